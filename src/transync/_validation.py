@@ -1,0 +1,147 @@
+"""Input validation shared by every public function.
+
+Every check raises ``ValueError`` or ``TypeError`` whose message names the argument,
+what was expected and what arrived. Internals trust validated inputs.
+"""
+
+from __future__ import annotations
+
+import numbers
+from collections.abc import Sequence
+
+import numpy as np
+
+__all__ = [
+    "as_generator",
+    "check_array",
+    "check_finite",
+    "check_int",
+    "check_nonnegative",
+    "check_positive",
+    "check_probability",
+    "check_shape",
+    "check_square",
+    "check_choice",
+]
+
+
+def as_generator(rng) -> np.random.Generator:
+    """Return a ``numpy.random.Generator`` from ``None``, an int seed or a Generator (SPEC 7)."""
+    if isinstance(rng, np.random.Generator):
+        return rng
+    if rng is None or isinstance(rng, (numbers.Integral, np.random.SeedSequence)):
+        return np.random.default_rng(rng)
+    if isinstance(rng, np.random.RandomState):
+        return np.random.default_rng(rng.randint(2**31))
+    raise TypeError(
+        f"`rng` must be None, an int or a numpy.random.Generator, got {type(rng).__name__}"
+    )
+
+
+def _describe(x) -> str:
+    if isinstance(x, np.ndarray):
+        return f"array of shape {x.shape} and dtype {x.dtype}"
+    return f"{type(x).__name__}"
+
+
+def check_array(x, name: str, *, ndim: int | Sequence[int] | None = None, dtype=float,
+                finite: bool = True, copy: bool = False) -> np.ndarray:
+    """Convert ``x`` to an array of ``dtype`` and check its number of dimensions and finiteness."""
+    if x is None:
+        raise TypeError(f"`{name}` must be an array, got None")
+    try:
+        arr = np.array(x, dtype=dtype, copy=copy) if copy else np.asarray(x, dtype=dtype)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"`{name}` must be convertible to a {np.dtype(dtype)} array, "
+                        f"got {_describe(x)}: {exc}") from None
+    if ndim is not None:
+        allowed = (ndim,) if isinstance(ndim, int) else tuple(ndim)
+        if arr.ndim not in allowed:
+            want = " or ".join(str(a) for a in allowed)
+            raise ValueError(f"`{name}` must have {want} dimensions, got shape {arr.shape}")
+    if finite and arr.dtype.kind in "fc" and not np.all(np.isfinite(arr)):
+        bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
+        raise ValueError(f"`{name}` must be finite, got {bad} NaN or infinite entries")
+    return arr
+
+
+def check_finite(x: np.ndarray, name: str) -> np.ndarray:
+    if not np.all(np.isfinite(x)):
+        raise ValueError(f"`{name}` must be finite, got NaN or infinite entries")
+    return x
+
+
+def check_shape(x: np.ndarray, shape: Sequence[int | str | None], name: str,
+                dims: dict[str, int] | None = None) -> dict[str, int]:
+    """Check ``x.shape`` against a pattern such as ``("n", "n")`` or ``(None, 2)``.
+
+    Named dimensions must agree with each other and with ``dims``; returns the bound names.
+
+    >>> check_shape(np.zeros((3, 3)), ("n", "n"), name="A")
+    {'n': 3}
+    """
+    dims = dict(dims or {})
+    if x.ndim != len(shape):
+        raise ValueError(f"`{name}` must have shape {_pattern(shape)}, got shape {x.shape}")
+    for size, want in zip(x.shape, shape):
+        if want is None:
+            continue
+        if isinstance(want, str):
+            if want in dims and dims[want] != size:
+                raise ValueError(f"`{name}` must have shape {_pattern(shape)} with "
+                                 f"{want}={dims[want]}, got shape {x.shape}")
+            dims[want] = size
+        elif size != want:
+            raise ValueError(f"`{name}` must have shape {_pattern(shape)}, got shape {x.shape}")
+    return dims
+
+
+def _pattern(shape) -> str:
+    return "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
+
+
+def check_square(x: np.ndarray, name: str) -> int:
+    if x.ndim != 2 or x.shape[0] != x.shape[1]:
+        raise ValueError(f"`{name}` must be a square matrix, got shape {x.shape}")
+    return x.shape[0]
+
+
+def check_nonnegative(x: np.ndarray, name: str) -> np.ndarray:
+    if x.size and np.min(x) < 0:
+        raise ValueError(f"`{name}` must be non-negative, got minimum {float(np.min(x)):.6g}")
+    return x
+
+
+def check_int(value, name: str, *, minimum: int | None = None, maximum: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"`{name}` must be an int, got {type(value).__name__} {value!r}")
+    value = int(value)
+    if minimum is not None and value < minimum:
+        raise ValueError(f"`{name}` must be >= {minimum}, got {value}")
+    if maximum is not None and value > maximum:
+        raise ValueError(f"`{name}` must be <= {maximum}, got {value}")
+    return value
+
+
+def check_positive(value, name: str, *, allow_zero: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"`{name}` must be a real number, got {type(value).__name__} {value!r}")
+    value = float(value)
+    if not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
+        rel = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"`{name}` must be finite and {rel}, got {value!r}")
+    return value
+
+
+def check_probability(value, name: str) -> float:
+    value = check_positive(value, name, allow_zero=True)
+    if value > 1:
+        raise ValueError(f"`{name}` must lie in [0, 1], got {value!r}")
+    return value
+
+
+def check_choice(value, name: str, choices) -> str:
+    if value not in choices:
+        opts = ", ".join(repr(c) for c in choices)
+        raise ValueError(f"`{name}` must be one of {opts}, got {value!r}")
+    return value

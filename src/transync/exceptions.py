@@ -1,0 +1,17 @@
+"""Exceptions and warnings raised by transync."""
+
+from __future__ import annotations
+
+__all__ = ["ConvergenceWarning", "DegenerateInputError", "TransyncError"]
+
+
+class TransyncError(Exception):
+    """Base class of the errors transync raises besides ``ValueError``/``TypeError``."""
+
+
+class DegenerateInputError(TransyncError, ValueError):
+    """Input is well formed but degenerate (singular maps, disconnected observations, ...)."""
+
+
+class ConvergenceWarning(UserWarning):
+    """An iterative method stopped at its iteration limit before meeting its tolerance."""

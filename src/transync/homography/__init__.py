@@ -1,0 +1,1 @@
+"""Multi-view plane homographies (being written)."""

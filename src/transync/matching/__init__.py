@@ -1,0 +1,1 @@
+"""Pairwise graph matching (being written)."""

@@ -1,1 +1,10 @@
 """Synthetic generators and real-data loaders."""
+from ._graphs import (  # noqa: F401
+    GraphCollectionProblem,
+    PairwiseProblem,
+    make_graph_collection,
+    make_pairwise_problem,
+    make_point_matching_problem,
+)
+from ._permutations import PermutationCollection, make_permutation_collection  # noqa: F401
+from ._transforms import TransformProblem, make_noisy_homographies, make_noisy_linear_maps  # noqa: F401

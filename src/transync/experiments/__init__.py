@@ -1,1 +1,8 @@
-"""Thesis experiments (being written)."""
+"""Thesis experiments: one module per figure or table, run by a resumable runner.
+
+``REGISTRY`` maps an experiment name to the module that builds it (``build(quick=...)``).
+"""
+
+REGISTRY = {
+    "pairwise": "transync.experiments.pairwise",
+}

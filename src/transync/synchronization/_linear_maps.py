@@ -1,13 +1,663 @@
-"""Placeholder: synchronization of invertible linear maps (being written)."""
+"""Synchronization of invertible linear maps: the null-space method of Bernard et al. (CVPR 2015).
+
+Convention (used everywhere in transync)
+---------------------------------------
+``T[i, j]`` maps coordinates of object ``j`` into object ``i``. The result stores absolute maps
+``maps[i]``, which take coordinates of object ``i`` into the reference object ``r``
+(``maps[r] = I``). The synchronized pairwise map is therefore
+
+.. math:: \\hat T_{ij} = M_i^{-1} M_j ,
+
+and a consistent input satisfies ``T[i, j] = inv(maps[i]) @ maps[j]``. In Bernard's notation
+``T_ij = T_i T_j^{-1}`` with ``T_i = M_i^{-1}`` (reference frame into frame ``i``).
+
+Method
+------
+With ``U = [U_1; ...; U_N]`` (``U_i = M_i^{-1} G`` for any invertible gauge ``G``), consistency gives
+``sum_j w_ij T_ij U_j = d_i U_i`` with ``d_i = sum_j w_ij``. So ``U`` spans the ``d``-dimensional
+null space of ``Z = D^{-1} W - I`` (``W`` holds the weighted observed blocks, missing pairs are
+zero). With noise, ``U`` is taken as the ``d`` right singular vectors of ``Z`` with the smallest
+singular values, and the gauge is fixed by ``M_i = U_r U_i^{-1}``.
+
+The robust variant starts from cycle-consistency scores (the median over third objects ``k`` of
+the discrepancy between ``T_ik T_kj`` and ``T_ij``), then alternates the weighted null-space
+solve with Cauchy reweighting of every pair by its residual (scale from the median absolute
+residual) plus hard rejection of pairs far beyond that scale.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+
+from .._validation import check_array, check_choice, check_int, check_positive
+from ..exceptions import ConvergenceWarning, DegenerateInputError
+
+__all__ = [
+    "LinearMapSyncResult",
+    "normalize_determinant",
+    "synchronize_homographies",
+    "synchronize_linear_maps",
+]
+
+_GROUPS = ("GL", "SL", "SO")
+_RESIDUALS = ("auto", "frobenius", "corner")
+_CORNERS = np.array([[-1.0, -1.0, 1.0], [1.0, -1.0, 1.0], [1.0, 1.0, 1.0], [-1.0, 1.0, 1.0]])
 
 
-def synchronize_linear_maps(*args, **kwargs):  # pragma: no cover - replaced
-    raise NotImplementedError
+@dataclass(frozen=True)
+class LinearMapSyncResult:
+    """Result of :func:`synchronize_linear_maps` / :func:`synchronize_homographies`.
+
+    Attributes
+    ----------
+    maps : ndarray of shape (N, d, d)
+        ``maps[i]`` maps coordinates of object ``i`` into the reference object
+        (``maps[reference]`` is the identity). Views outside the reference's connected
+        component (only with ``disconnected="component"``) hold NaN.
+    reference : int
+        Index of the reference object.
+    group : str
+        ``"GL"``, ``"SL"`` or ``"SO"``.
+    mask : ndarray of shape (N, N), bool
+        Observed pairs after symmetrization (``T[j, i] = inv(T[i, j])`` filled in).
+    weights : ndarray of shape (N, N)
+        Final weights of the observed pairs (input weights times robust weights; 0 = rejected).
+    inliers : ndarray of shape (N, N), bool
+        Observed pairs that were not rejected.
+    residuals : ndarray of shape (N, N)
+        Residual of every observed pair against the synchronized pairwise map (NaN elsewhere);
+        corner transfer error (pixels for :func:`synchronize_homographies`) or relative
+        Frobenius error, see ``info["residual"]``.
+    objective : float
+        Weighted mean squared residual over the kept pairs.
+    n_iter : int
+        Number of null-space solves (1 without ``robust``).
+    converged : bool
+    info : dict
+        ``singular_values`` (the d + 1 smallest of Z), ``spectral_gap``, ``residual``,
+        ``components`` (component label per object), ``excluded`` (objects outside the
+        reference's component), ``history`` (max map change per IRLS iteration).
+    """
+
+    maps: np.ndarray
+    reference: int
+    group: str
+    mask: np.ndarray
+    weights: np.ndarray
+    inliers: np.ndarray
+    residuals: np.ndarray
+    objective: float
+    n_iter: int
+    converged: bool
+    info: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_objects(self) -> int:
+        return int(self.maps.shape[0])
+
+    def pairwise(self, i: int, j: int) -> np.ndarray:
+        """Synchronized map from object ``j`` into object ``i``: ``inv(maps[i]) @ maps[j]``."""
+        n = self.n_objects
+        i = check_int(i, "i", minimum=0, maximum=n - 1)
+        j = check_int(j, "j", minimum=0, maximum=n - 1)
+        out = np.linalg.solve(self.maps[i], self.maps[j])
+        if self.group == "SL":
+            out = normalize_determinant(out)
+        return out
+
+    def to_array(self) -> np.ndarray:
+        """All synchronized pairwise maps as an (N, N, d, d) array (cycle-consistent)."""
+        inv = np.linalg.inv(self.maps)
+        out = np.einsum("iab,jbc->ijac", inv, self.maps)
+        if self.group == "SL":
+            out = normalize_determinant(out)
+        return out
 
 
-def synchronize_homographies(*args, **kwargs):  # pragma: no cover - replaced
-    raise NotImplementedError
+# ----------------------------------------------------------------------------------------------
+# helpers
+# ----------------------------------------------------------------------------------------------
+def normalize_determinant(A):
+    """Scale square matrices to determinant +1 (real d-th root); works on stacks (..., d, d).
+
+    For odd ``d`` a negative determinant is fixed by a negative scale (the projective class is
+    unchanged). Singular matrices give NaN.
+
+    >>> import numpy as np
+    >>> H = normalize_determinant(2.0 * np.eye(3))
+    >>> bool(np.allclose(H, np.eye(3)))
+    True
+    """
+    A = np.asarray(A, dtype=float)
+    d = A.shape[-1]
+    det = np.linalg.det(A)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if d % 2:
+            scale = np.sign(det) * np.abs(det) ** (1.0 / d)
+        else:
+            scale = np.abs(det) ** (1.0 / d)
+        scale = np.where(det == 0, np.nan, scale)
+        return A / scale[..., None, None]
 
 
-class LinearMapSyncResult:  # pragma: no cover - replaced
-    pass
+def _residual(A, B, kind: str) -> np.ndarray:
+    """Discrepancy between stacks of maps A and B (``B`` is the estimate); shape A.shape[:-2]."""
+    if kind == "corner":
+        pa = np.einsum("...ab,kb->...ka", A, _CORNERS)
+        pb = np.einsum("...ab,kb->...ka", B, _CORNERS)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pa = pa[..., :2] / pa[..., 2:3]
+            pb = pb[..., :2] / pb[..., 2:3]
+        r = np.linalg.norm(pa - pb, axis=-1).mean(axis=-1)
+        return np.where(np.isfinite(r), r, np.inf)
+    num = np.linalg.norm(A - B, axis=(-2, -1))
+    den = np.linalg.norm(B, axis=(-2, -1))
+    return num / np.maximum(den, 1e-300)
+
+
+def _parse_input(T, mask, n_objects):
+    """Accept a dense (N, N, d, d) array or a dict {(i, j): (d, d)}; return T, mask (bool)."""
+    if isinstance(T, Mapping):
+        if not T:
+            raise ValueError("`T` must contain at least one pair, got an empty dict")
+        keys = list(T)
+        for key in keys:
+            if not (isinstance(key, tuple) and len(key) == 2):
+                raise ValueError(f"`T` dict keys must be pairs (i, j), got {key!r}")
+            if key[0] == key[1]:
+                raise ValueError(f"`T` must not contain self-pairs (i == j), got pair {key!r}")
+        n = max(max(int(i), int(j)) for i, j in keys) + 1
+        if n_objects is not None:
+            n_objects = check_int(n_objects, "n_objects", minimum=1)
+            if n > n_objects:
+                raise ValueError(f"`T` has a pair index {n - 1} but `n_objects` is {n_objects}")
+            n = n_objects
+        first = check_array(T[keys[0]], f"T[{keys[0]}]", ndim=2)
+        d = first.shape[0]
+        dense = np.zeros((n, n, d, d))
+        obs = np.zeros((n, n), dtype=bool)
+        for (i, j), Tij in T.items():
+            Tij = check_array(Tij, f"T[{(i, j)}]", ndim=2)
+            if Tij.shape != (d, d):
+                raise ValueError(f"`T[{(i, j)}]` must have shape ({d}, {d}) like the first pair, "
+                                 f"got shape {Tij.shape}")
+            dense[i, j] = Tij
+            obs[i, j] = True
+        if mask is not None:
+            raise ValueError("`mask` must be None when `T` is a dict (the keys are the mask)")
+        return dense, obs
+    T = check_array(T, "T", ndim=4, finite=False)
+    n, n2, d, d2 = T.shape
+    if n != n2 or d != d2 or d == 0:
+        raise ValueError(f"`T` must have shape (N, N, d, d), got shape {T.shape}")
+    if mask is None:
+        obs = ~np.eye(n, dtype=bool)
+    else:
+        obs = np.asarray(mask)
+        if obs.shape != (n, n):
+            raise ValueError(f"`mask` must have shape ({n}, {n}) to match `T`, got shape {obs.shape}")
+        if obs.dtype != bool:
+            if not np.all(np.isin(obs, (0, 1))):
+                raise ValueError("`mask` must be boolean (or 0/1)")
+            obs = obs.astype(bool)
+        diag = np.flatnonzero(np.diag(obs))
+        if diag.size:
+            raise ValueError(f"`mask` must be False on the diagonal (self-pairs i == j carry no "
+                             f"information), got True for i = {diag.tolist()}")
+    bad = obs & ~np.all(np.isfinite(T), axis=(-2, -1))
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        raise ValueError(f"`T[{i}, {j}]` must be finite where observed, got NaN or infinite entries")
+    return T, obs.copy()
+
+
+def _check_invertible(T, obs, name="T"):
+    idx = np.argwhere(obs)
+    if idx.size == 0:
+        return
+    blocks = T[obs]
+    sv = np.linalg.svd(blocks, compute_uv=False)
+    cond = sv[:, 0] / np.maximum(sv[:, -1], 1e-300)
+    bad = np.flatnonzero(~(cond < 1e12))
+    if bad.size:
+        i, j = idx[bad[0]]
+        raise ValueError(f"`{name}[{i}, {j}]` must be invertible, got a singular matrix "
+                         f"(condition number {cond[bad[0]]:.3g}); {bad.size} singular pair(s)")
+
+
+def _symmetrize(T, obs, weights):
+    """Fill T[j, i] = inv(T[i, j]) where only one direction was observed; symmetric weights."""
+    T = T.copy()
+    only = obs & ~obs.T
+    if only.any():
+        i, j = np.nonzero(only)
+        T[j, i] = np.linalg.inv(T[i, j])
+    full = obs | obs.T
+    if weights is None:
+        w = full.astype(float)
+    else:
+        w = np.where(obs, weights, 0.0)
+        w = np.where(obs & obs.T, 0.5 * (w + w.T), np.maximum(w, w.T))
+        w = np.where(full, w, 0.0)
+    return T, full, w
+
+
+def _nullspace(T, w, d):
+    """Smallest right singular vectors of Z = D^{-1} W - I; returns U (N, d, d) and sigma."""
+    n = T.shape[0]
+    deg = w.sum(axis=1)
+    blocks = np.where((w > 0)[:, :, None, None], T, 0.0)
+    Z = (w[:, :, None, None] * blocks / deg[:, None, None, None]).transpose(0, 2, 1, 3)
+    Z = Z.reshape(n * d, n * d) - np.eye(n * d)
+    _, s, vt = np.linalg.svd(Z)
+    U = vt[-d:].T.reshape(n, d, d)
+    return U, s[::-1][: d + 1]
+
+
+def _maps_from_nullspace(U, reference, group):
+    Ur = U[reference]
+    cond = np.linalg.cond(Ur)
+    if not cond < 1e12:
+        raise DegenerateInputError(
+            f"the reference block of the null space is singular (condition {cond:.3g}); the "
+            "observations do not determine the maps")
+    maps = Ur[None] @ np.linalg.inv(U)
+    return _project(maps, group)
+
+
+def _project(maps, group):
+    if group == "SL":
+        return normalize_determinant(maps)
+    if group == "SO":
+        u, _, vt = np.linalg.svd(maps)
+        det = np.linalg.det(u @ vt)
+        u[..., :, -1] *= np.sign(det)[..., None]
+        return u @ vt
+    return maps
+
+
+def _pair_residuals(T, obs, maps, kind):
+    inv = np.linalg.inv(maps)
+    est = np.einsum("iab,jbc->ijac", inv, maps)
+    r = np.full(obs.shape, np.nan)
+    T = np.where(obs[:, :, None, None], T, 0.0)
+    if kind == "corner":
+        r[obs] = _residual(normalize_determinant(T[obs]), normalize_determinant(est[obs]), kind)
+    else:
+        r[obs] = _residual(T[obs], est[obs], kind)
+    return r
+
+
+def _cycle_scores(T, obs, kind):
+    """Median over k of the discrepancy between T_ik T_kj and T_ij (NaN when no triangle)."""
+    n = T.shape[0]
+    scores = np.full((n, n), np.nan)
+    for i in range(n):
+        js = np.flatnonzero(obs[i])
+        if js.size == 0:
+            continue
+        ks = np.flatnonzero(obs[i])
+        # P[k, j] = T[i, k] @ T[k, j]
+        P = np.einsum("kab,kjbc->kjac", T[i, ks], T[ks][:, js])
+        valid = obs[ks][:, js] & (ks[:, None] != js[None, :])
+        ref = np.broadcast_to(T[i, js][None], P.shape)
+        if kind == "corner":
+            res = _residual(normalize_determinant(P), normalize_determinant(ref), kind)
+        else:
+            res = _residual(P, ref, kind)
+        res = np.where(valid, res, np.nan)
+        has = valid.any(axis=0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            med = np.nanmedian(np.where(has[None], res, 0.0), axis=0)
+        scores[i, js] = np.where(has, med, np.nan)
+    return scores
+
+
+def _robust_weights(r, obs, scale_floor, c=2.385, reject=4.0):
+    """Cauchy weights from residuals (symmetrized); hard zero beyond ``reject`` robust sigmas."""
+    rs = np.where(obs, r, np.nan)
+    rs = np.where(np.isnan(rs.T), rs, 0.5 * (rs + rs.T))
+    vals = rs[obs]
+    vals = vals[np.isfinite(vals)]
+    if vals.size == 0:
+        return np.where(obs, 1.0, 0.0), scale_floor
+    sigma = max(1.4826 * float(np.median(vals)), scale_floor)
+    u = np.where(np.isfinite(rs), rs, 0.0) / (c * sigma)
+    w = 1.0 / (1.0 + u ** 2)
+    w = np.where(np.isfinite(rs) & (rs > reject * c * sigma), 0.0, w)
+    w = np.where(np.isinf(rs), 0.0, w)
+    return np.where(obs, w, 0.0), sigma
+
+
+def _components(obs):
+    n_comp, labels = connected_components(csr_matrix(obs), directed=False)
+    return n_comp, labels
+
+
+def _keep_connected(w_new, w_fallback, obs):
+    """Use ``w_new`` unless its support disconnects the observation graph; then restore edges."""
+    support = (w_new > 0) & obs
+    n_comp, _ = _components(support)
+    if n_comp == 1:
+        return w_new
+    # restore rejected edges (with their fallback weight, scaled down) until connected
+    out = w_new.copy()
+    rejected = np.argwhere(obs & ~support & (np.arange(obs.shape[0])[:, None] < np.arange(obs.shape[0])))
+    order = np.argsort(-w_fallback[rejected[:, 0], rejected[:, 1]])
+    for k in order:
+        i, j = rejected[k]
+        n_before, lab = _components((out > 0) & obs)
+        if lab[i] != lab[j]:
+            out[i, j] = out[j, i] = max(1e-6, 1e-3 * w_fallback[i, j])
+            if _components((out > 0) & obs)[0] == 1:
+                break
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# front doors
+# ----------------------------------------------------------------------------------------------
+def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="GL",
+                            robust=False, residual="auto", max_iter=20, tol=1e-8,
+                            disconnected="raise", n_objects=None,
+                            residual_scale=1.0) -> LinearMapSyncResult:
+    """Synchronize pairwise invertible linear maps with the null-space method (Bernard et al.).
+
+    .. math:: \\min_{U^T U = I} \\| (D^{-1} W - I)\\, U \\|_F ,\\qquad M_i = U_r U_i^{-1}
+
+    Parameters
+    ----------
+    T : ndarray of shape (N, N, d, d) or dict {(i, j): ndarray (d, d)}
+        ``T[i, j]`` maps coordinates of object ``j`` into object ``i``. Entries outside ``mask``
+        are ignored. Where only one direction of a pair is observed, the other is its inverse.
+    mask : ndarray of shape (N, N), bool, default=None
+        Observed pairs (default: every off-diagonal pair). The diagonal must be False.
+    weights : ndarray of shape (N, N), default=None
+        Non-negative confidence per observed pair (e.g. inlier counts); default all ones.
+    reference : int, default=0
+        Gauge: ``maps[reference]`` is the identity.
+    group : {"GL", "SL", "SO"}, default="GL"
+        ``"SL"`` normalizes every map to determinant 1 (homographies when d = 3); ``"SO"``
+        projects the maps to rotations (rotation averaging).
+    robust : bool, default=False
+        Cycle-consistency initial weights, then IRLS with Cauchy weights on the pair residuals
+        (scale by the median absolute residual) and hard rejection beyond 4 robust scales.
+    residual : {"auto", "frobenius", "corner"}, default="auto"
+        Pair residual for the robust weights and ``result.residuals``. ``"corner"``: mean
+        transfer error of the corners (+-1, +-1) (projective, d = 3; coordinates should be
+        normalized to about [-1, 1]); ``"frobenius"``: ``||T - T_hat||_F / ||T_hat||_F``.
+        ``"auto"`` is ``"frobenius"``; :func:`synchronize_homographies` uses ``"corner"``.
+    max_iter : int, default=20
+        Maximum number of IRLS iterations (``robust=True``).
+    tol : float, default=1e-8
+        IRLS stops when no map moves more than this (in the residual's units).
+    disconnected : {"raise", "component"}, default="raise"
+        What to do when the observed pairs do not connect all objects: raise
+        :class:`~transync.exceptions.DegenerateInputError`, or synchronize the reference's
+        component and give NaN maps to the other objects (listed in ``info["excluded"]``).
+    n_objects : int, default=None
+        Number of objects when ``T`` is a dict (default: largest index + 1).
+    residual_scale : float, default=1.0
+        Factor applied to the reported residuals (e.g. pixels per normalized unit).
+
+    Returns
+    -------
+    LinearMapSyncResult
+
+    Raises
+    ------
+    ValueError
+        Mismatched shapes, self-pairs, non-finite or singular maps, bad weights.
+    DegenerateInputError
+        Disconnected observation graph (with ``disconnected="raise"``).
+
+    References
+    ----------
+    F. Bernard, J. Thunberg, P. Gemmar, F. Hertel, A. Husch, J. Goncalves, "A solution for
+    multi-alignment by transformation synchronisation", CVPR 2015.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.synchronization import synchronize_linear_maps
+    >>> rng = np.random.default_rng(0)
+    >>> M = rng.normal(size=(4, 3, 3)) + 3 * np.eye(3)     # object i -> reference (up to gauge)
+    >>> T = np.einsum("iab,jbc->ijac", np.linalg.inv(M), M)  # T[i, j] = M_i^-1 M_j
+    >>> res = synchronize_linear_maps(T)
+    >>> bool(np.allclose(res.pairwise(1, 3), T[1, 3]))
+    True
+    >>> bool(np.allclose(res.maps[0], np.eye(3)))
+    True
+    """
+    group = check_choice(group, "group", _GROUPS)
+    residual = check_choice(residual, "residual", _RESIDUALS)
+    disconnected = check_choice(disconnected, "disconnected", ("raise", "component"))
+    max_iter = check_int(max_iter, "max_iter", minimum=1)
+    tol = check_positive(tol, "tol", allow_zero=True)
+    residual_scale = check_positive(residual_scale, "residual_scale")
+    if not isinstance(robust, (bool, np.bool_)):
+        raise TypeError(f"`robust` must be a bool, got {type(robust).__name__} {robust!r}")
+    T, obs = _parse_input(T, mask, n_objects)
+    n, d = T.shape[0], T.shape[-1]
+    reference = check_int(reference, "reference", minimum=0, maximum=n - 1)
+    if group == "SO" and d not in (2, 3):
+        raise ValueError(f"`group='SO'` needs d = 2 or 3, got d = {d}")
+    if residual == "auto":
+        residual = "frobenius"
+    if residual == "corner" and d != 3:
+        raise ValueError(f"`residual='corner'` needs 3x3 maps, got d = {d}")
+    if weights is not None:
+        weights = check_array(weights, "weights", ndim=2)
+        if weights.shape != (n, n):
+            raise ValueError(f"`weights` must have shape ({n}, {n}) to match `T`, "
+                             f"got shape {weights.shape}")
+        if np.any(weights[obs] < 0):
+            raise ValueError("`weights` must be non-negative on observed pairs, got a negative value")
+        obs = obs & (weights > 0)
+    if not obs.any():
+        raise ValueError("`mask` must select at least one pair, got none")
+    _check_invertible(T, obs)
+    if group == "SL":
+        det = np.linalg.det(T[obs])
+        if d % 2 == 0 and np.any(det < 0):
+            i, j = np.argwhere(obs)[np.flatnonzero(det < 0)[0]]
+            raise ValueError(f"`T[{i}, {j}]` has a negative determinant, which no scaling maps "
+                             f"into SL({d})")
+        T = T.copy()
+        T[obs] = normalize_determinant(T[obs])
+    T, obs, w0 = _symmetrize(T, obs, weights)
+    T = np.where(obs[:, :, None, None], T, np.eye(d))
+
+    n_comp, labels = _components(obs)
+    excluded = np.array([], dtype=int)
+    keep = np.arange(n)
+    if n_comp > 1:
+        sizes = np.bincount(labels)
+        comps = [np.flatnonzero(labels == c).tolist() for c in range(n_comp)]
+        if disconnected == "raise":
+            raise DegenerateInputError(
+                f"the observation graph is disconnected: {n_comp} components "
+                f"(sizes {sizes.tolist()}): {comps if n <= 30 else '...'}; maps between "
+                "components are undetermined (use disconnected='component' to synchronize the "
+                "reference's component only)")
+        keep = np.flatnonzero(labels == labels[reference])
+        excluded = np.flatnonzero(labels != labels[reference])
+    Tk = T[np.ix_(keep, keep)]
+    ok = obs[np.ix_(keep, keep)]
+    wk0 = w0[np.ix_(keep, keep)]
+    ref_k = int(np.flatnonzero(keep == reference)[0])
+
+    history = []
+    w = wk0.copy()
+    n_iter = 0
+    converged = True
+    if len(keep) == 1:
+        maps_k = np.eye(d)[None]
+        sv = np.zeros(d + 1)
+    else:
+        if robust:
+            cs = _cycle_scores(Tk, ok, residual)
+            floor = 1e-9
+            w_c, _ = _robust_weights(np.where(np.isnan(cs), np.nanmedian(cs[ok]) if
+                                              np.isfinite(cs[ok]).any() else 0.0, cs),
+                                     ok, floor)
+            w = _keep_connected(wk0 * w_c, wk0, ok)
+        U, sv = _nullspace(Tk, w, d)
+        maps_k = _maps_from_nullspace(U, ref_k, group)
+        n_iter = 1
+        if robust:
+            converged = False
+            for _ in range(max_iter):
+                r = _pair_residuals(Tk, ok, maps_k, residual)
+                w_r, _ = _robust_weights(r, ok, 1e-9)
+                w = _keep_connected(wk0 * w_r, wk0, ok)
+                U, sv = _nullspace(Tk, w, d)
+                new = _maps_from_nullspace(U, ref_k, group)
+                n_iter += 1
+                change = float(np.max(_residual(new, maps_k, residual)))
+                history.append(change)
+                maps_k = new
+                if change <= tol:
+                    converged = True
+                    break
+            if not converged:
+                warnings.warn(f"robust synchronization did not converge in {max_iter} iterations "
+                              f"(last change {history[-1]:.3g})", ConvergenceWarning, stacklevel=2)
+
+    maps = np.full((n, d, d), np.nan)
+    maps[keep] = maps_k
+    r_k = _pair_residuals(Tk, ok, maps_k, residual) * residual_scale
+    residuals = np.full((n, n), np.nan)
+    residuals[np.ix_(keep, keep)] = r_k
+    weights_out = np.zeros((n, n))
+    weights_out[np.ix_(keep, keep)] = w
+    inliers = obs & (weights_out > 1e-5 * max(float(weights_out.max()), 1e-300))
+    kept = (w > 0) & ok
+    objective = float(np.sum(w[kept] * r_k[kept] ** 2) / max(np.sum(w[kept]), 1e-300))
+    info = {
+        "singular_values": sv,
+        "spectral_gap": float(sv[d] / max(sv[d - 1], 1e-300)) if len(sv) > d else np.inf,
+        "residual": residual,
+        "components": labels,
+        "excluded": excluded,
+        "history": history,
+    }
+    return LinearMapSyncResult(maps=maps, reference=reference, group=group, mask=obs,
+                               weights=weights_out, inliers=inliers, residuals=residuals,
+                               objective=objective, n_iter=n_iter, converged=converged, info=info)
+
+
+def normalization_matrix(image_size) -> np.ndarray:
+    """Hartley-style similarity taking pixel coordinates of a ``(width, height)`` image to ~[-1, 1].
+
+    >>> normalization_matrix((640, 480)) @ [320, 240, 1]
+    array([0., 0., 1.])
+    """
+    w, h = (float(v) for v in image_size)
+    s = 2.0 / max(w, h)
+    return np.array([[s, 0.0, -s * w / 2], [0.0, s, -s * h / 2], [0.0, 0.0, 1.0]])
+
+
+def _image_sizes(image_size, n):
+    if image_size is None:
+        return None
+    arr = np.asarray(image_size, dtype=float)
+    if arr.shape == (2,):
+        arr = np.broadcast_to(arr, (n, 2))
+    if arr.shape != (n, 2) or not np.all(arr > 0):
+        raise ValueError(f"`image_size` must be (width, height) or an array of shape ({n}, 2) "
+                         f"with positive entries, got {np.asarray(image_size).tolist()!r}")
+    return arr
+
+
+def synchronize_homographies(H, *, mask=None, weights=None, reference=0, robust=False,
+                             image_size=None, max_iter=20, tol=1e-6,
+                             disconnected="raise") -> LinearMapSyncResult:
+    """Synchronize pairwise plane homographies (SL(3) null-space method) in normalized coordinates.
+
+    ``H[i, j]`` maps pixel coordinates of view ``j`` into view ``i``; the result's ``maps[i]``
+    maps pixels of view ``i`` into the reference view, scaled to determinant 1.
+
+    Each ``H[i, j]`` is conjugated into a Hartley-normalized frame
+    (``N_i H_ij N_j^{-1}``, with ``N`` taking each image to about [-1, 1]) before
+    :func:`synchronize_linear_maps` with ``group="SL"``; otherwise the entries of pixel
+    homographies differ by orders of magnitude and the null space is ill-conditioned.
+
+    Parameters
+    ----------
+    H : ndarray of shape (N, N, 3, 3) or dict {(i, j): ndarray (3, 3)}
+    mask, weights, reference, robust, max_iter, disconnected
+        As in :func:`synchronize_linear_maps`.
+    image_size : (width, height) or ndarray of shape (N, 2), default=None
+        Image sizes for the normalization. ``None`` means the coordinates are used as given
+        (they should then already be about [-1, 1]).
+    tol : float, default=1e-6
+        IRLS tolerance in normalized units.
+
+    Returns
+    -------
+    LinearMapSyncResult
+        ``residuals`` are mean corner transfer errors, in pixels when ``image_size`` is given.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.synchronization import synchronize_homographies
+    >>> from transync.datasets import make_noisy_homographies
+    >>> prob = make_noisy_homographies(n_views=6, noise=0.0, rng=0)
+    >>> res = synchronize_homographies(prob.observed, mask=prob.mask, image_size=prob.image_size)
+    >>> from transync.homography import corner_error
+    >>> bool(corner_error(res.maps, prob.truth, image_size=prob.image_size).max() < 1e-6)
+    True
+    """
+    if isinstance(H, Mapping):
+        n = max(max(int(i), int(j)) for i, j in H) + 1 if H else 0
+    else:
+        H = check_array(H, "H", ndim=4, finite=False)
+        n = H.shape[0]
+    sizes = _image_sizes(image_size, n)
+    scale = 1.0
+    if sizes is not None:
+        Nm = np.stack([normalization_matrix(s) for s in sizes])
+        Ninv = np.linalg.inv(Nm)
+        if isinstance(H, Mapping):
+            Hn = {}
+            for (i, j), Hij in H.items():
+                Hij = check_array(Hij, f"H[{(i, j)}]", ndim=2)
+                if Hij.shape != (3, 3):
+                    raise ValueError(f"`H[{(i, j)}]` must have shape (3, 3), got {Hij.shape}")
+                Hn[(i, j)] = Nm[i] @ Hij @ Ninv[j]
+        else:
+            if H.shape[1:] != (n, 3, 3):
+                raise ValueError(f"`H` must have shape (N, N, 3, 3), got shape {H.shape}")
+            Hn = np.einsum("iab,ijbc,jcd->ijad", Nm, np.nan_to_num(H), Ninv)
+            Hn = np.where(np.isfinite(H).all(axis=(-2, -1))[..., None, None], Hn, np.nan)
+        scale = float(np.mean(np.max(sizes, axis=1)) / 2.0)
+    else:
+        Hn = H
+        if not isinstance(H, Mapping) and H.shape[1:] != (n, 3, 3):
+            raise ValueError(f"`H` must have shape (N, N, 3, 3), got shape {H.shape}")
+    res = synchronize_linear_maps(Hn, mask=mask, weights=weights, reference=reference,
+                                  group="SL", robust=robust, residual="corner",
+                                  max_iter=max_iter, tol=tol, disconnected=disconnected,
+                                  n_objects=n if isinstance(H, Mapping) else None,
+                                  residual_scale=scale)
+    if sizes is None:
+        return res
+    maps = normalize_determinant(np.einsum("ab,ibc,icd->iad", Ninv[res.reference], res.maps, Nm))
+    ok = np.isfinite(res.maps).all(axis=(-2, -1))
+    maps[~ok] = np.nan
+    info = dict(res.info)
+    info["normalization"] = Nm
+    return LinearMapSyncResult(maps=maps, reference=res.reference, group="SL", mask=res.mask,
+                               weights=res.weights, inliers=res.inliers,
+                               residuals=res.residuals, objective=res.objective,
+                               n_iter=res.n_iter, converged=res.converged, info=info)

@@ -1,0 +1,227 @@
+"""Synthetic collections of corrupted pairwise permutations with ground truth.
+
+Every object ``g`` sees a subset of a universe of ``d`` nodes; ``labels[g][u]`` is the universe id of
+its node ``u``. The true pairwise map ``i -> j`` sends ``u`` to the node of ``j`` with the same
+universe id (``-1`` when ``j`` does not see it). Observed pairs are the true maps, except a chosen
+fraction that is replaced by random maps.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_generator, check_int, check_probability
+
+__all__ = ["PermutationCollection", "make_permutation_collection"]
+
+
+@dataclass(frozen=True)
+class PermutationCollection:
+    """A collection of pairwise assignments with its ground truth.
+
+    Attributes
+    ----------
+    pairwise : dict
+        ``{(i, j): assignment}`` for the observed pairs, ``i < j``; ``assignment[u] = v`` maps node
+        ``u`` of object ``i`` to node ``v`` of object ``j`` (``-1`` = unmatched).
+    labels : tuple of ndarray
+        Ground truth: ``labels[g][u]`` is the universe id of node ``u`` of object ``g``.
+    sizes : ndarray of shape (n_objects,)
+        Number of nodes of every object.
+    n_universe : int
+        Universe size ``d``.
+    mask : ndarray of shape (n_objects, n_objects), bool
+        Symmetric mask of the observed pairs.
+    corrupted : ndarray of shape (n_objects, n_objects), bool
+        Symmetric mask of the observed pairs that were replaced by random maps.
+    info : dict
+        The generation parameters.
+    """
+
+    pairwise: Mapping[tuple[int, int], np.ndarray]
+    labels: tuple[np.ndarray, ...]
+    sizes: np.ndarray
+    n_universe: int
+    mask: np.ndarray
+    corrupted: np.ndarray
+    info: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_objects(self) -> int:
+        return len(self.labels)
+
+    def true_pairwise(self, i: int, j: int) -> np.ndarray:
+        """The ground-truth assignment from object ``i`` to object ``j``."""
+        inv = np.full(self.n_universe, -1, dtype=np.int64)
+        inv[self.labels[j]] = np.arange(self.labels[j].size)
+        return inv[self.labels[i]]
+
+    def accuracy(self, labels: Sequence[np.ndarray], *, pairs=None) -> float:
+        """Fraction of ground-truth correspondences recovered by a multi-matching ``labels``.
+
+        A correspondence is a node ``u`` of ``i`` and a node ``v`` of ``j`` (``i != j``) with the
+        same true universe id; it is recovered when the predicted labels also put ``u`` and
+        ``v`` together. Evaluated over all pairs ``i < j`` (or the ``(P, 2)`` array ``pairs``).
+        """
+        return _labels_accuracy(labels, self.labels, pairs=pairs)
+
+
+def _pad_labels(labels: Sequence[np.ndarray]) -> np.ndarray:
+    n_max = max((len(lab) for lab in labels), default=0)
+    out = np.full((len(labels), n_max), -1, dtype=np.int64)
+    for g, lab in enumerate(labels):
+        out[g, : len(lab)] = lab
+    return out
+
+
+def _inverse_table(padded: np.ndarray, d: int) -> np.ndarray:
+    """``inv[g, a]`` = node of ``g`` with label ``a``; column ``d`` (= index -1) stays -1."""
+    n_obj, n_max = padded.shape
+    inv = np.full((n_obj, d + 1), -1, dtype=np.int64)
+    g, u = np.nonzero(padded >= 0)
+    inv[g, padded[g, u]] = u
+    return inv
+
+
+def _labels_accuracy(pred, truth, *, pairs=None) -> float:
+    truth_p = _pad_labels(truth)
+    pred_p = _pad_labels(pred)
+    if pred_p.shape != truth_p.shape:
+        raise ValueError(f"`labels` must hold {truth_p.shape[0]} objects of the true sizes, got "
+                         f"{pred_p.shape[0]} objects")
+    n = truth_p.shape[0]
+    if pairs is None:
+        pairs = np.column_stack(np.triu_indices(n, 1))
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    d_t = int(truth_p.max(initial=-1)) + 1
+    d_p = int(pred_p.max(initial=-1)) + 1
+    tinv = _inverse_table(truth_p, d_t)
+    pinv = _inverse_table(pred_p, d_p)
+    hit = 0
+    tot = 0
+    for start in range(0, pairs.shape[0], 20000):
+        chunk = pairs[start:start + 20000]
+        i, j = chunk[:, 0], chunk[:, 1]
+        true_v = tinv[j[:, None], truth_p[i]]      # -1 for padding / unseen
+        pred_v = pinv[j[:, None], pred_p[i]]
+        ok = true_v >= 0
+        tot += int(ok.sum())
+        hit += int((ok & (pred_v == true_v)).sum())
+    return float(hit / tot) if tot else 1.0
+
+
+def make_permutation_collection(n_objects: int, n_nodes: int, *, corruption: float = 0.0,
+                                visibility: float = 1.0, observed: float = 1.0,
+                                n_universe: int | None = None, ensure_connected: bool = True,
+                                rng=None) -> PermutationCollection:
+    """Generate pairwise assignments between objects that share a universe of nodes.
+
+    Every object picks ``n_nodes`` distinct universe nodes (all of them when
+    ``n_universe == n_nodes``), keeps each with probability ``visibility`` (at least one) and
+    lists them in random order. Each pair ``i < j`` is observed with probability ``observed``;
+    with ``ensure_connected`` the pairs of a random path through all objects are always
+    observed, so the observation graph is connected. Exactly ``round(corruption * n_observed)``
+    observed pairs are replaced by random maps: a uniformly random permutation when both objects
+    have all ``d`` nodes, otherwise a random injective map with as many matched nodes as the
+    true map.
+
+    Parameters
+    ----------
+    n_objects : int
+        Number of objects ``N`` (>= 2).
+    n_nodes : int
+        Nodes per object before visibility drops any (>= 1).
+    corruption, visibility, observed : float in [0, 1]
+        Fraction of corrupted pairs, node keep probability, pair observation probability.
+    n_universe : int, optional
+        Universe size ``d >= n_nodes``; default ``n_nodes``.
+    ensure_connected : bool, default=True
+        Always observe a random Hamiltonian path, so the observation graph is connected.
+    rng : None, int or numpy.random.Generator
+
+    Returns
+    -------
+    PermutationCollection
+
+    Examples
+    --------
+    >>> from transync.datasets import make_permutation_collection
+    >>> c = make_permutation_collection(4, 5, corruption=0.0, rng=0)
+    >>> len(c.pairwise), c.n_universe
+    (6, 5)
+    >>> bool((c.pairwise[(0, 1)] == c.true_pairwise(0, 1)).all())
+    True
+    """
+    n_objects = check_int(n_objects, "n_objects", minimum=2)
+    n_nodes = check_int(n_nodes, "n_nodes", minimum=1)
+    corruption = check_probability(corruption, "corruption")
+    visibility = check_probability(visibility, "visibility")
+    observed = check_probability(observed, "observed")
+    d = n_nodes if n_universe is None else check_int(n_universe, "n_universe", minimum=1)
+    if d < n_nodes:
+        raise ValueError(f"`n_universe` must be >= n_nodes={n_nodes}, got {d}")
+    gen = as_generator(rng)
+
+    # node sets and orders
+    if d == n_nodes and visibility == 1.0:
+        padded = gen.permuted(np.tile(np.arange(d), (n_objects, 1)), axis=1).astype(np.int64)
+        full = True
+    else:
+        rows = []
+        for _ in range(n_objects):
+            chosen = gen.choice(d, size=n_nodes, replace=False)
+            keep = gen.random(n_nodes) < visibility
+            if not keep.any():
+                keep[gen.integers(n_nodes)] = True
+            rows.append(gen.permutation(chosen[keep]))
+        padded = _pad_labels(rows)
+        full = bool(np.all(padded >= 0)) and padded.shape[1] == d
+    sizes = (padded >= 0).sum(1)
+    labels = tuple(padded[g, : sizes[g]].copy() for g in range(n_objects))
+
+    # observed pairs
+    iu, ju = np.triu_indices(n_objects, 1)
+    obs = gen.random(iu.size) < observed
+    if ensure_connected and observed < 1.0:
+        path = gen.permutation(n_objects)
+        a, b = np.minimum(path[:-1], path[1:]), np.maximum(path[:-1], path[1:])
+        # index of pair (a, b) in triu order
+        idx = a * n_objects - a * (a + 1) // 2 + (b - a - 1)
+        obs[idx] = True
+    pairs = np.column_stack([iu[obs], ju[obs]]).astype(np.int64)
+    n_pairs = pairs.shape[0]
+
+    inv = _inverse_table(padded, d)
+    maps = inv[pairs[:, 1][:, None], padded[pairs[:, 0]]]         # (P, n_max), -1 at padding
+    n_bad = int(round(corruption * n_pairs))
+    bad = np.zeros(n_pairs, dtype=bool)
+    if n_bad:
+        bad_idx = gen.choice(n_pairs, size=n_bad, replace=False)
+        bad[bad_idx] = True
+        if full:
+            maps[bad_idx] = gen.permuted(np.tile(np.arange(d), (n_bad, 1)), axis=1)
+        else:
+            for p in bad_idx:
+                i, j = pairs[p]
+                m = int((maps[p, : sizes[i]] >= 0).sum())
+                new = np.full(maps.shape[1], -1, dtype=np.int64)
+                src = gen.choice(sizes[i], size=m, replace=False)
+                new[src] = gen.choice(sizes[j], size=m, replace=False)
+                maps[p] = new
+    pairwise = {(int(i), int(j)): maps[p, : sizes[i]]
+                for p, (i, j) in enumerate(pairs.tolist())}
+    mask = np.zeros((n_objects, n_objects), dtype=bool)
+    mask[pairs[:, 0], pairs[:, 1]] = True
+    mask |= mask.T
+    corrupted = np.zeros_like(mask)
+    corrupted[pairs[bad, 0], pairs[bad, 1]] = True
+    corrupted |= corrupted.T
+    info = {"n_objects": n_objects, "n_nodes": n_nodes, "corruption": corruption,
+            "visibility": visibility, "observed": observed, "n_pairs": n_pairs,
+            "n_corrupted": n_bad, "full_permutations": full}
+    return PermutationCollection(pairwise=pairwise, labels=labels, sizes=sizes.astype(np.int64),
+                                 n_universe=d, mask=mask, corrupted=corrupted, info=info)

@@ -1,0 +1,57 @@
+"""Plots of experiment summaries: mean ± standard error per method against the swept variable."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["plot_experiment"]
+
+
+def plot_experiment(experiment, summary: list[dict], path) -> Path:
+    """One panel per (sweep, metric), one line per method with a standard-error band.
+
+    Returns the path of the PNG written. Uses matplotlib's non-interactive Agg backend.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    panels = [(sw, m) for sw in experiment.sweeps for m in sw.metrics]
+    ncols = min(4, max(1, len(panels)))
+    nrows = int(np.ceil(len(panels) / ncols))
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.4 * nrows), squeeze=False)
+    for ax in axes.ravel()[len(panels):]:
+        ax.set_visible(False)
+    for ax, (sw, metric) in zip(axes.ravel(), panels):
+        for method in sw.methods:
+            rows = [r for r in summary if r["sweep"] == sw.name and r["method"] == method
+                    and r["metric"] == metric and r["n"] > 0]
+            if not rows:
+                continue
+            xs = [r["value"] for r in rows]
+            numeric = all(isinstance(x, (int, float)) for x in xs)
+            x = np.asarray(xs, dtype=float) if numeric else np.arange(len(xs))
+            mean = np.array([r["mean"] for r in rows])
+            se = np.array([r["se"] for r in rows])
+            line, = ax.plot(x, mean, marker="o", ms=3.5, lw=1.5, label=method)
+            ax.fill_between(x, mean - se, mean + se, color=line.get_color(), alpha=0.2, lw=0)
+            if not numeric:
+                ax.set_xticks(x, [json.dumps(v) for v in xs], rotation=30)
+        ax.set_xlabel(sw.xlabel or sw.variable)
+        ax.set_ylabel(metric)
+        ax.set_title(sw.name, fontsize=10)
+        if metric in ("seconds", "time") and ax.lines:
+            ax.set_yscale("log")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, frameon=False)
+    title = experiment.name + (f": {experiment.description}" if experiment.description else "")
+    fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

@@ -1,0 +1,322 @@
+"""Resumable experiment runner: sweeps x methods x trials, one SQLite row per finished trial.
+
+An :class:`Experiment` is a list of :class:`Sweep` s (one swept variable each, a set of fixed
+parameters, the methods to compare) and a ``trial(config, rng) -> dict`` function. The runner
+
+* derives every trial's random generator from ``(experiment, sweep, value, trial, seed)`` — not
+  from the method, so all methods of a trial see the same generated problem;
+* skips trials already in ``DIR/results.sqlite`` (rerunning resumes) and commits each trial in its
+  own transaction as soon as it finishes (a killed run loses at most the trials in flight);
+* runs serially or on a process pool (``workers``), with a tqdm progress bar;
+* summarizes mean and standard error per (sweep, value, method, metric), writes
+  ``summary.csv``/``summary.md`` and plots one panel per sweep and metric.
+
+Examples
+--------
+>>> import tempfile
+>>> from transync.experiments._runner import Experiment, Sweep, run_experiment
+>>> exp = Experiment(name="toy", trial=_toy_trial, trials=3, sweeps=[
+...     Sweep(name="noise", variable="noise", values=[0.0, 0.5], methods=["a", "b"],
+...           metrics=("error",))])
+>>> with tempfile.TemporaryDirectory() as d:
+...     report = run_experiment(exp, d, progress=False, plot=False)
+...     again = run_experiment(exp, d, progress=False, plot=False)
+>>> report.n_new, again.n_new, len(again.records)
+(12, 0, 12)
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import sqlite3
+import time
+import traceback
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .._validation import check_int
+
+__all__ = ["Experiment", "ExperimentReport", "ExperimentStore", "Sweep", "run_experiment",
+           "summarize"]
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """One swept variable: ``config = base | {variable: value, "method": method}``."""
+
+    name: str
+    variable: str
+    values: Sequence
+    methods: Sequence[str]
+    base: Mapping = field(default_factory=dict)
+    metrics: Sequence[str] = ("accuracy",)
+    xlabel: str | None = None
+
+    def configs(self):
+        for value in self.values:
+            for method in self.methods:
+                yield value, method, {**dict(self.base), self.variable: value, "method": method}
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """A named set of sweeps sharing one ``trial(config, rng) -> {metric: value}`` function."""
+
+    name: str
+    sweeps: Sequence[Sweep]
+    trial: Callable[[dict, np.random.Generator], Mapping[str, float]]
+    trials: int = 20
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class ExperimentReport:
+    """What a run produced: all stored records (old and new), the summary and output paths."""
+
+    experiment: str
+    records: list
+    summary: list
+    n_new: int
+    n_failed: int
+    out_dir: Path
+    figure: Path | None
+    seconds: float
+
+
+def _config_key(sweep: str, config: Mapping) -> str:
+    blob = json.dumps({"sweep": sweep, **config}, sort_keys=True, default=str)
+    return hashlib.sha1(blob.encode()).hexdigest()[:16]
+
+
+def _trial_seed(experiment: str, sweep: str, value, trial: int, seed: int) -> int:
+    blob = json.dumps([experiment, sweep, value, trial, seed], default=str).encode()
+    return int.from_bytes(hashlib.sha256(blob).digest()[:8], "little")
+
+
+class ExperimentStore:
+    """SQLite store of finished trials, keyed by (experiment, configuration hash, trial index)."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._con = sqlite3.connect(str(self.path))
+        self._con.execute("PRAGMA journal_mode=WAL")
+        self._con.execute("""CREATE TABLE IF NOT EXISTS trials (
+            experiment TEXT NOT NULL, config_hash TEXT NOT NULL, trial INTEGER NOT NULL,
+            sweep TEXT NOT NULL, config TEXT NOT NULL, metrics TEXT NOT NULL,
+            error TEXT, seconds REAL NOT NULL, finished REAL NOT NULL,
+            PRIMARY KEY (experiment, config_hash, trial))""")
+        self._con.commit()
+
+    def done(self, experiment: str) -> set[tuple[str, int]]:
+        rows = self._con.execute("SELECT config_hash, trial FROM trials WHERE experiment = ?",
+                                 (experiment,))
+        return {(h, int(t)) for h, t in rows}
+
+    def add(self, experiment: str, key: str, trial: int, sweep: str, config: Mapping,
+            metrics: Mapping, error: str | None, seconds: float) -> None:
+        with self._con:  # one transaction per trial
+            self._con.execute(
+                "INSERT OR REPLACE INTO trials VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (experiment, key, trial, sweep, json.dumps(dict(config), default=str),
+                 json.dumps({k: float(v) for k, v in metrics.items()}), error, seconds,
+                 time.time()))
+
+    def records(self, experiment: str) -> list[dict]:
+        rows = self._con.execute(
+            "SELECT sweep, config, trial, metrics, error, seconds FROM trials "
+            "WHERE experiment = ? ORDER BY sweep, config_hash, trial", (experiment,))
+        return [dict(sweep=s, config=json.loads(c), trial=t, metrics=json.loads(m), error=e,
+                     seconds=sec) for s, c, t, m, e, sec in rows]
+
+    def close(self):
+        self._con.close()
+
+
+def _run_one(trial_fn, config, seed):
+    """Run one trial; never raises (errors are returned and stored)."""
+    rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    n_warn = 0
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            metrics = dict(trial_fn(dict(config), rng))
+        n_warn = len(caught)
+        error = None
+    except Exception:  # noqa: BLE001 - a failed trial is recorded, the run goes on
+        metrics, error = {}, traceback.format_exc(limit=5)
+    seconds = time.perf_counter() - t0
+    metrics.setdefault("seconds", seconds)
+    metrics.setdefault("warnings", n_warn)
+    return metrics, error, seconds
+
+
+def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None,
+                   workers: int = 1, seed: int = 0, progress: bool = True,
+                   plot: bool = True) -> ExperimentReport:
+    """Run (or resume) ``experiment``, storing trials in ``out_dir/results.sqlite``.
+
+    Parameters
+    ----------
+    experiment : Experiment
+    out_dir : path
+        Folder for ``results.sqlite``, ``summary.csv``, ``summary.md`` and ``<name>.png``.
+    trials : int, optional
+        Trials per configuration (default: ``experiment.trials``).
+    workers : int, default=1
+        Processes; 1 runs in this process.
+    seed : int, default=0
+        Changes every trial's random problem.
+    progress : bool, default=True
+        Show a tqdm progress bar.
+    plot : bool, default=True
+        Write the figure.
+    """
+    n_trials = check_int(trials if trials is not None else experiment.trials, "trials", minimum=1)
+    workers = check_int(workers, "workers", minimum=1)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    store = ExperimentStore(out / "results.sqlite")
+    t_start = time.perf_counter()
+    try:
+        finished = store.done(experiment.name)
+        todo = []
+        for sw in experiment.sweeps:
+            for value, _method, config in sw.configs():
+                key = _config_key(sw.name, config)
+                for t in range(n_trials):
+                    if (key, t) not in finished:
+                        todo.append((sw.name, key, t, config,
+                                     _trial_seed(experiment.name, sw.name, value, t, seed)))
+        n_failed = 0
+        bar = _progress(len(todo), experiment.name, progress)
+        if workers == 1 or len(todo) <= 1:
+            for sw_name, key, t, config, s in todo:
+                metrics, error, sec = _run_one(experiment.trial, config, s)
+                store.add(experiment.name, key, t, sw_name, config, metrics, error, sec)
+                n_failed += error is not None
+                bar.update(1)
+        else:
+            with ProcessPoolExecutor(max_workers=workers) as pool:
+                pending = {}
+                it = iter(todo)
+                for item in it:
+                    pending[pool.submit(_run_one, experiment.trial, item[3], item[4])] = item
+                    if len(pending) >= 2 * workers:
+                        break
+                while pending:
+                    done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                    for fut in done:
+                        sw_name, key, t, config, _s = pending.pop(fut)
+                        metrics, error, sec = fut.result()
+                        store.add(experiment.name, key, t, sw_name, config, metrics, error, sec)
+                        n_failed += error is not None
+                        bar.update(1)
+                        nxt = next(it, None)
+                        if nxt is not None:
+                            pending[pool.submit(_run_one, experiment.trial, nxt[3], nxt[4])] = nxt
+        bar.close()
+        records = store.records(experiment.name)
+    finally:
+        store.close()
+    summary = summarize(experiment, records)
+    _write_summary(summary, out)
+    figure = None
+    if plot:
+        from ._plot import plot_experiment
+
+        figure = plot_experiment(experiment, summary, out / f"{experiment.name}.png")
+    return ExperimentReport(experiment.name, records, summary, len(todo), n_failed, out, figure,
+                            time.perf_counter() - t_start)
+
+
+class _NoBar:
+    def update(self, n):
+        pass
+
+    def close(self):
+        pass
+
+
+def _progress(total: int, name: str, enabled: bool):
+    if not enabled or total == 0:
+        return _NoBar()
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=f"experiment {name}", unit="trial", dynamic_ncols=True)
+
+
+def summarize(experiment: Experiment, records: list[dict]) -> list[dict]:
+    """Mean and standard error per (sweep, value, method, metric) over successful trials."""
+    by_sweep = {sw.name: sw for sw in experiment.sweeps}
+    groups: dict[tuple, list[dict]] = {}
+    failures: dict[tuple, int] = {}
+    for r in records:
+        sw = by_sweep.get(r["sweep"])
+        if sw is None:
+            continue
+        value = r["config"].get(sw.variable)
+        gkey = (sw.name, json.dumps(value, default=str), r["config"].get("method"))
+        if r["error"]:
+            failures[gkey] = failures.get(gkey, 0) + 1
+            continue
+        groups.setdefault(gkey, []).append(r["metrics"])
+    rows = []
+    for sw in experiment.sweeps:
+        metrics = list(dict.fromkeys([*sw.metrics, "seconds"]))
+        for value, method, _cfg in sw.configs():
+            gkey = (sw.name, json.dumps(value, default=str), method)
+            ms = groups.get(gkey, [])
+            for metric in metrics:
+                vals = np.array([m[metric] for m in ms if metric in m and m[metric] is not None],
+                                dtype=float)
+                vals = vals[np.isfinite(vals)]
+                n = vals.size
+                rows.append(dict(sweep=sw.name, variable=sw.variable, value=value, method=method,
+                                 metric=metric, mean=float(vals.mean()) if n else math.nan,
+                                 se=float(vals.std(ddof=1) / math.sqrt(n)) if n > 1 else 0.0,
+                                 n=int(n), failed=failures.get(gkey, 0)))
+    return rows
+
+
+def _write_summary(rows: list[dict], out: Path) -> None:
+    import csv
+
+    cols = ["sweep", "variable", "value", "method", "metric", "mean", "se", "n", "failed"]
+    with open(out / "summary.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=cols)
+        w.writeheader()
+        w.writerows(rows)
+    lines = []
+    for sweep in dict.fromkeys(r["sweep"] for r in rows):
+        sub = [r for r in rows if r["sweep"] == sweep]
+        metrics = list(dict.fromkeys(r["metric"] for r in sub))
+        methods = list(dict.fromkeys(r["method"] for r in sub))
+        values = list(dict.fromkeys(json.dumps(r["value"], default=str) for r in sub))
+        for metric in metrics:
+            lines.append(f"\n### {sweep}: {metric} (mean ± s.e.)\n")
+            lines.append("| " + sub[0]["variable"] + " | " + " | ".join(methods) + " |")
+            lines.append("|" + "---|" * (len(methods) + 1))
+            for v in values:
+                cells = []
+                for m in methods:
+                    hit = [r for r in sub if r["metric"] == metric and r["method"] == m
+                           and json.dumps(r["value"], default=str) == v]
+                    r = hit[0] if hit else None
+                    cells.append("—" if r is None or not r["n"] else f"{r['mean']:.4g} ± {r['se']:.2g}")
+                lines.append(f"| {v} | " + " | ".join(cells) + " |")
+    (out / "summary.md").write_text("\n".join(lines).lstrip() + "\n")
+
+
+def _toy_trial(config, rng):
+    """Toy trial used by the doctest: error grows with noise, method 'b' is better."""
+    scale = 1.0 if config["method"] == "a" else 0.5
+    return {"error": float(abs(rng.normal(0, config["noise"] + 0.01)) * scale)}

@@ -1,0 +1,223 @@
+"""Attributed graphs: adjacency, node points, node and edge features.
+
+A :class:`Graph` stores a square adjacency (dense, symmetric for undirected graphs; entries are
+edge weights, 0 = no edge), optional 2-d/3-d node ``points``, optional ``node_features`` of shape
+``(n, f)``, optional ``edge_features`` of shape ``(n, n)`` (one scalar attribute per node pair, read
+only where an edge exists; may be negative) and optional ``node_labels``. Geometric edge attributes
+(lengths, angles) are derived from the points on demand.
+
+Examples
+--------
+>>> import numpy as np
+>>> from transync.graphs import Graph
+>>> g = Graph.from_points(np.array([[0, 0], [1, 0], [0, 1], [1, 1]]), edges="full")
+>>> g.n_nodes, g.n_edges
+(4, 6)
+>>> g.edge_index().shape   # directed edge list, both directions
+(12, 2)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import Delaunay, cKDTree
+
+from ._validation import check_array, check_choice, check_int, check_shape
+
+__all__ = ["Graph"]
+
+
+@dataclass(frozen=True, eq=False)
+class Graph:
+    """An attributed graph.
+
+    Parameters
+    ----------
+    adjacency : ndarray of shape (n, n)
+        Edge weights, 0 where there is no edge. Diagonal must be zero (no self-loops).
+    points : ndarray of shape (n, dim), optional
+        Node coordinates (keypoints, landmarks).
+    node_features : ndarray of shape (n, f), optional
+        Node descriptors.
+    node_labels : ndarray of shape (n,), optional
+        Integer node labels (categorical).
+    edge_features : ndarray of shape (n, n), optional
+        Scalar edge attribute (e.g. Cho et al.'s random edge attributes), used where
+        ``adjacency != 0``.
+    directed : bool, default=False
+        Undirected graphs must have a symmetric adjacency.
+    """
+
+    adjacency: np.ndarray
+    points: np.ndarray | None = None
+    node_features: np.ndarray | None = None
+    node_labels: np.ndarray | None = None
+    edge_features: np.ndarray | None = None
+    directed: bool = False
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        A = check_array(self.adjacency, "adjacency", ndim=2)
+        if A.shape[0] != A.shape[1]:
+            raise ValueError(f"`adjacency` must be square, got shape {A.shape}")
+        if A.shape[0] == 0:
+            raise ValueError("`adjacency` must describe a non-empty graph, got shape (0, 0)")
+        if np.any(np.diag(A) != 0):
+            raise ValueError("`adjacency` must have a zero diagonal (no self-loops)")
+        if np.min(A) < 0:
+            raise ValueError(f"`adjacency` weights must be non-negative, got minimum {A.min():.6g}")
+        if not self.directed and not np.allclose(A, A.T):
+            raise ValueError("`adjacency` must be symmetric for an undirected graph "
+                             "(pass directed=True otherwise)")
+        object.__setattr__(self, "adjacency", A)
+        n = A.shape[0]
+        if self.points is not None:
+            P = check_array(self.points, "points", ndim=2)
+            check_shape(P, (n, None), "points")
+            object.__setattr__(self, "points", P)
+        if self.node_features is not None:
+            F = check_array(self.node_features, "node_features", ndim=(1, 2))
+            if F.ndim == 1:
+                F = F[:, None]
+            check_shape(F, (n, None), "node_features")
+            object.__setattr__(self, "node_features", F)
+        if self.edge_features is not None:
+            E = check_array(self.edge_features, "edge_features", ndim=2)
+            check_shape(E, (n, n), "edge_features")
+            if not self.directed and not np.allclose(E[A != 0], E.T[A != 0]):
+                raise ValueError("`edge_features` must be symmetric on the edges of an undirected "
+                                 "graph")
+            object.__setattr__(self, "edge_features", E)
+        if self.node_labels is not None:
+            L = np.asarray(self.node_labels)
+            if L.shape != (n,):
+                raise ValueError(f"`node_labels` must have shape ({n},), got {L.shape}")
+            object.__setattr__(self, "node_labels", L)
+
+    # ------------------------------------------------------------------ basic properties
+    @property
+    def n_nodes(self) -> int:
+        return self.adjacency.shape[0]
+
+    @property
+    def n_edges(self) -> int:
+        """Number of edges (undirected edges counted once)."""
+        nnz = int(np.count_nonzero(self.adjacency))
+        return nnz if self.directed else nnz // 2
+
+    @property
+    def mask(self) -> np.ndarray:
+        """Boolean adjacency (edge present)."""
+        return self.adjacency != 0
+
+    def edge_index(self) -> np.ndarray:
+        """Directed edge list of shape (m, 2): both directions of every undirected edge."""
+        return np.argwhere(self.adjacency != 0)
+
+    def distances(self) -> np.ndarray:
+        """Euclidean distance matrix between node points, shape (n, n)."""
+        P = self._require_points()
+        return np.linalg.norm(P[:, None, :] - P[None, :, :], axis=-1)
+
+    def angles(self) -> np.ndarray:
+        """Angle of each node-to-node vector with the x axis, shape (n, n), radians."""
+        P = self._require_points()
+        d = P[None, :, :2] - P[:, None, :2]
+        return np.arctan2(d[..., 1], d[..., 0])
+
+    def _require_points(self) -> np.ndarray:
+        if self.points is None:
+            raise ValueError("this Graph has no `points`; edge lengths and angles need them")
+        return self.points
+
+    def permute(self, perm) -> Graph:
+        """Relabel nodes: node ``u`` of the result is node ``perm[u]`` of this graph."""
+        perm = np.asarray(perm, dtype=np.int64)
+        if sorted(perm.tolist()) != list(range(self.n_nodes)):
+            raise ValueError(f"`perm` must be a permutation of range({self.n_nodes})")
+        take = (lambda x: None if x is None else x[perm])
+        E = None if self.edge_features is None else self.edge_features[np.ix_(perm, perm)]
+        return Graph(self.adjacency[np.ix_(perm, perm)], points=take(self.points),
+                     node_features=take(self.node_features), node_labels=take(self.node_labels),
+                     edge_features=E, directed=self.directed, meta=dict(self.meta))
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_points(cls, points, *, edges: str = "delaunay", k: int = 5, weighted: bool = False,
+                    node_features=None, node_labels=None) -> Graph:
+        """Build a graph on a point set.
+
+        Parameters
+        ----------
+        points : array_like of shape (n, dim)
+        edges : {"delaunay", "full", "knn"}, default="delaunay"
+            Delaunay triangulation (2-d, n >= 3), complete graph, or symmetric k-nearest neighbours.
+        k : int, default=5
+            Neighbours per node for ``edges="knn"``.
+        weighted : bool, default=False
+            Store edge lengths as weights instead of 1.
+        """
+        P = check_array(points, "points", ndim=2)
+        n = P.shape[0]
+        if n == 0:
+            raise ValueError("`points` must hold at least one point, got 0")
+        check_choice(edges, "edges", ("delaunay", "full", "knn"))
+        M = np.zeros((n, n), dtype=bool)
+        if edges == "full" or (edges == "delaunay" and n <= 3):
+            M[:] = True
+        elif edges == "delaunay":
+            if P.shape[1] != 2:
+                raise ValueError(f"`edges='delaunay'` needs 2-d points, got dimension {P.shape[1]}")
+            simplices = Delaunay(P).simplices
+            for a, b in ((0, 1), (1, 2), (0, 2)):
+                M[simplices[:, a], simplices[:, b]] = True
+        else:
+            k = check_int(k, "k", minimum=1)
+            kk = min(k + 1, n)
+            _, idx = cKDTree(P).query(P, k=kk)
+            idx = np.atleast_2d(idx)
+            M[np.repeat(np.arange(n), kk), idx.ravel()] = True
+        M = M | M.T
+        np.fill_diagonal(M, False)
+        A = M.astype(float)
+        if weighted:
+            A = A * np.linalg.norm(P[:, None, :] - P[None, :, :], axis=-1)
+        return cls(A, points=P, node_features=node_features, node_labels=node_labels)
+
+    @classmethod
+    def from_networkx(cls, G, *, weight: str | None = "weight", points: str | None = "pos",
+                      features: str | None = None, label: str | None = None) -> Graph:
+        """Build from a networkx graph; node order is ``list(G.nodes)``."""
+        import networkx as nx
+
+        nodes = list(G.nodes)
+        if not nodes:
+            raise ValueError("`G` must have at least one node")
+        A = nx.to_numpy_array(G, nodelist=nodes, weight=weight, dtype=float)
+        np.fill_diagonal(A, 0.0)
+
+        def collect(key):
+            if key is None or not all(key in G.nodes[v] for v in nodes):
+                return None
+            return np.asarray([G.nodes[v][key] for v in nodes])
+
+        return cls(A, points=collect(points), node_features=collect(features),
+                   node_labels=collect(label), directed=G.is_directed(),
+                   meta={"nodes": nodes})
+
+    def to_networkx(self):
+        """Convert to a networkx ``Graph``/``DiGraph`` with ``pos``/``features``/``label`` data."""
+        import networkx as nx
+
+        G = nx.from_numpy_array(self.adjacency,
+                                create_using=nx.DiGraph if self.directed else nx.Graph)
+        for v in range(self.n_nodes):
+            if self.points is not None:
+                G.nodes[v]["pos"] = tuple(self.points[v])
+            if self.node_features is not None:
+                G.nodes[v]["features"] = self.node_features[v].copy()
+            if self.node_labels is not None:
+                G.nodes[v]["label"] = self.node_labels[v].item()
+        return G

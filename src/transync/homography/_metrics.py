@@ -1,0 +1,178 @@
+"""Accuracy measures for multi-view plane homographies: corner errors, Brenner focus, segmentation."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._validation import check_array
+
+__all__ = [
+    "brenner_focus",
+    "corner_error",
+    "corner_accuracy",
+    "pairwise_corner_error",
+    "segmentation_scores",
+]
+
+
+def _corners(size):
+    w, h = float(size[0]), float(size[1])
+    return np.array([[0.0, 0.0], [w - 1, 0.0], [w - 1, h - 1], [0.0, h - 1]])
+
+
+def _transfer(H, pts):
+    p = pts @ H[..., :2, :2].swapaxes(-1, -2) + H[..., None, :2, 2]
+    z = pts @ H[..., 2, :2][..., :, None] + H[..., 2, 2][..., None, None]
+    return p / z
+
+
+def _sizes(image_size, n):
+    arr = np.asarray(image_size, dtype=float)
+    if arr.shape == (2,):
+        arr = np.broadcast_to(arr, (n, 2))
+    if arr.shape != (n, 2):
+        raise ValueError(f"`image_size` must be (width, height) or of shape ({n}, 2), "
+                         f"got {arr.tolist()!r}")
+    return arr
+
+
+def corner_error(H_est, H_true, *, image_size) -> np.ndarray:
+    """Mean distance, in reference pixels, between the view corners mapped by two homographies.
+
+    Parameters
+    ----------
+    H_est, H_true : ndarray (3, 3) or (N, 3, 3)
+        Homographies taking pixels of each view into the reference view.
+    image_size : (width, height) or ndarray (N, 2)
+        Size of the views whose corners are transferred.
+
+    Returns
+    -------
+    ndarray of shape (N,) (or a float for single homographies)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> H = np.eye(3); H2 = np.eye(3); H2[0, 2] = 0.5
+    >>> float(corner_error(H, H2, image_size=(640, 480)))
+    0.5
+    """
+    He = check_array(H_est, "H_est", ndim=(2, 3))
+    Ht = check_array(H_true, "H_true", ndim=(2, 3), finite=False)
+    single = He.ndim == 2
+    if single:
+        He = He[None]
+    if Ht.ndim == 2:
+        Ht = Ht[None]
+    if He.shape != Ht.shape or He.shape[1:] != (3, 3):
+        raise ValueError(f"`H_est` and `H_true` must both have shape (N, 3, 3), got "
+                         f"{He.shape} and {Ht.shape}")
+    sizes = _sizes(image_size, len(He))
+    err = np.empty(len(He))
+    for i in range(len(He)):
+        c = _corners(sizes[i])
+        err[i] = np.linalg.norm(_transfer(He[i], c) - _transfer(Ht[i], c), axis=1).mean()
+    return float(err[0]) if single else err
+
+
+def corner_accuracy(errors, thresholds=(1.0, 3.0, 5.0)) -> dict:
+    """Fraction of views whose corner error is at most each threshold (pixels)."""
+    errors = np.asarray(errors, dtype=float)
+    return {f"acc@{t:g}px": float(np.mean(errors <= t)) for t in thresholds}
+
+
+def pairwise_corner_error(H_est, H_true, *, image_size, min_overlap=0.05) -> np.ndarray:
+    """Corner errors of every ordered pair of overlapping views (``inv(H_i) @ H_j``), in pixels.
+
+    Two views overlap when the ground-truth footprint of view ``j`` covers at least
+    ``min_overlap`` of view ``i``. Returns a flat array over those pairs.
+    """
+    import cv2
+
+    He = check_array(H_est, "H_est", ndim=3)
+    Ht = check_array(H_true, "H_true", ndim=3)
+    n = len(He)
+    sizes = _sizes(image_size, n)
+    inv_e, inv_t = np.linalg.inv(He), np.linalg.inv(Ht)
+    out = []
+    for i in range(n):
+        ci = _corners(sizes[i]).astype(np.float32)
+        area_i = float(sizes[i][0] * sizes[i][1])
+        for j in range(n):
+            if i == j:
+                continue
+            cj = _corners(sizes[j])
+            Pt = inv_t[i] @ Ht[j]
+            foot = _transfer(Pt, cj).astype(np.float32)
+            try:
+                inter, _ = cv2.intersectConvexConvex(ci, foot)
+            except cv2.error:
+                inter = 0.0
+            if inter < min_overlap * area_i:
+                continue
+            Pe = inv_e[i] @ He[j]
+            out.append(np.linalg.norm(_transfer(Pe, cj) - _transfer(Pt, cj), axis=1).mean())
+    return np.asarray(out)
+
+
+def brenner_focus(image, mask=None) -> float:
+    """Brenner focus measure: mean over ``mask`` of ``max(|I(x+2,y)-I(x,y)|, |I(x,y+2)-I(x,y)|)^2``.
+
+    Images are converted to grey levels in [0, 1] (uint8 divided by 255). Sharp (well aligned)
+    mean warped images score higher than blurred ones.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> img = np.zeros((8, 8)); img[:, 4:] = 1.0
+    >>> round(brenner_focus(img), 4)
+    0.3333
+    """
+    img = np.asarray(image)
+    if img.ndim == 3:
+        img = img.mean(axis=2) if img.dtype != np.uint8 else img.astype(float).mean(axis=2)
+        if np.asarray(image).dtype == np.uint8:
+            img = img / 255.0
+    elif img.dtype == np.uint8:
+        img = img / 255.0
+    img = np.asarray(img, dtype=float)
+    if img.ndim != 2:
+        raise ValueError(f"`image` must be a 2-D grey or 3-D color image, got shape {img.shape}")
+    dh = np.zeros_like(img)
+    dv = np.zeros_like(img)
+    dh[:, :-2] = img[:, 2:] - img[:, :-2]
+    dv[:-2, :] = img[2:, :] - img[:-2, :]
+    fm = np.maximum(np.abs(dh), np.abs(dv)) ** 2
+    valid = np.zeros(img.shape, dtype=bool)
+    valid[:-2, :-2] = True
+    if mask is not None:
+        m = np.asarray(mask, dtype=bool)
+        if m.shape != img.shape:
+            raise ValueError(f"`mask` must have the image's shape {img.shape}, got {m.shape}")
+        # both samples of each difference must be inside the mask
+        m2 = m.copy()
+        m2[:, :-2] &= m[:, 2:]
+        m2[:-2, :] &= m[2:, :]
+        valid &= m2
+    if not valid.any():
+        return 0.0
+    return float(fm[valid].mean())
+
+
+def segmentation_scores(pred, truth, *, valid=None) -> dict:
+    """Pixel-wise precision, recall, F1 and IoU of binary masks (stacks allowed)."""
+    p = np.asarray(pred, dtype=bool)
+    t = np.asarray(truth, dtype=bool)
+    if p.shape != t.shape:
+        raise ValueError(f"`pred` and `truth` must have the same shape, got {p.shape} and {t.shape}")
+    if valid is not None:
+        v = np.asarray(valid, dtype=bool)
+        p, t = p[v], t[v]
+    tp = float(np.sum(p & t))
+    fp = float(np.sum(p & ~t))
+    fn = float(np.sum(~p & t))
+    prec = tp / (tp + fp) if tp + fp else 1.0
+    rec = tp / (tp + fn) if tp + fn else 1.0
+    f1 = 2 * prec * rec / (prec + rec) if prec + rec else 0.0
+    iou = tp / (tp + fp + fn) if tp + fp + fn else 1.0
+    return {"precision": prec, "recall": rec, "f1": f1, "iou": iou}

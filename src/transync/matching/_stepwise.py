@@ -1,0 +1,195 @@
+"""The step-wise protocol shared by the iterative QAP solvers.
+
+Synchronized multi-graph solvers (S-GA, S-RRW, S-PF) run one pairwise solver per graph pair and,
+between two outer steps, replace each pair's relaxed iterate by a cycle-consistent one. Each
+iterative solver therefore exists as a *stepper* object that exposes its state:
+
+>>> import numpy as np
+>>> from transync.graphs import Graph
+>>> from transync.matching import RRWMStepper, gaussian_edge_affinity
+>>> rng = np.random.default_rng(0)
+>>> g1 = Graph.from_points(rng.random((6, 2)), edges="full")
+>>> g2 = g1.permute(rng.permutation(6))
+>>> st = RRWMStepper(gaussian_edge_affinity(g1, g2))
+>>> while not st.done:
+...     X = st.iterate                 # (n1, n2) doubly-stochastic iterate
+...     st.set_iterate(X)              # a synchronizer would overwrite it here
+...     _ = st.step()
+>>> res = st.result()
+>>> bool(np.all(g2.points[res.assignment] == g1.points))
+True
+
+The public functions (:func:`~transync.matching.rrwm` etc.) are a thin loop over the stepper:
+``while not st.done: st.step()``, then a ``ConvergenceWarning`` if ``st.converged`` is false, then
+``st.result()``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from .._validation import check_array
+from ..exceptions import ConvergenceWarning
+from ..permutations import assignment_to_matrix, solve_lap
+from ._affinity import Affinity
+from ._result import MatchingResult
+
+__all__ = ["Stepper"]
+
+
+@runtime_checkable
+class Stepper(Protocol):
+    """Step-wise interface of an iterative pairwise QAP solver.
+
+    Attributes
+    ----------
+    affinity : Affinity
+        The problem (the caller's affinity; solvers may keep a normalized copy internally).
+    n_iter : int
+        Outer steps performed so far.
+    converged : bool
+        Whether the solver's stopping criterion has been met.
+    done : bool
+        ``converged`` or the iteration budget is spent; ``step`` does nothing once done.
+
+    Methods
+    -------
+    iterate
+        Property: the current relaxed solution, an ``(n1, n2)`` array. For RRWM it is the Sinkhorn
+        output, for GA the per-beta matrix (both (sub-)doubly stochastic), for PF the Frank-Wolfe
+        iterate in the (rectangular) Birkhoff polytope, for IPFP the continuous iterate, for SM the
+        leading eigenvector estimate (unit norm, not doubly stochastic).
+    step()
+        One outer iteration (RRWM, SM, IPFP: one iteration; GA: one beta level, with its inner loop
+        run to convergence; PF: one lambda step). Returns ``done``.
+    set_iterate(X)
+        Overwrite the relaxed state with ``X`` (e.g. a synchronized matrix) and continue from it;
+        resets ``converged`` so that at least one more step is taken.
+    result()
+        Round the current state with the Hungarian algorithm and return a :class:`MatchingResult`.
+    """
+
+    affinity: Affinity
+    n_iter: int
+    converged: bool
+
+    @property
+    def iterate(self) -> np.ndarray: ...
+
+    @property
+    def done(self) -> bool: ...
+
+    def step(self) -> bool: ...
+
+    def set_iterate(self, X) -> None: ...
+
+    def result(self) -> MatchingResult: ...
+
+
+class _BaseStepper:
+    """Bookkeeping shared by the steppers: budget, convergence flag, rounding."""
+
+    method = ""
+
+    def __init__(self, affinity: Affinity, *, max_iter: int):
+        self.affinity = affinity
+        self.n1, self.n2 = affinity.n1, affinity.n2
+        self.max_iter = max_iter
+        self.n_iter = 0
+        self.converged = False
+        self._X = np.full((self.n1, self.n2), 1.0 / max(self.n1, self.n2))
+
+    @property
+    def done(self) -> bool:
+        return self.converged or self.n_iter >= self.max_iter
+
+    @property
+    def iterate(self) -> np.ndarray:
+        return self._X.copy()
+
+    def _check_iterate(self, X) -> np.ndarray:
+        X = check_array(X, "X", ndim=2)
+        if X.shape != (self.n1, self.n2):
+            raise ValueError(f"`X` must have shape ({self.n1}, {self.n2}), got {X.shape}")
+        if X.size and X.min() < 0:
+            raise ValueError(f"`X` must be non-negative, got minimum {X.min():.6g}")
+        return np.array(X, dtype=float)
+
+    def set_iterate(self, X) -> None:
+        self._X = self._check_iterate(X)
+        self.converged = False
+
+    def step(self) -> bool:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def _rounding_scores(self) -> np.ndarray:
+        return self._X
+
+    def _info(self) -> dict:
+        return {}
+
+    def result(self) -> MatchingResult:
+        assignment = solve_lap(self._rounding_scores())
+        objective = self.affinity.score(assignment_to_matrix(assignment, self.n2))
+        return MatchingResult(assignment=assignment, soft=self._X.copy(), objective=objective,
+                              n_iter=self.n_iter, converged=bool(self.converged),
+                              method=self.method, n2=self.n2, info=self._info())
+
+
+def _run(stepper) -> MatchingResult:
+    """Thin loop of the public functions: step until done, warn if not converged."""
+    while not stepper.done:
+        stepper.step()
+    if not stepper.converged:
+        warnings.warn(f"{stepper.method}: stopped at max_iter={stepper.max_iter} before meeting "
+                      "the tolerance; the result may be poor (raise `max_iter` or `tol`)",
+                      ConvergenceWarning, stacklevel=3)
+    return stepper.result()
+
+
+class _SymmetrizedAffinity(Affinity):
+    """``(K + K^T) / 2`` through products; same quadratic form as ``K``."""
+
+    def __init__(self, base: Affinity):
+        self.base = base
+        self.n1, self.n2 = base.n1, base.n2
+
+    def matvec(self, X):
+        return 0.5 * (self.base.matvec(X) + self.base.rmatvec(X))
+
+    def diag(self):
+        return self.base.diag()
+
+    def to_dense(self):
+        K = self.base.to_dense()
+        return 0.5 * (K + K.T)
+
+
+def _symmetric(affinity: Affinity, *, rtol: float = 1e-10) -> Affinity:
+    """``affinity`` itself if it is symmetric (checked on one random probe), else its symmetric part."""
+    probe = np.random.default_rng(12345).random((affinity.n1, affinity.n2))
+    a, b = affinity.matvec(probe), affinity.rmatvec(probe)
+    scale = max(float(np.abs(a).max(initial=0.0)), 1e-300)
+    if float(np.abs(a - b).max(initial=0.0)) <= rtol * scale:
+        return affinity
+    return _SymmetrizedAffinity(affinity)
+
+
+def _power_iteration(matvec, n1: int, n2: int, *, max_iter: int, tol: float):
+    """Leading eigenpair of a non-negative symmetric operator from a uniform start."""
+    v = np.full((n1, n2), 1.0 / np.sqrt(n1 * n2))
+    lam = 0.0
+    for it in range(1, max_iter + 1):
+        w = matvec(v)
+        lam = float(np.vdot(v, w))
+        nrm = np.linalg.norm(w)
+        if nrm == 0:
+            return 0.0, v, it, True
+        w /= nrm
+        if np.linalg.norm(w - v) < tol:
+            return lam, w, it, True
+        v = w
+    return lam, v, max_iter, False

@@ -1,0 +1,74 @@
+import numpy as np
+import pytest
+
+from transync.datasets import (
+    make_graph_collection,
+    make_pairwise_problem,
+    make_point_matching_problem,
+)
+from transync.permutations import check_assignment
+
+
+def test_pairwise_problem_truth_is_an_isomorphism_at_zero_noise():
+    p = make_pairwise_problem(n_inliers=12, n_outliers=3, deformation=0.0, density=0.6, rng=1)
+    t = check_assignment(p.truth, n2=p.g2.n_nodes)
+    inl = np.flatnonzero(t >= 0)
+    assert inl.size == 12
+    np.testing.assert_allclose(p.g1.adjacency[np.ix_(inl, inl)],
+                               p.g2.adjacency[np.ix_(t[inl], t[inl])])
+    np.testing.assert_allclose(p.g1.edge_features[np.ix_(inl, inl)],
+                               p.g2.edge_features[np.ix_(t[inl], t[inl])])
+
+
+def test_pairwise_problem_deformation_scale():
+    p = make_pairwise_problem(n_inliers=30, deformation=0.1, rng=2)
+    t = p.truth
+    diff = (p.g1.edge_features - p.g2.edge_features[np.ix_(t, t)])[np.triu_indices(30, 1)]
+    assert 0.08 < diff.std() < 0.12
+
+
+def test_pairwise_problem_is_reproducible():
+    a = make_pairwise_problem(rng=5)
+    b = make_pairwise_problem(rng=5)
+    np.testing.assert_array_equal(a.truth, b.truth)
+    np.testing.assert_allclose(a.g2.edge_features, b.g2.edge_features)
+
+
+def test_point_problem_truth():
+    p = make_point_matching_problem(n_inliers=10, n_outliers=2, deformation=0.0, rng=3)
+    t = p.truth
+    inl = np.flatnonzero(t >= 0)
+    np.testing.assert_allclose(p.g1.distances()[np.ix_(inl, inl)],
+                               p.g2.distances()[np.ix_(t[inl], t[inl])], atol=1e-12)
+
+
+def test_graph_collection_labels_and_truth():
+    c = make_graph_collection(n_graphs=4, n_inliers=6, n_outliers=2, deformation=0.0, rng=0)
+    assert len(c.graphs) == 4 and c.n_universe == 6
+    for lab in c.labels:
+        assert sorted(lab[lab >= 0].tolist()) == list(range(6))
+        assert (lab < 0).sum() == 2
+    t = c.truth(0, 2)
+    g0, g2 = c.graphs[0], c.graphs[2]
+    inl = np.flatnonzero(t >= 0)
+    np.testing.assert_allclose(g0.edge_features[np.ix_(inl, inl)],
+                               g2.edge_features[np.ix_(t[inl], t[inl])])
+
+
+def test_graph_collection_flip_changes_topology():
+    c0 = make_graph_collection(n_graphs=2, n_inliers=20, flip=0.0, rng=4, shuffle=False)
+    c1 = make_graph_collection(n_graphs=2, n_inliers=20, flip=0.3, rng=4, shuffle=False)
+    assert np.all(c0.graphs[0].mask == c0.graphs[1].mask)
+    changed = (c1.graphs[0].mask != c1.graphs[1].mask).sum() / (20 * 19)
+    assert 0.3 < changed < 0.6      # two independent flips of p=0.3: 2p(1-p) = 0.42
+
+
+@pytest.mark.parametrize("kw, msg", [
+    (dict(n_inliers=0), "n_inliers"),
+    (dict(deformation=-1.0), "deformation"),
+    (dict(density=1.5), "density"),
+    (dict(n_outliers=1.5), "n_outliers"),
+])
+def test_generator_validation(kw, msg):
+    with pytest.raises((ValueError, TypeError), match=msg):
+        make_pairwise_problem(**kw)

@@ -1,0 +1,118 @@
+import sqlite3
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+
+from transync.experiments._runner import Experiment, Sweep, run_experiment
+
+
+def noisy_trial(config, rng):
+    if config["method"] == "broken" and config["x"] == 2:
+        raise RuntimeError("planted failure")
+    return {"value": config["x"] + rng.normal(0, 0.01), "draw": rng.random()}
+
+
+def _experiment(trials=4, methods=("a", "b")):
+    return Experiment(name="t", trial=noisy_trial, trials=trials, sweeps=[
+        Sweep(name="s", variable="x", values=[1, 2, 3], methods=list(methods),
+              metrics=("value",))])
+
+
+def test_all_trials_stored_and_summarized(tmp_path):
+    rep = run_experiment(_experiment(), tmp_path, progress=False)
+    assert rep.n_new == 3 * 2 * 4 and rep.n_failed == 0
+    assert (tmp_path / "t.png").stat().st_size > 0
+    assert (tmp_path / "summary.md").read_text().count("|") > 10
+    rows = {(r["value"], r["method"]): r for r in rep.summary if r["metric"] == "value"}
+    for x in (1, 2, 3):
+        assert rows[(x, "a")]["mean"] == pytest.approx(x, abs=0.05)
+        assert rows[(x, "a")]["n"] == 4
+
+
+def test_methods_share_the_random_problem(tmp_path):
+    rep = run_experiment(_experiment(), tmp_path, progress=False, plot=False)
+    draws = {}
+    for r in rep.records:
+        draws.setdefault((r["config"]["x"], r["trial"]), set()).add(r["metrics"]["draw"])
+    assert all(len(v) == 1 for v in draws.values())
+    other = run_experiment(_experiment(), tmp_path / "seed1", seed=1, progress=False, plot=False)
+    assert {r["metrics"]["draw"] for r in other.records}.isdisjoint(
+        {r["metrics"]["draw"] for r in rep.records})
+
+
+def test_resume_skips_finished_and_extends(tmp_path):
+    first = run_experiment(_experiment(trials=2), tmp_path, progress=False, plot=False)
+    again = run_experiment(_experiment(trials=2), tmp_path, progress=False, plot=False)
+    more = run_experiment(_experiment(trials=3), tmp_path, progress=False, plot=False)
+    assert (first.n_new, again.n_new, more.n_new) == (12, 0, 6)
+    assert len(more.records) == 18
+
+
+def test_failures_are_recorded_not_fatal(tmp_path):
+    rep = run_experiment(_experiment(methods=("a", "broken")), tmp_path, progress=False,
+                         plot=False)
+    assert rep.n_failed == 4
+    failed = [r for r in rep.records if r["error"]]
+    assert all("planted failure" in r["error"] for r in failed)
+    row = [r for r in rep.summary if r["method"] == "broken" and r["value"] == 2
+           and r["metric"] == "value"][0]
+    assert row["n"] == 0 and row["failed"] == 4
+
+
+def test_process_pool_gives_the_same_numbers(tmp_path):
+    serial = run_experiment(_experiment(trials=2), tmp_path / "a", progress=False, plot=False)
+    pooled = run_experiment(_experiment(trials=2), tmp_path / "b", workers=2, progress=False,
+                            plot=False)
+    key = lambda r: (r["config"]["x"], r["config"]["method"], r["trial"])  # noqa: E731
+    s = {key(r): r["metrics"]["value"] for r in serial.records}
+    p = {key(r): r["metrics"]["value"] for r in pooled.records}
+    assert s == p
+
+
+def test_killed_run_loses_at_most_the_trial_in_flight(tmp_path):
+    mod = tmp_path / "slowexp.py"
+    mod.write_text(textwrap.dedent("""
+        import time
+        from transync.experiments._runner import Experiment, Sweep, run_experiment
+        def trial(config, rng):
+            time.sleep(0.15)
+            return {"v": float(config["x"])}
+        EXP = Experiment(name="slow", trial=trial, trials=10, sweeps=[
+            Sweep(name="s", variable="x", values=[0, 1], methods=["m"], metrics=("v",))])
+        if __name__ == "__main__":
+            import sys
+            run_experiment(EXP, sys.argv[1], progress=False, plot=False)
+    """))
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, str(mod), str(out)], cwd=tmp_path)
+    db = out / "results.sqlite"
+    deadline = time.time() + 60
+    stored = 0
+    while time.time() < deadline:
+        time.sleep(0.1)
+        if db.exists():
+            try:
+                with sqlite3.connect(db) as con:
+                    stored = con.execute("SELECT COUNT(*) FROM trials").fetchone()[0]
+            except sqlite3.OperationalError:
+                continue
+            if stored >= 3:
+                break
+    proc.kill()
+    proc.wait()
+    with sqlite3.connect(db) as con:
+        after_kill = con.execute("SELECT COUNT(*) FROM trials").fetchone()[0]
+    assert 3 <= after_kill < 20
+    sys.path.insert(0, str(tmp_path))
+    try:
+        import slowexp
+        rep = run_experiment(slowexp.EXP, out, progress=False, plot=False)
+    finally:
+        sys.path.remove(str(tmp_path))
+    assert rep.n_new == 20 - after_kill
+    assert len(rep.records) == 20
+    assert np.allclose(sorted(r["metrics"]["v"] for r in rep.records), [0] * 10 + [1] * 10)

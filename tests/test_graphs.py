@@ -1,0 +1,72 @@
+import networkx as nx
+import numpy as np
+import pytest
+
+from transync.graphs import Graph
+
+
+def test_from_points_variants(rng):
+    P = rng.random((12, 2))
+    full = Graph.from_points(P, edges="full")
+    assert full.n_edges == 12 * 11 // 2
+    dela = Graph.from_points(P, edges="delaunay")
+    # planar triangulation: at most 3n - 6 edges, connected
+    assert 12 - 1 <= dela.n_edges <= 3 * 12 - 6
+    knn = Graph.from_points(P, edges="knn", k=3)
+    assert np.all(knn.mask.sum(1) >= 3)
+    assert np.allclose(knn.adjacency, knn.adjacency.T)
+
+
+def test_distances_and_weighted(rng):
+    P = np.array([[0.0, 0.0], [3.0, 4.0]])
+    g = Graph.from_points(P, edges="full", weighted=True)
+    assert g.adjacency[0, 1] == pytest.approx(5.0)
+    assert g.distances()[1, 0] == pytest.approx(5.0)
+    assert g.angles()[0, 1] == pytest.approx(np.arctan2(4, 3))
+
+
+def test_permute_relabels_everything(rng):
+    P = rng.random((6, 2))
+    E = rng.random((6, 6))
+    E = E + E.T
+    g = Graph(Graph.from_points(P, edges="full").adjacency, points=P,
+              node_features=rng.random((6, 3)), edge_features=E, node_labels=np.arange(6))
+    perm = rng.permutation(6)
+    h = g.permute(perm)
+    np.testing.assert_allclose(h.points, P[perm])
+    np.testing.assert_allclose(h.edge_features, E[np.ix_(perm, perm)])
+    np.testing.assert_array_equal(h.node_labels, perm)
+
+
+def test_networkx_round_trip(rng):
+    g = Graph.from_points(rng.random((5, 2)), edges="delaunay", node_labels=np.arange(5))
+    G = g.to_networkx()
+    assert isinstance(G, nx.Graph) and G.number_of_edges() == g.n_edges
+    h = Graph.from_networkx(G, label="label")
+    np.testing.assert_allclose(h.adjacency, g.adjacency)
+    np.testing.assert_allclose(h.points, g.points)
+    np.testing.assert_array_equal(h.node_labels, np.arange(5))
+
+
+@pytest.mark.parametrize("adj, msg", [
+    (np.zeros((2, 3)), "square"),
+    (np.zeros((0, 0)), "non-empty"),
+    (np.array([[1.0, 0], [0, 0]]), "zero diagonal"),
+    (np.array([[0, -1.0], [-1.0, 0]]), "non-negative"),
+    (np.array([[0, 1.0], [0, 0]]), "symmetric"),
+    (np.array([[0, np.nan], [np.nan, 0]]), "finite"),
+])
+def test_graph_validation(adj, msg):
+    with pytest.raises(ValueError, match=msg):
+        Graph(adj)
+
+
+def test_graph_attribute_shapes():
+    with pytest.raises(ValueError, match="points"):
+        Graph(np.zeros((3, 3)), points=np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="edge_features"):
+        Graph(np.zeros((3, 3)), edge_features=np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="edges"):
+        Graph.from_points(np.zeros((4, 2)), edges="ring")
+    with pytest.raises(ValueError, match="at least one"):
+        Graph.from_points(np.zeros((0, 2)))

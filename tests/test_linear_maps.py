@@ -1,0 +1,177 @@
+"""Tests for synchronize_linear_maps / synchronize_homographies (Bernard null-space method)."""
+
+import numpy as np
+import pytest
+
+from transync.datasets import make_noisy_homographies, make_noisy_linear_maps
+from transync.exceptions import DegenerateInputError
+from transync.homography import corner_error
+from transync.synchronization import (
+    LinearMapSyncResult,
+    synchronize_homographies,
+    synchronize_linear_maps,
+)
+
+
+@pytest.mark.parametrize("group", ["GL", "SL", "SO"])
+@pytest.mark.parametrize("density", [1.0, 0.4])
+def test_exact_on_consistent_input(group, density):
+    prob = make_noisy_linear_maps(9, 3, group=group, noise=0.0, density=density, rng=3)
+    res = synchronize_linear_maps(prob.observed, mask=prob.mask, group=group)
+    assert isinstance(res, LinearMapSyncResult)
+    np.testing.assert_allclose(res.maps, prob.truth, atol=1e-9)
+    # pairwise(i, j) reproduces the observation, also for unobserved pairs (truth)
+    truth_pw = prob.true_pairwise()
+    for i, j in [(1, 2), (3, 0), (8, 5)]:
+        np.testing.assert_allclose(res.pairwise(i, j), truth_pw[i, j], atol=1e-9)
+    full = res.to_array()
+    np.testing.assert_allclose(full[prob.mask], prob.observed[prob.mask], atol=1e-9)
+
+
+def test_convention_planted_maps():
+    """T[i, j] = M_i^-1 M_j with maps[i] = object i into the reference."""
+    rng = np.random.default_rng(0)
+    M = rng.normal(size=(5, 2, 2)) + 2 * np.eye(2)
+    M = np.linalg.solve(M[0], M)  # gauge: M_0 = I
+    T = np.einsum("iab,jbc->ijac", np.linalg.inv(M), M)
+    res = synchronize_linear_maps(T, reference=0)
+    np.testing.assert_allclose(res.maps, M, atol=1e-10)
+    # another reference: maps[i] = M_r^-1 M_i
+    res3 = synchronize_linear_maps(T, reference=3)
+    np.testing.assert_allclose(res3.maps, np.linalg.solve(M[3], M), atol=1e-10)
+    np.testing.assert_allclose(res3.pairwise(1, 4), T[1, 4], atol=1e-10)
+
+
+def test_dict_input_and_one_direction_only():
+    prob = make_noisy_linear_maps(5, 3, group="GL", noise=0.0, rng=1)
+    pairs = {(i, j): prob.observed[i, j] for i in range(5) for j in range(5) if i < j}
+    res = synchronize_linear_maps(pairs)
+    np.testing.assert_allclose(res.maps, prob.truth, atol=1e-9)
+    assert res.mask.all() == False  # noqa: E712  (diagonal stays False)
+    assert res.mask[4, 0] and res.mask[0, 4]
+
+
+def test_cycle_consistency_of_output():
+    prob = make_noisy_linear_maps(7, 3, group="GL", noise=0.1, rng=2)
+    res = synchronize_linear_maps(prob.observed, mask=prob.mask)
+    A = res.to_array()
+    np.testing.assert_allclose(A[1, 2] @ A[2, 5], A[1, 5], atol=1e-9)
+
+
+def test_weights_favour_good_pairs():
+    prob = make_noisy_linear_maps(8, 3, group="SO", noise=0.01, outlier_fraction=0.1, rng=4)
+    w = np.where(prob.outliers, 1e-6, 1.0)
+    res_w = synchronize_linear_maps(prob.observed, mask=prob.mask, weights=w, group="SO")
+    res = synchronize_linear_maps(prob.observed, mask=prob.mask, group="SO")
+    err_w = np.abs(res_w.maps - prob.truth).max()
+    err = np.abs(res.maps - prob.truth).max()
+    assert err_w < 0.05 < err
+
+
+@pytest.mark.parametrize("group", ["GL", "SL", "SO"])
+def test_robust_rejects_outliers(group):
+    prob = make_noisy_linear_maps(20, 3, group=group, noise=0.02, outlier_fraction=0.2,
+                                  density=0.7, rng=0)
+    plain = synchronize_linear_maps(prob.observed, mask=prob.mask, group=group)
+    res = synchronize_linear_maps(prob.observed, mask=prob.mask, group=group, robust=True)
+    assert res.converged
+    assert np.abs(res.maps - prob.truth).max() < 0.1
+    assert np.abs(plain.maps - prob.truth).max() > 0.2
+    rejected = res.mask & ~res.inliers
+    np.testing.assert_array_equal(rejected[prob.mask], prob.outliers[prob.mask])
+
+
+def test_so_output_is_rotation():
+    prob = make_noisy_linear_maps(6, 3, group="SO", noise=0.1, rng=5)
+    res = synchronize_linear_maps(prob.observed, mask=prob.mask, group="SO")
+    np.testing.assert_allclose(res.maps @ res.maps.transpose(0, 2, 1),
+                               np.broadcast_to(np.eye(3), (6, 3, 3)), atol=1e-10)
+    np.testing.assert_allclose(np.linalg.det(res.maps), 1.0, atol=1e-10)
+
+
+def test_so2_rotation_averaging():
+    prob = make_noisy_linear_maps(6, 2, group="SO", noise=0.0, rng=6)
+    res = synchronize_linear_maps(prob.observed, mask=prob.mask, group="SO")
+    np.testing.assert_allclose(res.maps, prob.truth, atol=1e-10)
+
+
+def test_homographies_exact_and_det_one():
+    prob = make_noisy_homographies(8, noise=0.0, density=0.5, rng=0)
+    res = synchronize_homographies(prob.observed, mask=prob.mask, image_size=prob.image_size)
+    err = corner_error(res.maps, prob.truth, image_size=prob.image_size)
+    assert err.max() < 1e-6
+    np.testing.assert_allclose(np.linalg.det(res.maps), 1.0, atol=1e-9)
+    Hp = res.pairwise(2, 5)
+    Ht = prob.true_pairwise()[2, 5]
+    np.testing.assert_allclose(Hp / Hp[2, 2], Ht / Ht[2, 2], rtol=1e-6, atol=1e-9)
+
+
+def test_homographies_robust_target_20_percent_outliers():
+    """SL(3), 640x480, 0.5 px pairwise noise, 20 % outlier pairs: every view < 0.5 px."""
+    prob = make_noisy_homographies(20, noise=0.5, outlier_fraction=0.2, rng=1)
+    res = synchronize_homographies(prob.observed, mask=prob.mask, image_size=prob.image_size,
+                                   robust=True)
+    err = corner_error(res.maps, prob.truth, image_size=prob.image_size)
+    assert err.max() < 0.5
+    plain = synchronize_homographies(prob.observed, mask=prob.mask, image_size=prob.image_size)
+    assert corner_error(plain.maps, prob.truth, image_size=prob.image_size).mean() > 2.0
+    # residuals are in pixels: inliers near the noise level, outliers large
+    assert np.nanmedian(res.residuals[prob.mask & ~prob.outliers]) < 1.0
+    assert np.nanmin(res.residuals[prob.outliers]) > 10.0
+
+
+def test_homographies_without_normalization_is_worse_conditioned():
+    prob = make_noisy_homographies(10, noise=0.5, rng=2)
+    res = synchronize_homographies(prob.observed, mask=prob.mask, image_size=prob.image_size)
+    err = corner_error(res.maps, prob.truth, image_size=prob.image_size)
+    assert err.max() < 0.6
+
+
+def test_disconnected_graph_raises_or_components():
+    prob = make_noisy_linear_maps(6, 3, noise=0.0, rng=0)
+    mask = np.zeros((6, 6), dtype=bool)
+    for i, j in [(0, 1), (1, 2), (3, 4), (4, 5)]:
+        mask[i, j] = mask[j, i] = True
+    with pytest.raises(DegenerateInputError, match="disconnected: 2 components"):
+        synchronize_linear_maps(prob.observed, mask=mask)
+    with pytest.raises(ValueError, match="disconnected"):
+        synchronize_linear_maps(prob.observed, mask=mask)
+    res = synchronize_linear_maps(prob.observed, mask=mask, disconnected="component")
+    np.testing.assert_array_equal(res.info["excluded"], [3, 4, 5])
+    assert np.isnan(res.maps[3:]).all()
+    np.testing.assert_allclose(res.maps[:3], prob.truth[:3], atol=1e-9)
+
+
+def test_bad_input():
+    prob = make_noisy_linear_maps(4, 3, noise=0.0, rng=0)
+    T = prob.observed.copy()
+    with pytest.raises(ValueError, match=r"shape \(N, N, d, d\)"):
+        synchronize_linear_maps(T[:, :3])
+    with pytest.raises(ValueError, match="must have 4 dimensions"):
+        synchronize_linear_maps(T[0])
+    with pytest.raises(ValueError, match=r"`mask` must have shape \(4, 4\)"):
+        synchronize_linear_maps(T, mask=np.ones((3, 3), dtype=bool))
+    with pytest.raises(ValueError, match="diagonal"):
+        synchronize_linear_maps(T, mask=np.ones((4, 4), dtype=bool))
+    with pytest.raises(ValueError, match="self-pairs"):
+        synchronize_linear_maps({(0, 0): np.eye(3), (0, 1): np.eye(3)})
+    Ts = T.copy()
+    Ts[1, 2] = np.array([[1.0, 2, 3], [2, 4, 6], [0, 0, 1]])
+    with pytest.raises(ValueError, match=r"`T\[1, 2\]` must be invertible"):
+        synchronize_linear_maps(Ts)
+    Tn = T.copy()
+    Tn[0, 3, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        synchronize_linear_maps(Tn)
+    with pytest.raises(ValueError, match="`weights` must have shape"):
+        synchronize_linear_maps(T, weights=np.ones((3, 3)))
+    with pytest.raises(ValueError, match="non-negative"):
+        synchronize_linear_maps(T, weights=-np.ones((4, 4)))
+    with pytest.raises(ValueError, match="`group` must be one of"):
+        synchronize_linear_maps(T, group="SE")
+    with pytest.raises(ValueError, match="`reference` must be <= 3"):
+        synchronize_linear_maps(T, reference=4)
+    with pytest.raises(ValueError, match=r"`d` = 4|d = 4"):
+        synchronize_linear_maps(np.broadcast_to(np.eye(4), (3, 3, 4, 4)), group="SO")
+    with pytest.raises(ValueError, match="image_size"):
+        synchronize_homographies(T, image_size=(640,))

@@ -1,0 +1,37 @@
+import numpy as np
+import pytest
+
+from transync.metrics import affinity_score, matching_accuracy, matching_precision_recall
+
+
+def test_accuracy_ignores_outlier_rows():
+    truth = np.array([1, 0, -1, -1])
+    assert matching_accuracy(np.array([1, 0, 2, 3]), truth) == 1.0
+    assert matching_accuracy(np.array([0, 1, 2, 3]), truth) == 0.0
+    assert matching_accuracy(np.array([1, -1, 2, 3]), truth) == 0.5
+
+
+def test_precision_recall_counts_spurious_matches():
+    truth = np.array([0, 1, -1])
+    pr = matching_precision_recall(np.array([0, -1, 1]), truth)
+    assert pr["precision"] == 0.5 and pr["recall"] == 0.5 and pr["f1"] == 0.5
+    assert matching_precision_recall(truth, truth)["f1"] == 1.0
+
+
+def test_affinity_score_dense_matches_formula(rng):
+    n1, n2 = 3, 4
+    K = rng.random((n1 * n2, n1 * n2))
+    a = np.array([2, 0, 3])
+    x = np.zeros(n1 * n2)
+    x[a * n1 + np.arange(n1)] = 1          # column-major vec: index a * n1 + i
+    assert affinity_score(K, a, n2=n2) == pytest.approx(x @ K @ x)
+    assert affinity_score(K, a, n2=n2, normalize_by=a) == pytest.approx(1.0)
+
+
+def test_metric_errors():
+    with pytest.raises(ValueError, match="same length"):
+        matching_accuracy([0, 1], [0, 1, 2])
+    with pytest.raises(TypeError, match="n2"):
+        affinity_score(np.eye(4), [0, 1])
+    with pytest.raises(ValueError, match="shape"):
+        affinity_score(np.eye(5), [0, 1], n2=2)

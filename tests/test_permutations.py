@@ -1,0 +1,89 @@
+import itertools
+
+import numpy as np
+import pytest
+
+from transync.permutations import (
+    assignment_to_matrix,
+    check_assignment,
+    compose,
+    cycle_inconsistency,
+    invert,
+    is_partial_permutation_matrix,
+    matrix_to_assignment,
+    random_permutation,
+    solve_lap,
+)
+
+
+def test_matrix_round_trip_partial(rng):
+    a = np.array([3, -1, 0, 1])
+    X = assignment_to_matrix(a, n2=5)
+    assert X.shape == (4, 5)
+    assert is_partial_permutation_matrix(X)
+    np.testing.assert_array_equal(matrix_to_assignment(X), a)
+
+
+def test_invert_round_trip(rng):
+    p = random_permutation(9, rng)
+    np.testing.assert_array_equal(compose(p, invert(p, 9)), np.arange(9))
+    np.testing.assert_array_equal(compose(invert(p, 9), p), np.arange(9))
+
+
+def test_compose_matches_matrix_product(rng):
+    a = np.array([2, 0, -1, 1])
+    b = np.array([1, -1, 3])
+    np.testing.assert_array_equal(
+        assignment_to_matrix(compose(a, b), 4),
+        assignment_to_matrix(a, 3) @ assignment_to_matrix(b, 4))
+
+
+def test_solve_lap_brute_force(rng):
+    for n1, n2 in [(4, 4), (3, 5), (5, 3)]:
+        S = rng.random((n1, n2))
+        a = solve_lap(S)
+        best = max(
+            sum(S[i, p[i]] for i in range(min(n1, n2)))
+            if n1 <= n2 else sum(S[p[j], j] for j in range(n2))
+            for p in itertools.permutations(range(max(n1, n2)), min(n1, n2)))
+        got = sum(S[i, a[i]] for i in range(n1) if a[i] >= 0)
+        assert got == pytest.approx(best)
+        assert (a >= 0).sum() == min(n1, n2)
+
+
+def test_solve_lap_threshold():
+    a = solve_lap(np.array([[0.9, 0.1], [0.2, 0.05]]), min_score=0.1)
+    np.testing.assert_array_equal(a, [0, -1])
+
+
+@pytest.mark.parametrize("bad, msg", [
+    (np.array([[0, 1]]), "1-d"),
+    (np.array([0, 0]), "injective"),
+    (np.array([-2, 0]), ">= -1"),
+    (np.array([0.5, 1.0]), "integers"),
+])
+def test_check_assignment_errors(bad, msg):
+    with pytest.raises((ValueError, TypeError), match=msg):
+        check_assignment(bad)
+
+
+def test_check_assignment_range():
+    with pytest.raises(ValueError, match="< n2=2"):
+        check_assignment([0, 2], n2=2)
+
+
+def test_matrix_to_assignment_rejects_soft():
+    with pytest.raises(ValueError, match="solve_lap"):
+        matrix_to_assignment(np.full((2, 2), 0.5))
+
+
+def test_cycle_inconsistency_detects_a_broken_triangle(rng):
+    P = [random_permutation(5, rng) for _ in range(4)]
+    # consistent: pairwise i->j = P_j^{-1} o P_i  (node u of i -> universe P_i[u] -> node of j)
+    pairs = {(i, j): compose(P[i], invert(P[j], 5)) for i in range(4) for j in range(i + 1, 4)}
+    rep = cycle_inconsistency(pairs)
+    assert rep["n_triangles"] == 4 and rep["inconsistent_triangles"] == 0.0
+    pairs[(0, 1)] = pairs[(0, 1)][[1, 0, 2, 3, 4]]
+    rep = cycle_inconsistency(pairs)
+    assert rep["inconsistent_triangles"] == 0.5   # the two triangles through (0, 1)
+    assert rep["cycle_error"] > 0

@@ -1,3 +1,63 @@
-"""transync: transformation synchronization for graph matching and multi-view geometry."""
+"""transync: transformation synchronization for graph matching and multi-view geometry.
+
+Front doors (keyword-only options, ``method=`` strings, frozen dataclass results):
+
+* :func:`match_graphs` — pairwise graph matching (hungarian, sinkhorn, sm, rrwm, ipfp, ga, pf);
+* :func:`synchronize_permutations` — consistent multi-matchings from pairwise assignments;
+* :func:`synchronize_doubly_stochastic` — Birkhoff-polytope synchronization of soft matchings;
+* :func:`synchronize_linear_maps` / :func:`synchronize_homographies` — invertible maps, SL(3);
+* :func:`estimate_plane_homographies` — consistent plane homographies and masks across views.
+
+Subpackages are imported on first use, so ``import transync`` stays light (OpenCV and
+scikit-image load only with :mod:`transync.homography`).
+
+>>> import transync
+>>> transync.match_graphs.__name__
+'match_graphs'
+"""
+
+from __future__ import annotations
+
+import importlib
 
 __version__ = "0.1.0"
+
+_LAZY = {
+    # name: (module, attribute or None for the module itself)
+    "match_graphs": ("transync.matching", "match_graphs"),
+    "MatchingResult": ("transync.matching", "MatchingResult"),
+    "Graph": ("transync.graphs", "Graph"),
+    "synchronize_permutations": ("transync.synchronization", "synchronize_permutations"),
+    "synchronize_doubly_stochastic": ("transync.synchronization",
+                                      "synchronize_doubly_stochastic"),
+    "synchronize_linear_maps": ("transync.synchronization", "synchronize_linear_maps"),
+    "synchronize_homographies": ("transync.synchronization", "synchronize_homographies"),
+    "estimate_plane_homographies": ("transync.homography", "estimate_plane_homographies"),
+    "ConvergenceWarning": ("transync.exceptions", "ConvergenceWarning"),
+    "DegenerateInputError": ("transync.exceptions", "DegenerateInputError"),
+    "datasets": ("transync.datasets", None),
+    "experiments": ("transync.experiments", None),
+    "graphs": ("transync.graphs", None),
+    "homography": ("transync.homography", None),
+    "matching": ("transync.matching", None),
+    "metrics": ("transync.metrics", None),
+    "permutations": ("transync.permutations", None),
+    "synchronization": ("transync.synchronization", None),
+}
+
+__all__ = ["__version__", *_LAZY]
+
+
+def __getattr__(name: str):
+    try:
+        module, attr = _LAZY[name]
+    except KeyError:
+        raise AttributeError(f"module 'transync' has no attribute {name!r}") from None
+    mod = importlib.import_module(module)
+    value = mod if attr is None else getattr(mod, attr)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))

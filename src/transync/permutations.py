@@ -155,52 +155,116 @@ def solve_lap(score, *, maximize: bool = True, min_score: float | None = None,
     return a
 
 
-def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray]) -> dict[str, float]:
+def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
+                        max_triangles: int = 200_000, rng=None) -> dict[str, float]:
     """How far a collection of pairwise assignments is from cycle consistency.
 
     ``pairwise[(i, j)]`` maps the nodes of object ``i`` into object ``j``. For every triangle
-    ``(i, j, k)`` with all three pairs observed (either direction), the composition
-    ``i -> j -> k`` is compared with ``i -> k``. Returns the fraction of inconsistent
-    triangles and the mean fraction of disagreeing nodes (``cycle_error``).
+    ``i < j < k`` with all three pairs observed (either direction; a missing direction is the
+    inverse of the given one, ``(i, j)`` wins when both are given), the composition
+    ``i -> j -> k`` is compared with ``i -> k``. Returns the number of triangles checked, the
+    fraction of inconsistent ones and the mean fraction of disagreeing nodes (``cycle_error``).
+
+    When there are more than ``max_triangles`` candidate triples, ``max_triangles`` triples
+    ``i < j < k`` are drawn uniformly at random (with ``rng``) and the observed ones among them
+    are checked; ``"sampled"`` says so. The work is vectorized over triangles (index gathers).
 
     >>> p = {(0, 1): np.array([1, 0]), (1, 2): np.array([1, 0]), (0, 2): np.array([0, 1])}
     >>> cycle_inconsistency(p)
-    {'n_triangles': 1, 'inconsistent_triangles': 0.0, 'cycle_error': 0.0}
+    {'n_triangles': 1, 'inconsistent_triangles': 0.0, 'cycle_error': 0.0, 'sampled': False}
     """
-    maps: dict[tuple[int, int], np.ndarray] = {}
+    if not isinstance(pairwise, Mapping):
+        raise TypeError(f"`pairwise` must be a dict {{(i, j): assignment}}, got "
+                        f"{type(pairwise).__name__}")
+    check_int(max_triangles, "max_triangles", minimum=1)
+    arrays: dict[tuple[int, int], np.ndarray] = {}
     sizes: dict[int, int] = {}
     for (i, j), a in pairwise.items():
+        i, j = int(i), int(j)
         a = check_assignment(a, f"pairwise[{(i, j)}]")
-        maps[(i, j)] = a
+        arrays[(i, j)] = a
         sizes[i] = max(sizes.get(i, 0), a.shape[0])
         if a.size:
             sizes[j] = max(sizes.get(j, 0), int(a.max()) + 1)
-    for (i, j), a in list(maps.items()):
-        if (j, i) not in maps:
-            maps[(j, i)] = invert(a, max(sizes.get(j, 0), int(a.max(initial=-1)) + 1))
-    nodes = sorted(sizes)
+    if not arrays:
+        return {"n_triangles": 0, "inconsistent_triangles": 0.0, "cycle_error": 0.0,
+                "sampled": False}
+    n_obj = max(sizes) + 1
+    size_arr = np.zeros(n_obj, dtype=np.int64)
+    for g, n in sizes.items():
+        size_arr[g] = n
+    n_max = int(size_arr.max())
+    canon: dict[tuple[int, int], np.ndarray] = {}
+    for (i, j), a in arrays.items():
+        if i < j:
+            canon[(i, j)] = a
+    for (i, j), a in arrays.items():
+        if i > j and (j, i) not in canon:
+            canon[(j, i)] = invert(a, int(size_arr[i]))
+    pairs = np.array(list(canon.keys()), dtype=np.int64).reshape(-1, 2)
+    maps = np.full((len(canon), n_max), UNMATCHED, dtype=np.int64)
+    for q, a in enumerate(canon.values()):
+        maps[q, : a.shape[0]] = a
+    return _triangle_report(pairs, maps, size_arr, max_triangles=max_triangles, rng=rng)
+
+
+def _triangle_report(pairs: np.ndarray, maps: np.ndarray, sizes: np.ndarray, *,
+                     max_triangles: int = 200_000, rng=None) -> dict[str, float]:
+    """Vectorized triangle check on stacked maps (private; pairs oriented ``i < j``).
+
+    ``maps[q]`` is the assignment ``pairs[q, 0] -> pairs[q, 1]`` padded with -1 to a common
+    width. Duplicate pairs: the first occurrence is used.
+    """
+    n_obj = int(sizes.shape[0])
+    n_max = maps.shape[1]
+    pid = np.full((n_obj, n_obj), -1, dtype=np.int64)
+    q_rev = np.arange(pairs.shape[0])[::-1]
+    pid[pairs[q_rev, 0], pairs[q_rev, 1]] = q_rev          # first occurrence wins
+    # a column of -1 so that "unmatched" indexes to unmatched: ajk_pad[-1] = -1
+    maps_pad = np.concatenate([maps, np.full((maps.shape[0], 1), UNMATCHED, maps.dtype)], 1)
+    total = n_obj * (n_obj - 1) * (n_obj - 2) // 6
+    sampled = total > max_triangles
+
+    def _chunks():
+        if sampled:
+            gen = as_generator(rng)
+            left = max_triangles
+            while left > 0:
+                m = min(left, 100_000)
+                tri = np.sort(np.column_stack([gen.integers(0, n_obj, 3 * m) for _ in range(3)])
+                              .reshape(-1, 3)[:m * 3], axis=1)
+                tri = tri[(tri[:, 0] < tri[:, 1]) & (tri[:, 1] < tri[:, 2])][:m]
+                left -= m
+                yield tri
+        else:
+            for i in range(n_obj - 2):
+                row = pid[i]
+                js = np.flatnonzero(row[i + 1:] >= 0) + i + 1
+                if js.size < 2:
+                    continue
+                jj, kk = np.triu_indices(js.size, 1)
+                yield np.column_stack([np.full(jj.size, i), js[jj], js[kk]])
+
     n_tri = 0
     bad = 0
     err = 0.0
-    for ii, i in enumerate(nodes):
-        for jj in range(ii + 1, len(nodes)):
-            j = nodes[jj]
-            if (i, j) not in maps:
-                continue
-            for k in nodes[jj + 1:]:
-                if (j, k) not in maps or (i, k) not in maps:
-                    continue
-                aij, ajk, aik = maps[(i, j)], maps[(j, k)], maps[(i, k)]
-                ajk_pad = np.full(max(ajk.shape[0], int(aij.max(initial=-1)) + 1), UNMATCHED)
-                ajk_pad[: ajk.shape[0]] = ajk
-                via = compose(aij, ajk_pad)
-                m = min(via.shape[0], aik.shape[0])
-                diff = np.count_nonzero(via[:m] != aik[:m])
-                n_tri += 1
-                bad += int(diff > 0)
-                err += diff / max(m, 1)
+    for tri in _chunks():
+        qij = pid[tri[:, 0], tri[:, 1]]
+        qjk = pid[tri[:, 1], tri[:, 2]]
+        qik = pid[tri[:, 0], tri[:, 2]]
+        ok = (qij >= 0) & (qjk >= 0) & (qik >= 0)
+        if not ok.any():
+            continue
+        qij, qjk, qik, tri = qij[ok], qjk[ok], qik[ok], tri[ok]
+        aij = maps[qij]                                       # (t, n_max)
+        via = np.take_along_axis(maps_pad[qjk], np.where(aij >= 0, aij, n_max), axis=1)
+        diff = (via != maps[qik]).sum(1)                      # padding is -1 on both sides
+        n_tri += int(tri.shape[0])
+        bad += int(np.count_nonzero(diff))
+        err += float((diff / np.maximum(sizes[tri[:, 0]], 1)).sum())
     return {
         "n_triangles": n_tri,
         "inconsistent_triangles": float(bad / n_tri) if n_tri else 0.0,
         "cycle_error": float(err / n_tri) if n_tri else 0.0,
+        "sampled": bool(sampled),
     }

@@ -20,7 +20,7 @@ from .._validation import as_generator, check_choice, check_int, check_positive,
 
 __all__ = ["PlanarScene", "make_planar_scene"]
 
-_SOURCES = ("astronaut", "brick", "grass", "gravel", "rocket", "coffee", "chelsea", "camera",
+_SOURCES = ("astronaut", "grass", "gravel", "rocket", "coffee", "chelsea", "camera",
             "immunohistochemistry", "coins")
 _PRESETS = {
     "easy": {"max_angle": 15.0, "clutter": 0.0},
@@ -95,10 +95,19 @@ def _texture(size_px, tile, rng, sources=_SOURCES):
     out = np.zeros((n * tile, n * tile), dtype=np.float32)
     for a in range(n):
         for b in range(n):
-            out[a * tile:(a + 1) * tile, b * tile:(b + 1) * tile] = _random_tile(tile, rng, sources)
+            # blend two random crops with a smooth random field: every tile is unique, so
+            # repeated source images never produce consistent false matches
+            t1 = _random_tile(tile, rng, sources)
+            t2 = _random_tile(tile, rng, sources)
+            field = cv2.GaussianBlur(rng.random((tile, tile)).astype(np.float32), (0, 0),
+                                     tile / 8)
+            field = np.clip((field - field.mean()) / (field.std() + 1e-6) * 0.25 + 0.5, 0, 1)
+            out[a * tile:(a + 1) * tile, b * tile:(b + 1) * tile] = field * t1 + (1 - field) * t2
     # fine unique noise so that repeated sources never give identical descriptors
     noise = cv2.GaussianBlur(rng.normal(0, 12, size=out.shape).astype(np.float32), (0, 0), 1.5)
-    return np.clip(out[:size_px, :size_px] + noise[:size_px, :size_px], 0, 255).astype(np.float32)
+    out = out[:size_px, :size_px]
+    out += noise[:size_px, :size_px]
+    return np.clip(out, 0, 255).astype(np.uint8)
 
 
 def _look_at(C, target, roll):
@@ -181,23 +190,17 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
     f = 1.1 * w
     K = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1.0]])
     px_per_unit = f * 0.9          # texture resolution close to the image's at distance 1
-    extent = 5.0                    # plane texture covers [-2.5, 2.5]^2 world units
-    tex_px = int(extent * px_per_unit)
-    tile = max(64, int(0.55 * px_per_unit))
-    texture = _texture(tex_px, tile, rng)
-    s = extent / tex_px
-    S = np.array([[s, 0, -extent / 2], [0, s, -extent / 2], [0, 0, 1.0]])
     corners = np.array([[0, 0, 1], [w - 1, 0, 1], [w - 1, h - 1, 1], [0, h - 1, 1]], float).T
 
     # cameras
-    Ks, Rs, Cs, Gs = [], [], [], []
+    Ks, Rs, Cs = [], [], []
     max_ang = np.deg2rad(preset["max_angle"])
+    reach = 0.0
     for i in range(n):
-        for _ in range(100):
+        for _attempt in range(200):
             if i == reference:
-                theta, phi, roll = 0.0, 0.0, 0.0
+                theta, phi, roll, dist = 0.0, 0.0, 0.0, 1.0
                 target = np.zeros(3)
-                dist = 1.0
             else:
                 theta = max_ang * np.sqrt(rng.uniform(0.1, 1.0))
                 phi = rng.uniform(0, 2 * np.pi)
@@ -207,19 +210,28 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
             C = target + dist * np.array([np.sin(theta) * np.cos(phi),
                                           np.sin(theta) * np.sin(phi), np.cos(theta)])
             R = _look_at(C, target, roll)
-            G = _plane_homography(K, R, C, 0.0, S)
+            G = _plane_homography(K, R, C, 0.0, np.eye(3))   # plane (X, Y, 1) -> pixels
             foot = np.linalg.solve(G, corners)
-            foot = foot[:2] / foot[2]
-            if foot.min() > 2 and foot.max() < tex_px - 3 and np.all(
-                    np.linalg.solve(G, corners)[2] > 0):
-                break
+            if np.all(foot[2] * np.sign(foot[2, 0]) > 0):
+                r_i = float(np.abs(foot[:2] / foot[2]).max())
+                # keep the texture below OpenCV's remap limit (32767 px)
+                if r_i < 3.0:
+                    break
+        else:
+            raise ValueError("`max_angle` too large: no camera sees a bounded part of the plane")
+        reach = max(reach, r_i)
         Ks.append(K)
         Rs.append(R)
         Cs.append(C)
-        Gs.append(G)
+    extent = 2.0 * reach + 0.2     # the plane texture covers every view
+    tex_px = int(extent * px_per_unit)
+    tile = max(64, int(0.55 * px_per_unit))
+    texture = _texture(tex_px, tile, rng)
+    s = extent / tex_px
+    S = np.array([[s, 0, -extent / 2], [0, s, -extent / 2], [0, 0, 1.0]])
 
     # clutter: floating textured rectangles in front of the plane, placed over the reference view
-    Gr = Gs[reference]
+    Gr = _plane_homography(K, Rs[reference], Cs[reference], 0.0, S)
     patches = []
     covered = np.zeros((h, w), dtype=bool)
     attempts = 0
@@ -251,7 +263,7 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
     for i in range(n):
         G = _plane_homography(Ks[i], Rs[i], Cs[i], 0.0, S)
         img = cv2.warpPerspective(texture, G, (w, h), flags=cv2.INTER_LINEAR,
-                                  borderMode=cv2.BORDER_REFLECT)
+                                  borderMode=cv2.BORDER_REFLECT).astype(np.float32)
         plane = np.ones((h, w), dtype=bool)
         for p in patches:
             Gp = _plane_homography(Ks[i], Rs[i], Cs[i], p["height"], p["S"])

@@ -5,4 +5,5 @@
 
 REGISTRY = {
     "pairwise": "transync.experiments.pairwise",
+    "sync": "transync.experiments.sync",
 }

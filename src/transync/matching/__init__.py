@@ -10,6 +10,15 @@ from ._affinity import (
     gaussian_edge_affinity,
     gaussian_node_affinity,
 )
+from ._front import METHODS, match_graphs
+from ._ga import GAStepper, ga
+from ._ipfp import IPFPStepper, ipfp
+from ._linear import hungarian, sinkhorn
+from ._pf import PFStepper, pf
+from ._result import MatchingResult
+from ._rrwm import RRWMStepper, rrwm
+from ._sm import SMStepper, sm
+from ._stepwise import Stepper
 
 __all__ = [
     "Affinity",
@@ -20,4 +29,20 @@ __all__ = [
     "as_affinity",
     "gaussian_edge_affinity",
     "gaussian_node_affinity",
+    "GAStepper",
+    "IPFPStepper",
+    "METHODS",
+    "MatchingResult",
+    "PFStepper",
+    "RRWMStepper",
+    "SMStepper",
+    "Stepper",
+    "ga",
+    "hungarian",
+    "ipfp",
+    "match_graphs",
+    "pf",
+    "rrwm",
+    "sinkhorn",
+    "sm",
 ]

@@ -122,31 +122,65 @@ def parse_pairwise(pairwise, *, mask=None, weights=None, sizes=None, soft: bool 
     keys_i: list[int] = []
     keys_j: list[int] = []
     vals: list[np.ndarray] = []
-    is_matrix: list[bool] = []
-    ws: list[float] = []
-    for i, j, value in _items(pairwise, mask):
+    if isinstance(pairwise, Mapping) and mask is None:
+        raw_keys = list(pairwise.keys())
+        vals = [np.asarray(v) for v in pairwise.values()]
+        karr = np.array(raw_keys, dtype=object) if raw_keys else np.zeros((0, 2))
         try:
-            i = check_int(i, f"{name} key"); j = check_int(j, f"{name} key")  # noqa: E702
-        except TypeError:
-            raise TypeError(f"`{name}` keys must be pairs of ints, got {(i, j)!r}") from None
-        if i < 0 or j < 0:
-            raise ValueError(f"`{name}` keys must be non-negative object indices, got {(i, j)}")
-        if i == j:
-            raise ValueError(f"`{name}` must not contain pairs with i == j, got {(i, j)}")
-        arr = np.asarray(value)
-        if arr.ndim not in (1, 2):
-            raise ValueError(f"`{name}[{(i, j)}]` must be an assignment (1-d) or a matrix (2-d), "
-                             f"got shape {arr.shape}")
-        w = _weight_of(weights, i, j)
-        if not np.isfinite(w) or w < 0:
-            raise ValueError(f"`weights` must be finite and >= 0, got {w!r} for pair {(i, j)}")
-        keys_i.append(i); keys_j.append(j); vals.append(arr)  # noqa: E702
-        is_matrix.append(arr.ndim == 2); ws.append(float(w))  # noqa: E702
+            karr = np.array(raw_keys)
+        except ValueError:
+            karr = None
+        if karr is not None and karr.ndim == 2 and karr.shape[1] == 2 and karr.dtype.kind in "iu":
+            keys_i = karr[:, 0].tolist()
+            keys_j = karr[:, 1].tolist()
+        else:
+            for key in raw_keys:
+                if not (isinstance(key, tuple) and len(key) == 2):
+                    raise ValueError(f"`{name}` keys must be pairs (i, j), got {key!r}")
+                try:
+                    keys_i.append(check_int(key[0], f"{name} key"))
+                    keys_j.append(check_int(key[1], f"{name} key"))
+                except TypeError:
+                    raise TypeError(f"`{name}` keys must be pairs of ints, got {key!r}") from None
+    else:
+        for i, j, value in _items(pairwise, mask):
+            try:
+                i = check_int(i, f"{name} key"); j = check_int(j, f"{name} key")  # noqa: E702
+            except TypeError:
+                raise TypeError(f"`{name}` keys must be pairs of ints, got {(i, j)!r}") from None
+            keys_i.append(i); keys_j.append(j); vals.append(np.asarray(value))  # noqa: E702
     if not vals:
         raise ValueError(f"`{name}` must contain at least one observed pair i != j")
+    ki_arr = np.asarray(keys_i, dtype=np.int64)
+    kj_arr = np.asarray(keys_j, dtype=np.int64)
+    if ki_arr.min() < 0 or kj_arr.min() < 0:
+        q = int(np.flatnonzero((ki_arr < 0) | (kj_arr < 0))[0])
+        raise ValueError(f"`{name}` keys must be non-negative object indices, got "
+                         f"{(keys_i[q], keys_j[q])}")
+    if np.any(ki_arr == kj_arr):
+        q = int(np.flatnonzero(ki_arr == kj_arr)[0])
+        raise ValueError(f"`{name}` must not contain pairs with i == j, got "
+                         f"{(keys_i[q], keys_j[q])}")
+    for q, arr in enumerate(vals):
+        if arr.ndim not in (1, 2):
+            raise ValueError(f"`{name}[{(keys_i[q], keys_j[q])}]` must be an assignment (1-d) or "
+                             f"a matrix (2-d), got shape {arr.shape}")
+    is_matrix = [arr.ndim == 2 for arr in vals]
+    if weights is None:
+        ws = np.ones(len(vals))
+    elif isinstance(weights, Mapping):
+        ws = np.array([float(_weight_of(weights, i, j)) for i, j in zip(keys_i, keys_j)])
+    else:
+        if max(ki_arr.max(), kj_arr.max()) >= weights.shape[0]:
+            raise ValueError(f"`weights` must be ({int(max(ki_arr.max(), kj_arr.max())) + 1}, ...) "
+                             f"or larger, got shape {weights.shape}")
+        ws = weights[ki_arr, kj_arr].astype(float)
+    if np.any(~np.isfinite(ws)) or np.any(ws < 0):
+        q = int(np.flatnonzero(~np.isfinite(ws) | (ws < 0))[0])
+        raise ValueError(f"`weights` must be finite and >= 0, got {ws[q]!r} for pair "
+                         f"{(keys_i[q], keys_j[q])}")
 
-    ki = np.asarray(keys_i, dtype=np.int64)
-    kj = np.asarray(keys_j, dtype=np.int64)
+    ki, kj = ki_arr, kj_arr
     n_obj = int(max(ki.max(), kj.max())) + 1
     if fixed is not None:
         if fixed.size < n_obj:
@@ -159,6 +193,7 @@ def parse_pairwise(pairwise, *, mask=None, weights=None, sizes=None, soft: bool 
     # sizes: exact from lengths / matrix shapes, lower bounds from targets
     exact = np.full(n_obj, -1, dtype=np.int64) if fixed is None else fixed.copy()
     lower = np.zeros(n_obj, dtype=np.int64)
+    stacked = None
 
     def _set_exact(g, value, what):
         if exact[g] >= 0 and exact[g] != value:
@@ -166,14 +201,38 @@ def parse_pairwise(pairwise, *, mask=None, weights=None, sizes=None, soft: bool 
                              f"{value} but object {g} has {exact[g]} nodes elsewhere")
         exact[g] = value
 
-    for i, j, arr, mat in zip(keys_i, keys_j, vals, is_matrix):
-        if mat:
-            _set_exact(i, arr.shape[0], f"pair {(i, j)} (rows)")
-            _set_exact(j, arr.shape[1], f"pair {(i, j)} (columns)")
+    if not any(is_matrix):
+        lens = np.fromiter((a.shape[0] for a in vals), dtype=np.int64, count=len(vals))
+        stacked = None
+        if lens.min() == lens.max() and all(a.dtype.kind in "iu" for a in vals):
+            stacked = np.stack(vals).astype(np.int64, copy=False)
+            maxs = stacked.max(1) if stacked.shape[1] else np.full(len(vals), -1)
         else:
-            _set_exact(i, arr.shape[0], f"pair {(i, j)}")
-            if arr.size:
-                lower[j] = max(lower[j], int(np.max(arr)) + 1)
+            maxs = np.fromiter((int(np.max(a)) if a.size else -1 for a in vals),
+                               dtype=np.int64, count=len(vals))
+        order = np.argsort(ki_arr, kind="stable")
+        ks, ls = ki_arr[order], lens[order]
+        first = np.r_[True, ks[1:] != ks[:-1]]
+        grp_len = ls[first]
+        grp_obj = ks[first]
+        # every occurrence of an object as a source must have the same length
+        bad = np.flatnonzero(ls != np.repeat(grp_len, np.diff(np.r_[np.flatnonzero(first), ks.size])))
+        if bad.size:
+            g = int(ks[bad[0]])
+            raise ValueError(f"`{name}`: mismatched sizes for object {g}: its assignments have "
+                             f"lengths {sorted(set(ls[ks == g].tolist()))}")
+        for g, n_g in zip(grp_obj.tolist(), grp_len.tolist()):
+            _set_exact(g, n_g, "an assignment")
+        np.maximum.at(lower, kj_arr, maxs + 1)
+    else:
+        for i, j, arr, mat in zip(keys_i, keys_j, vals, is_matrix):
+            if mat:
+                _set_exact(i, arr.shape[0], f"pair {(i, j)} (rows)")
+                _set_exact(j, arr.shape[1], f"pair {(i, j)} (columns)")
+            else:
+                _set_exact(i, arr.shape[0], f"pair {(i, j)}")
+                if arr.size:
+                    lower[j] = max(lower[j], int(np.max(arr)) + 1)
     sizes_out = np.where(exact >= 0, exact, np.maximum(lower, 0))
     bad = np.flatnonzero((exact >= 0) & (lower > exact))
     if bad.size:
@@ -206,9 +265,7 @@ def parse_pairwise(pairwise, *, mask=None, weights=None, sizes=None, soft: bool 
             soft_blocks[q, : block.shape[0], : block.shape[1]] = block
     else:
         maps = np.full((Q, n_max), -1, dtype=np.int64)
-        same_len = not any(is_matrix) and all(v.shape[0] == n_max for v in vals)
-        if same_len and all(v.dtype.kind in "iu" for v in vals):
-            stacked = np.stack(vals).astype(np.int64, copy=False)
+        if stacked is not None and stacked.shape[1] == n_max:
             if stacked.min() < -1:
                 raise ValueError(f"`{name}` assignments must hold entries >= -1, got "
                                  f"{int(stacked.min())}")
@@ -249,7 +306,7 @@ def parse_pairwise(pairwise, *, mask=None, weights=None, sizes=None, soft: bool 
                 inv[a[r]] = r
                 maps[q] = inv
     # average duplicated observations of the same unordered pair
-    w = np.asarray(ws, dtype=float)
+    w = np.asarray(ws, dtype=float).copy()
     key = pairs[:, 0] * n_obj + pairs[:, 1]
     _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
     w = w / counts[inverse]

@@ -25,31 +25,76 @@ __all__: list[str] = []
 DENSE_MAX = 2000          # "auto" uses dense eigh up to this total number of nodes
 
 
-def block_matrix(stk: StackedPairs, *, identity: bool = True) -> sp.csr_matrix:
-    """Symmetric sparse block matrix of the observations (see module docstring)."""
+def directed(stk: StackedPairs):
+    """Directed observations sorted by source: ``(ptr, dst, maps, weights)``.
+
+    ``maps[e]`` is the assignment ``src -> dst`` of directed observation ``e`` (the inverse map
+    for the reversed direction); the observations of object ``g`` are ``ptr[g]:ptr[g + 1]``.
+    """
+    Q, n_max = stk.maps.shape
+    inv = np.full((Q, n_max), -1, dtype=stk.maps.dtype)
+    q, u = np.nonzero(stk.maps >= 0)
+    inv[q, stk.maps[q, u]] = u
+    src = np.concatenate([stk.pairs[:, 0], stk.pairs[:, 1]])
+    order = np.argsort(src, kind="stable")
+    dst = np.concatenate([stk.pairs[:, 1], stk.pairs[:, 0]])[order]
+    maps = np.concatenate([stk.maps, inv])[order]
+    w = np.concatenate([stk.weights, stk.weights])[order]
+    ptr = np.searchsorted(src[order], np.arange(stk.n_objects + 1))
+    return ptr, dst, maps, w
+
+
+def block_matrix(stk: StackedPairs, *, normalize: bool = True, dtype=np.float64,
+                 directed_obs=None) -> sp.csr_matrix:
+    """Sparse ``(M, M)`` block matrix ``T`` (identity diagonal blocks), optionally normalized.
+
+    Built object by object straight in CSR form: the rows of object ``i`` are the transposed
+    stack of its directed maps (one gather per observed pair), so no COO sort is needed. With
+    ``normalize`` the result is ``D^-1/2 T D^-1/2``, ``D`` the row sums of ``T``.
+    """
     off = stk.offsets
     M = int(off[-1])
     idx_dtype = np.int32 if M < 2**31 - 1 else np.int64
-    n_max = stk.maps.shape[1]
-    valid = stk.maps >= 0
-    q, u = np.nonzero(valid)
-    rows = (off[stk.pairs[q, 0]] + u).astype(idx_dtype)
-    cols = (off[stk.pairs[q, 1]] + stk.maps[q, u]).astype(idx_dtype)
-    data = stk.weights[q]
-    del q, u, valid
-    parts_r = [rows, cols]
-    parts_c = [cols, rows]
-    parts_d = [data, data]
-    if identity:
-        diag = np.arange(M, dtype=idx_dtype)
-        parts_r.append(diag); parts_c.append(diag); parts_d.append(np.ones(M))  # noqa: E702
-    r = np.concatenate(parts_r); del parts_r, rows  # noqa: E702
-    c = np.concatenate(parts_c); del parts_c, cols  # noqa: E702
-    d = np.concatenate(parts_d); del parts_d, data  # noqa: E702
-    T = sp.coo_matrix((d, (r, c)), shape=(M, M)).tocsr()
-    del r, c, d
-    _ = n_max
-    return T
+    ptr, dst, maps, w = directed_obs if directed_obs is not None else directed(stk)
+    indptr = np.zeros(M + 1, dtype=np.int64)
+    ind_parts = []
+    dat_parts = []
+    for g in range(stk.n_objects):
+        lo, hi = ptr[g], ptr[g + 1]
+        n_g = int(stk.sizes[g])
+        a = maps[lo:hi, :n_g].T                                   # (n_g, deg)
+        cols = np.empty((n_g, hi - lo + 1), dtype=np.int64)
+        cols[:, 0] = off[g] + np.arange(n_g)                      # diagonal (identity block)
+        cols[:, 1:] = off[dst[lo:hi]][None, :] + a
+        vals = np.empty((n_g, hi - lo + 1), dtype=np.float64)
+        vals[:, 0] = 1.0
+        vals[:, 1:] = w[lo:hi][None, :]
+        valid = np.ones_like(cols, dtype=bool)
+        valid[:, 1:] = a >= 0
+        if valid.all():
+            counts = np.full(n_g, hi - lo + 1)
+            ind_parts.append(cols.ravel().astype(idx_dtype))
+            dat_parts.append(vals.ravel())
+        else:
+            counts = valid.sum(1)
+            ind_parts.append(cols[valid].astype(idx_dtype))
+            dat_parts.append(vals[valid])
+        indptr[off[g] + 1: off[g + 1] + 1] = counts
+    np.cumsum(indptr, out=indptr)
+    indices = np.concatenate(ind_parts)
+    del ind_parts
+    data = np.concatenate(dat_parts)
+    del dat_parts
+    if normalize:
+        row_counts = np.diff(indptr)
+        deg = np.add.reduceat(data, indptr[:-1]) if data.size else np.ones(M)
+        deg[row_counts == 0] = 1.0
+        dinv = 1.0 / np.sqrt(np.maximum(deg, 1e-300))
+        data *= np.repeat(dinv, row_counts)
+        data *= dinv[indices]
+    if indptr[-1] < 2**31 - 1:
+        indptr = indptr.astype(idx_dtype)
+    return sp.csr_matrix((data.astype(dtype, copy=False), indices, indptr), shape=(M, M))
 
 
 def normalized(T: sp.csr_matrix) -> tuple[sp.csr_matrix, np.ndarray]:
@@ -60,38 +105,84 @@ def normalized(T: sp.csr_matrix) -> tuple[sp.csr_matrix, np.ndarray]:
     return A.tocsr(), dinv
 
 
+def reference_start(stk: StackedPairs, b: int, directed_obs, rng) -> np.ndarray:
+    """Start block for the eigensolver: one-hot maps into the best-connected object + noise.
+
+    Rows of object ``i`` observed with the reference ``r`` are the one-hot rows of
+    ``P_ir`` (the reference itself gets the identity); the remaining columns are Gaussian.
+    For mildly corrupted input this block is already close to the leading eigenspace.
+    """
+    ptr, dst, maps, w = directed_obs
+    off = stk.offsets
+    M = int(off[-1])
+    r = int(np.argmax(np.diff(ptr) + 1e-9 * stk.sizes))
+    n_r = int(stk.sizes[r])
+    gen = np.random.default_rng(rng)
+    V = np.zeros((M, b))
+    V[:, min(n_r, b):] = gen.standard_normal((M, b - min(n_r, b)))
+    m = min(n_r, b)
+    V[off[r] + np.arange(m), np.arange(m)] = 1.0
+    lo, hi = ptr[r], ptr[r + 1]
+    # P_ri maps r -> i; row v of object i gets slot u where maps_ri[u] = v
+    for e in range(lo, hi):
+        i = int(dst[e])
+        a = maps[e, :n_r]
+        ok = (a >= 0) & (np.arange(n_r) < m)
+        V[off[i] + a[ok], np.flatnonzero(ok)] = 1.0
+    return V
+
+
 def _orth(X: np.ndarray) -> np.ndarray:
-    Q, _ = np.linalg.qr(X)
-    return Q
+    """Orthonormal basis of the columns of ``X`` (Cholesky QR twice, QR as fallback)."""
+    try:
+        for _ in range(2):
+            G = X.T @ X
+            L = np.linalg.cholesky(G + 1e-14 * np.trace(G) / max(G.shape[0], 1) * np.eye(G.shape[0]))
+            X = sla.solve_triangular(L, X.T, lower=True, check_finite=False).T
+        return X
+    except np.linalg.LinAlgError:
+        Q, _ = np.linalg.qr(X)
+        return Q
 
 
-def block_krylov_eigs(matmat, M: int, k: int, *, block: int | None = None, depth: int = 3,
-                      tol: float = 1e-6, max_restarts: int = 200, rng=None):
-    """Top-``k`` eigenpairs of a symmetric operator by restarted block Krylov + Rayleigh-Ritz.
+def block_krylov_eigs(matmat, M: int, k: int, *, k_values: int | None = None,
+                      block: int | None = None, depth: int = 2, tol: float = 1e-4,
+                      value_tol: float = 1e-3, max_restarts: int = 300, V0=None, rng=None):
+    """Top eigenpairs of a symmetric operator by restarted block Krylov + Rayleigh-Ritz.
 
-    The basis ``[V, AV, ..., A^depth V]`` is orthonormalized, the Ritz pairs of ``A`` on it are
-    computed, and the best ``block`` Ritz vectors restart the next round. Stops when the residual
-    of each of the top ``k`` Ritz pairs is below ``tol * |lambda_max|``. Returns
-    ``(values descending, vectors, n_products, converged)``.
+    The basis ``[V, AV, ..., A^(depth-1) V]`` is orthonormalized, the Ritz pairs of ``A`` on it
+    are computed, and the best ``block`` Ritz vectors (with their images, so a restart costs no
+    extra product) start the next round. Stops when the residual of each of the top ``k`` Ritz
+    pairs is below ``tol * |lambda_max|`` and the top ``k_values`` Ritz values changed by less
+    than ``value_tol * |lambda_max|`` since the previous round (they only feed the eigengap
+    estimate). ``depth=1`` is plain subspace iteration with Rayleigh-Ritz (one block product per
+    round). Returns
+    ``(values descending (k_values), vectors (M, k), n_products, n_restarts, converged)``.
     """
     gen = np.random.default_rng(rng)
-    b = block or min(M, max(k + 8, int(1.25 * k)))
+    kv = max(k, k_values or k)
+    b = block or max(kv + 6, int(1.15 * kv))
     b = min(b, M)
-    V = _orth(gen.standard_normal((M, b)))
+    if V0 is not None:
+        V = np.array(V0[:, :b], dtype=float)
+        if V.shape[1] < b:
+            V = np.hstack([V, gen.standard_normal((M, b - V.shape[1]))])
+    else:
+        V = gen.standard_normal((M, b))
+    V = _orth(V)
     AV = matmat(V)
     n_prod = b
     converged = False
-    vals = vecs = None
-    for _ in range(max_restarts):
-        basis = [V, AV]
+    prev = None
+    it = 0
+    for it in range(1, max_restarts + 1):
+        basis = [AV] if depth == 1 else [V, AV]
         cur = AV
-        for _d in range(depth - 1):
+        for _d in range(depth - 2):
             cur = matmat(_orth(cur))
             n_prod += b
             basis.append(cur)
-        Q = _orth(np.hstack(basis))
-        if Q.shape[1] > M:
-            Q = Q[:, :M]
+        Q = _orth(np.hstack(basis)) if sum(x.shape[1] for x in basis) <= M else _orth(V)
         AQ = matmat(Q)
         n_prod += Q.shape[1]
         H = Q.T @ AQ
@@ -101,13 +192,14 @@ def block_krylov_eigs(matmat, M: int, k: int, *, block: int | None = None, depth
         w, S = w[order], S[:, order]
         V = Q @ S
         AV = AQ @ S
-        R = AV[:, :k] - V[:, :k] * w[:k]
-        res = np.linalg.norm(R, axis=0)
-        vals, vecs = w[:k], V[:, :k]
-        if np.all(res <= tol * max(abs(w[0]), 1e-12)):
+        scale = max(abs(w[0]), 1e-12)
+        res = np.linalg.norm(AV[:, :k] - V[:, :k] * w[:k], axis=0)
+        vals_ok = prev is not None and np.all(np.abs(w[:kv] - prev) <= value_tol * scale)
+        prev = w[:kv].copy()
+        if np.all(res <= tol * scale) and (kv == k or vals_ok):
             converged = True
             break
-    return vals, vecs, n_prod, converged
+    return w[:kv], V[:, :k], n_prod, it, converged
 
 
 def top_eigenpairs(A, k: int, *, solver: str, tol: float = 1e-6, rng=None):
@@ -118,7 +210,8 @@ def top_eigenpairs(A, k: int, *, solver: str, tol: float = 1e-6, rng=None):
         Ad = A.toarray() if sp.issparse(A) else np.asarray(A)
         w, U = sla.eigh(Ad, subset_by_index=[M - k, M - 1])
         return w[::-1], U[:, ::-1], 1, True
-    return block_krylov_eigs(lambda X: A @ X, M, k, tol=tol, rng=rng)
+    vals, vecs, n_prod, _, ok = block_krylov_eigs(lambda X: A @ X, M, k, tol=tol, rng=rng)
+    return vals, vecs, n_prod, ok
 
 
 def estimate_universe(vals: np.ndarray, n_max: int) -> tuple[int, str]:

@@ -1,0 +1,223 @@
+"""transync vs pygmtools on identical pairwise matching problems.
+
+For every configuration (n nodes per graph, deformation, with/without outliers) and every trial,
+one problem is generated: ``n_in`` inlier points in the unit square, the second graph a rotated,
+permuted and Gaussian-deformed copy; with outliers, a third of the ``n`` nodes of *each* graph are
+extra uniform points (``n_in = n - n // 3``), so both libraries see ``n x n`` problems of the same
+size with and without outliers. Graphs are fully connected; the affinity is Cho et al.'s Gaussian
+edge-length affinity ``exp(-(d1 - d2)^2 / sigma2)`` with the same ``sigma2`` for both libraries.
+
+Pipelines, timed from the point sets to the assignment:
+
+* transync: ``Graph.from_points(edges="full")`` x2, ``gaussian_edge_affinity`` (auto backend),
+  solver (``sm``, ``rrwm`` or ``ipfp``; each rounds with Hungarian internally).
+* pygmtools (numpy backend): distance matrices, ``dense_to_sparse``, ``build_aff_mat`` with
+  ``gaussian_aff_fn(sigma=sigma2)``, ``pygm.sm/rrwm/ipfp`` (pygmtools defaults), ``pygm.hungarian``.
+
+The affinity of a problem is built once per library and its build time is added to each solver's
+time (the solvers do not modify it). Peak memory is measured with ``tracemalloc`` (numpy
+allocations are traced) on the first trial of each configuration, in a separate run of the full
+pipeline (build + solve) so that tracing does not distort the timings.
+
+Usage::
+
+    python benchmarks/pairwise.py --quick
+    python benchmarks/pairwise.py --trials 20 --out benchmarks/results/pairwise.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import gc
+import json
+import platform
+import time
+import tracemalloc
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from transync.graphs import Graph
+from transync.matching import gaussian_edge_affinity, ipfp, rrwm, sm
+
+METHODS = ("sm", "rrwm", "ipfp")
+_TS = {"sm": sm, "rrwm": rrwm, "ipfp": ipfp}
+
+
+def make_problem(n: int, deformation: float, outliers: bool, rng: np.random.Generator):
+    n_out = n // 3 if outliers else 0
+    n_in = n - n_out
+    P = rng.random((n_in, 2))
+    th = rng.uniform(0, 2 * np.pi)
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    Q = P @ R.T + deformation * rng.standard_normal(P.shape)
+    P1 = np.vstack([P, rng.random((n_out, 2))])
+    Q2 = np.vstack([Q, rng.random((n_out, 2)) @ R.T])
+    perm = rng.permutation(n)
+    truth = np.argsort(perm)[:n_in]           # inlier i of g1 -> node truth[i] of g2
+    return P1, Q2[perm], truth
+
+
+def accuracy(assignment, truth) -> float:
+    return float(np.mean(assignment[: truth.size] == truth))
+
+
+# --------------------------------------------------------------------------- transync
+def ts_build(P1, P2, sigma2):
+    g1 = Graph.from_points(P1, edges="full")
+    g2 = Graph.from_points(P2, edges="full")
+    return gaussian_edge_affinity(g1, g2, sigma2=sigma2)
+
+
+def ts_solve(aff, method):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return _TS[method](aff).assignment
+
+
+# --------------------------------------------------------------------------- pygmtools
+def pg_build(pygm, P1, P2, sigma2):
+    n1, n2 = len(P1), len(P2)
+    D1 = np.linalg.norm(P1[:, None] - P1[None], axis=-1)
+    D2 = np.linalg.norm(P2[:, None] - P2[None], axis=-1)
+    conn1, e1 = pygm.utils.dense_to_sparse(D1)
+    conn2, e2 = pygm.utils.dense_to_sparse(D2)
+    aff_fn = functools.partial(pygm.utils.gaussian_aff_fn, sigma=sigma2)
+    # non-batched inputs: n1, n2 must be given as length-1 arrays (pygmtools adds the batch axis)
+    return pygm.utils.build_aff_mat(None, e1, conn1, None, e2, conn2, np.array([n1]), None,
+                                    np.array([n2]), None,
+                                    edge_aff_fn=aff_fn)
+
+
+def pg_solve(pygm, K, n1, n2, method):
+    X = getattr(pygm, method)(K, n1, n2)
+    X = pygm.hungarian(X)
+    a = np.full(n1, -1)
+    r, c = np.nonzero(X)
+    a[r] = c
+    return a
+
+
+def _timed(fn, *args):
+    t = time.perf_counter()
+    out = fn(*args)
+    return out, time.perf_counter() - t
+
+
+def _peak(fn, *args) -> float:
+    gc.collect()
+    tracemalloc.start()
+    tracemalloc.reset_peak()
+    fn(*args)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak / 2**20
+
+
+def run(sizes, deformations, trials, sigma2, methods, seed, memory=True):
+    import pygmtools as pygm
+
+    pygm.set_backend("numpy")
+    # warm-up both pipelines (imports, first-call overheads)
+    P1, P2, _ = make_problem(8, 0.0, False, np.random.default_rng(0))
+    for m in methods:
+        ts_solve(ts_build(P1, P2, sigma2), m)
+        pg_solve(pygm, pg_build(pygm, P1, P2, sigma2), 8, 8, m)
+    rows = []
+    for n in sizes:
+        for outliers in (False, True):
+            for deformation in deformations:
+                rec = {m: {"ts_acc": [], "pg_acc": [], "ts_time": [], "pg_time": []}
+                       for m in methods}
+                mem = {}
+                for t in range(trials):
+                    rng = np.random.default_rng([seed, n, int(outliers), int(1000 * deformation), t])
+                    P1, P2, truth = make_problem(n, deformation, outliers, rng)
+                    aff, tb_ts = _timed(ts_build, P1, P2, sigma2)
+                    K, tb_pg = _timed(pg_build, pygm, P1, P2, sigma2)
+                    for m in methods:
+                        a_ts, t_ts = _timed(ts_solve, aff, m)
+                        a_pg, t_pg = _timed(pg_solve, pygm, K, n, n, m)
+                        r = rec[m]
+                        r["ts_acc"].append(accuracy(a_ts, truth))
+                        r["pg_acc"].append(accuracy(a_pg, truth))
+                        r["ts_time"].append(tb_ts + t_ts)
+                        r["pg_time"].append(tb_pg + t_pg)
+                    del K, aff
+                    if memory and t == 0:
+                        for m in methods:
+                            mem[m] = (
+                                _peak(lambda: ts_solve(ts_build(P1, P2, sigma2), m)),
+                                _peak(lambda: pg_solve(pygm, pg_build(pygm, P1, P2, sigma2),
+                                                       n, n, m)),
+                            )
+                for m in methods:
+                    r = rec[m]
+                    row = {
+                        "n": n, "outliers": outliers, "deformation": deformation, "method": m,
+                        "trials": trials,
+                        "acc_transync": float(np.mean(r["ts_acc"])),
+                        "acc_pygmtools": float(np.mean(r["pg_acc"])),
+                        "time_transync_s": float(np.median(r["ts_time"])),
+                        "time_pygmtools_s": float(np.median(r["pg_time"])),
+                    }
+                    row["time_ratio"] = row["time_pygmtools_s"] / row["time_transync_s"]
+                    if m in mem:
+                        row["peak_mib_transync"], row["peak_mib_pygmtools"] = mem[m]
+                        row["memory_ratio"] = mem[m][1] / max(mem[m][0], 1e-9)
+                    rows.append(row)
+                    _print_row(row)
+    return rows
+
+
+_HEADER = (f"{'n':>4} {'out':>3} {'def':>5} {'method':>6} | {'acc ts':>6} {'acc pg':>6} | "
+           f"{'t ts [s]':>9} {'t pg [s]':>9} {'pg/ts':>6} | {'mem ts':>8} {'mem pg':>8} {'pg/ts':>6}")
+
+
+def _print_row(row):
+    mem = ""
+    if "peak_mib_transync" in row:
+        mem = (f"{row['peak_mib_transync']:7.1f}M {row['peak_mib_pygmtools']:7.1f}M "
+               f"{row['memory_ratio']:6.1f}")
+    print(f"{row['n']:>4} {('yes' if row['outliers'] else 'no'):>3} {row['deformation']:>5.2f} "
+          f"{row['method']:>6} | {row['acc_transync']:6.3f} {row['acc_pygmtools']:6.3f} | "
+          f"{row['time_transync_s']:9.4f} {row['time_pygmtools_s']:9.4f} "
+          f"{row['time_ratio']:6.1f} | {mem}", flush=True)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="small sizes, 3 trials")
+    ap.add_argument("--trials", type=int, default=None, help="problems per configuration (20)")
+    ap.add_argument("--sizes", type=int, nargs="+", default=None, help="n (10 20 50 100)")
+    ap.add_argument("--deformations", type=float, nargs="+", default=[0.0, 0.02, 0.04])
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
+    ap.add_argument("--sigma2", type=float, default=0.15)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--no-memory", action="store_true", help="skip the tracemalloc runs")
+    ap.add_argument("--out", type=Path, default=None, help="write JSON results here")
+    args = ap.parse_args(argv)
+    sizes = args.sizes or ([10, 20] if args.quick else [10, 20, 50, 100])
+    trials = args.trials or (3 if args.quick else 20)
+    print("times: median seconds from point sets to assignment; accuracy: mean over trials; "
+          "memory: tracemalloc peak (MiB), first trial")
+    print(_HEADER)
+    t0 = time.time()
+    rows = run(sizes, args.deformations, trials, args.sigma2, args.methods, args.seed,
+               memory=not args.no_memory)
+    print(f"total {time.time() - t0:.0f} s")
+    if args.out is not None:
+        import pygmtools
+
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        meta = {"python": platform.python_version(), "numpy": np.__version__,
+                "pygmtools": getattr(pygmtools, "__version__", "?"), "machine": platform.machine(),
+                "sizes": sizes, "trials": trials, "sigma2": args.sigma2, "seed": args.seed}
+        args.out.write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
+        print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,161 @@
+"""Plane segmentation from per-pixel evidence across views warped into the reference frame.
+
+Evidence per view and canvas pixel: the photometric residual against the robust consensus
+(median of the photometrically normalized warped views), the local ZNCC against that consensus
+over a small window, the local texture of the consensus and the number of views that see the
+pixel. A logistic-regression classifier is self-trained on confident pixels (high ZNCC and low
+residual as plane, low ZNCC or a large residual as non-plane); its probabilities are smoothed
+spatially, thresholded, cleaned morphologically and warped back into every view.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import cv2
+import numpy as np
+
+__all__ = ["segment_plane"]
+
+
+def _box(x, k):
+    return cv2.boxFilter(x, cv2.CV_32F, (k, k), borderType=cv2.BORDER_REFLECT)
+
+
+def _canvas(size, margin):
+    w, h = size
+    mx, my = int(round(margin * w)), int(round(margin * h))
+    return (w + 2 * mx, h + 2 * my), (mx, my)
+
+
+def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, smooth=2.0,
+                  min_views=3, rng=0, return_evidence=False):
+    """Per-view plane masks from the consensus of the views warped into the reference frame.
+
+    Parameters
+    ----------
+    images : list of (h_i, w_i) grey images
+    homographies : ndarray (N, 3, 3)
+        ``homographies[i]`` maps pixels of view ``i`` into the reference view.
+    reference : int, default=0
+    window : int, default=7
+        Window of the local ZNCC.
+    margin : float, default=0.2
+        The canvas extends the reference frame by this fraction on every side.
+    smooth : float, default=2.0
+        Gaussian sigma (pixels) applied to the plane probabilities before thresholding.
+    min_views : int, default=3
+        Canvas pixels seen by fewer views are labelled plane only if they look like the
+        consensus (no evidence against it).
+
+    Returns
+    -------
+    masks : list of (h_i, w_i) bool arrays
+    evidence : dict (only with ``return_evidence``): ``canvas_masks``, ``median``, ``count``,
+        ``offset``, ``probability``.
+    """
+    from sklearn.linear_model import LogisticRegression
+
+    n = len(images)
+    imgs = [np.asarray(im, dtype=np.float32) for im in images]
+    h0, w0 = imgs[reference].shape[:2]
+    (W, Hc), (ox, oy) = _canvas((w0, h0), margin)
+    T = np.array([[1.0, 0, ox], [0, 1.0, oy], [0, 0, 1.0]])
+    warped = np.empty((n, Hc, W), np.float32)
+    valid = np.empty((n, Hc, W), bool)
+    kern = np.ones((5, 5), np.uint8)
+    for i, (im, H) in enumerate(zip(imgs, homographies)):
+        M = T @ H
+        warped[i] = cv2.warpPerspective(im, M, (W, Hc), flags=cv2.INTER_LINEAR)
+        ones = np.ones(im.shape[:2], np.uint8)
+        valid[i] = cv2.erode(cv2.warpPerspective(ones, M, (W, Hc), flags=cv2.INTER_NEAREST),
+                             kern) > 0
+    count = valid.sum(axis=0)
+
+    def _median(stack):
+        s = np.where(valid, stack, np.inf)
+        s.sort(axis=0)
+        idx = np.clip((count - 1) // 2, 0, n - 1)
+        idx2 = np.clip(count // 2, 0, n - 1)
+        med = 0.5 * (np.take_along_axis(s, idx[None], 0)[0] + np.take_along_axis(s, idx2[None], 0)[0])
+        return np.where(count > 0, med, 0.0).astype(np.float32)
+
+    med = _median(warped)
+    # photometric normalization of every view against the consensus, then a new consensus
+    for i in range(n):
+        v = valid[i] & (count >= 2)
+        if v.sum() > 100:
+            x = warped[i][v].astype(np.float64)
+            y = med[v].astype(np.float64)
+            r = np.abs(y - x - np.median(y - x))
+            keep = r <= np.percentile(r, 70)
+            a, b = np.polyfit(x[keep], y[keep], 1)
+            warped[i] = a * warped[i] + b
+    med = _median(warped)
+
+    mu_m = _box(med, window)
+    var_m = np.maximum(_box(med * med, window) - mu_m ** 2, 0)
+    tex = np.log1p(np.sqrt(var_m))
+    feats, probs_shape = [], []
+    zs, rs = [], []
+    for i in range(n):
+        wi = np.where(valid[i], warped[i], med)   # windows at the view border see the consensus
+        mu_i = _box(wi, window)
+        var_i = np.maximum(_box(wi * wi, window) - mu_i ** 2, 0)
+        cov = _box(wi * med, window) - mu_i * mu_m
+        z = cov / np.sqrt(var_i * var_m + 25.0)
+        r = _box(np.abs(wi - med), 5)
+        zs.append(z.astype(np.float32))
+        rs.append(r.astype(np.float32))
+    zs = np.stack(zs)
+    rs = np.stack(rs)
+    sel = valid & (count >= min_views)[None]
+    r_scale = float(np.median(rs[sel])) + 1e-3 if sel.any() else 1.0
+    F = np.stack([zs, np.log1p(rs / r_scale), np.broadcast_to(tex, zs.shape)], axis=-1)
+    textured = (tex > np.median(tex[count >= min_views]))[None] if (count >= min_views).any() \
+        else np.ones_like(sel)
+    pos = sel & (((zs > 0.85) & (rs < 1.5 * r_scale)) | (~textured & (rs < 0.7 * r_scale)))
+    neg = sel & (((zs < 0.3) & textured) | (rs > 5 * r_scale))
+    gen = np.random.default_rng(rng)
+    prob = np.zeros(zs.shape, np.float32)
+    if pos.sum() > 50 and neg.sum() > 50:
+        ip = np.flatnonzero(pos.ravel())
+        ineg = np.flatnonzero(neg.ravel())
+        ip = gen.choice(ip, size=min(20000, ip.size), replace=False)
+        ineg = gen.choice(ineg, size=min(20000, ineg.size), replace=False)
+        Ff = F.reshape(-1, 3)
+        X = np.concatenate([Ff[ip], Ff[ineg]])
+        y = np.concatenate([np.ones(ip.size), np.zeros(ineg.size)])
+        clf = LogisticRegression(C=1.0, max_iter=200)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            clf.fit(X, y)
+        coef, icpt = clf.coef_[0].astype(np.float32), np.float32(clf.intercept_[0])
+        logit = F @ coef + icpt
+        prob = (1.0 / (1.0 + np.exp(-logit))).astype(np.float32)
+    else:
+        prob = (zs > 0.6).astype(np.float32)
+    # few views: no evidence against the plane unless the residual says so
+    few = valid & ~(count >= min_views)[None]
+    prob = np.where(few, np.maximum(prob, 0.6 * (zs > 0.5)), prob)
+
+    masks, canvas_masks = [], []
+    k3 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+    for i in range(n):
+        p = cv2.GaussianBlur(prob[i], (0, 0), smooth) if smooth > 0 else prob[i]
+        cm = ((p > 0.5) & valid[i]).astype(np.uint8)
+        cm = cv2.morphologyEx(cm, cv2.MORPH_OPEN, k3)
+        cm = cv2.morphologyEx(cm, cv2.MORPH_CLOSE, k3)
+        # pixels outside the eroded valid region keep the label of their neighbourhood
+        cm_full = cv2.dilate(cm, kern) if True else cm
+        cm = np.where(valid[i], cm, cm_full)
+        canvas_masks.append(cm > 0)
+        hi, wi_ = imgs[i].shape[:2]
+        back = cv2.warpPerspective(cm, T @ homographies[i], (wi_, hi),
+                                   flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
+                                   borderMode=cv2.BORDER_CONSTANT, borderValue=1)
+        masks.append(back > 0)
+    if return_evidence:
+        return masks, {"canvas_masks": canvas_masks, "median": med, "count": count,
+                       "offset": (ox, oy), "probability": prob}
+    return masks

@@ -1,0 +1,229 @@
+"""Sparse pairwise homographies with OpenCV: SIFT, Lowe's ratio test, RANSAC (+ LM polish)."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+
+from .._validation import check_choice, check_int, check_positive
+
+__all__ = [
+    "PairwiseHomographies",
+    "estimate_pairwise_homographies",
+    "load_images",
+    "sift_features",
+    "to_gray",
+]
+
+_METHODS = {
+    "ransac": cv2.RANSAC,
+    "lmeds": cv2.LMEDS,
+    "rho": cv2.RHO,
+    "usac_default": cv2.USAC_DEFAULT,
+    "usac_magsac": cv2.USAC_MAGSAC,
+    "usac_accurate": cv2.USAC_ACCURATE,
+    "usac_prosac": cv2.USAC_PROSAC,
+    "usac_fast": cv2.USAC_FAST,
+}
+
+
+@dataclass(frozen=True)
+class PairwiseHomographies:
+    """Pairwise homographies of a view graph.
+
+    Attributes
+    ----------
+    H : ndarray (N, N, 3, 3)
+        ``H[i, j]`` maps pixels of view ``j`` into view ``i`` (NaN where not estimated); both
+        directions of every successful pair are filled.
+    mask : ndarray (N, N), bool
+        Successful pairs (symmetric).
+    weights : ndarray (N, N)
+        Inlier counts (symmetric, 0 where failed).
+    failed : list of (i, j, reason)
+        Attempted pairs that did not give a homography.
+    matches : dict
+        ``(i, j) -> (pts_i, pts_j, inlier)``, the ratio-test matches of each attempted pair.
+    info : dict
+        ``n_keypoints`` per view, ``seconds``.
+    """
+
+    H: np.ndarray
+    mask: np.ndarray
+    weights: np.ndarray
+    failed: list
+    matches: dict = field(repr=False, default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+def load_images(images) -> list:
+    """Read file paths (``cv2.imread``) and pass arrays through; returns a list of arrays."""
+    if isinstance(images, np.ndarray) and images.ndim in (3, 4) and images.dtype != object:
+        if images.ndim == 3 and images.shape[-1] in (3, 4) and images.shape[0] > 4:
+            raise ValueError("`images` must be a list of images; got a single (H, W, C) array")
+        images = list(images)
+    if isinstance(images, (str, os.PathLike)):
+        raise TypeError("`images` must be a list of images or paths, got a single path")
+    out = []
+    for k, im in enumerate(images):
+        if isinstance(im, (str, os.PathLike)):
+            arr = cv2.imread(os.fspath(im), cv2.IMREAD_UNCHANGED)
+            if arr is None:
+                raise ValueError(f"`images[{k}]`: cannot read image file {os.fspath(im)!r}")
+            if arr.ndim == 3:
+                arr = cv2.cvtColor(arr[..., :3], cv2.COLOR_BGR2RGB)
+            out.append(arr)
+        else:
+            arr = np.asarray(im)
+            if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (1, 3, 4)):
+                raise ValueError(f"`images[{k}]` must be a (H, W) or (H, W, C) image, "
+                                 f"got shape {arr.shape}")
+            if arr.size == 0:
+                raise ValueError(f"`images[{k}]` is empty")
+            out.append(arr)
+    return out
+
+
+def to_gray(image) -> np.ndarray:
+    """Grey-level uint8 version of an image (RGB assumed for 3 channels; floats in [0, 1] or 255)."""
+    arr = np.asarray(image)
+    if arr.ndim == 3:
+        arr = arr[..., 0] if arr.shape[2] == 1 else cv2.cvtColor(
+            np.ascontiguousarray(arr[..., :3]), cv2.COLOR_RGB2GRAY)
+    if arr.dtype == np.uint8:
+        return np.ascontiguousarray(arr)
+    arr = arr.astype(np.float64)
+    if arr.dtype.kind == "f" and np.nanmax(arr) <= 1.0 + 1e-9:
+        arr = arr * 255.0
+    elif np.asarray(image).dtype == np.uint16:
+        arr = arr / 257.0
+    return np.clip(np.round(arr), 0, 255).astype(np.uint8)
+
+
+def sift_features(gray, *, n_features=4000):
+    """SIFT keypoint coordinates (k, 2) float32 and descriptors (k, 128) float32."""
+    sift = cv2.SIFT_create(nfeatures=int(n_features))
+    kp, desc = sift.detectAndCompute(gray, None)
+    if desc is None or not kp:
+        return np.zeros((0, 2), np.float32), np.zeros((0, 128), np.float32)
+    pts = np.array([k.pt for k in kp], dtype=np.float32)
+    return pts, desc
+
+
+def _ratio_matches(desc_i, desc_j, ratio, matcher):
+    if len(desc_i) < 2 or len(desc_j) < 2:
+        return np.zeros((0, 2), int)
+    knn = matcher.knnMatch(desc_j, desc_i, k=2)
+    good = [(m[0].trainIdx, m[0].queryIdx) for m in knn
+            if len(m) == 2 and m[0].distance < ratio * m[1].distance]
+    if not good:
+        return np.zeros((0, 2), int)
+    good = np.array(good, dtype=int)
+    # one-to-one: keep the first match of every keypoint of view i
+    _, first = np.unique(good[:, 0], return_index=True)
+    return good[np.sort(first)]
+
+
+def _all_pairs(n):
+    return [(i, j) for i in range(n) for j in range(i + 1, n)]
+
+
+def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio=0.8,
+                                   threshold=3.0, max_iter=2000, confidence=0.995,
+                                   min_inliers=20, n_features=4000,
+                                   features=None) -> PairwiseHomographies:
+    """Pairwise homographies between views: SIFT, ratio test, robust fit (``cv2.findHomography``).
+
+    Parameters
+    ----------
+    images : list of arrays or paths
+    pairs : list of (i, j), default=None
+        View graph; default all pairs.
+    method : str, default="ransac"
+        ``"ransac"`` (OpenCV RANSAC followed by its Levenberg-Marquardt polish on the inliers),
+        ``"lmeds"``, ``"rho"`` or a USAC variant: ``"usac_default"``, ``"usac_magsac"``,
+        ``"usac_accurate"``, ``"usac_prosac"``, ``"usac_fast"``.
+    ratio : float, default=0.8
+        Lowe's ratio test.
+    threshold : float, default=3.0
+        Reprojection threshold in pixels.
+    max_iter : int, default=2000
+    confidence : float, default=0.995
+    min_inliers : int, default=20
+        Pairs with fewer inliers are recorded as failed.
+    n_features : int, default=4000
+        SIFT features per view.
+    features : list of (pts, desc), default=None
+        Precomputed features (as returned by :func:`sift_features`).
+
+    Returns
+    -------
+    PairwiseHomographies
+    """
+    import time
+
+    t0 = time.perf_counter()
+    method = check_choice(method, "method", tuple(_METHODS))
+    ratio = check_positive(ratio, "ratio")
+    threshold = check_positive(threshold, "threshold")
+    max_iter = check_int(max_iter, "max_iter", minimum=1)
+    min_inliers = check_int(min_inliers, "min_inliers", minimum=4)
+    imgs = load_images(images)
+    n = len(imgs)
+    if n < 2:
+        raise ValueError(f"`images` must hold at least 2 images, got {n}")
+    if pairs is None:
+        pairs = _all_pairs(n)
+    else:
+        checked = []
+        for p in pairs:
+            i, j = (int(v) for v in p)
+            if i == j or not (0 <= i < n and 0 <= j < n):
+                raise ValueError(f"`pairs` must hold pairs of distinct view indices in [0, {n}), "
+                                 f"got {tuple(p)!r}")
+            checked.append((i, j))
+        pairs = checked
+    if features is None:
+        gray = [to_gray(im) for im in imgs]
+        features = [sift_features(g, n_features=n_features) for g in gray]
+    matcher = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 64})
+    H = np.full((n, n, 3, 3), np.nan)
+    mask = np.zeros((n, n), dtype=bool)
+    weights = np.zeros((n, n))
+    failed, matches = [], {}
+    for i, j in pairs:
+        pi, di = features[i]
+        pj, dj = features[j]
+        m = _ratio_matches(di, dj, ratio, matcher)
+        if len(m) < max(min_inliers, 4):
+            failed.append((i, j, f"{len(m)} ratio-test matches"))
+            continue
+        src = pj[m[:, 1]]
+        dst = pi[m[:, 0]]
+        try:
+            Hij, inl = cv2.findHomography(src, dst, _METHODS[method], threshold,
+                                          maxIters=max_iter, confidence=confidence)
+        except cv2.error as exc:  # degenerate configurations
+            failed.append((i, j, f"OpenCV error: {str(exc).strip()[:80]}"))
+            continue
+        if Hij is None or inl is None:
+            failed.append((i, j, "no homography found"))
+            continue
+        inl = inl.ravel().astype(bool)
+        matches[(i, j)] = (dst, src, inl)
+        k = int(inl.sum())
+        if k < min_inliers or not np.all(np.isfinite(Hij)) or abs(np.linalg.det(Hij)) < 1e-12:
+            failed.append((i, j, f"{k} inliers"))
+            continue
+        H[i, j] = Hij / Hij[2, 2]
+        Hji = np.linalg.inv(Hij)
+        H[j, i] = Hji / Hji[2, 2]
+        mask[i, j] = mask[j, i] = True
+        weights[i, j] = weights[j, i] = k
+    return PairwiseHomographies(H=H, mask=mask, weights=weights, failed=failed, matches=matches,
+                                info={"n_keypoints": [len(f[0]) for f in features],
+                                      "seconds": time.perf_counter() - t0})

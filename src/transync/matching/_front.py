@@ -1,0 +1,107 @@
+"""``match_graphs``: one front door for pairwise graph matching.
+
+Examples
+--------
+>>> import numpy as np
+>>> from transync.graphs import Graph
+>>> from transync.matching import match_graphs
+>>> rng = np.random.default_rng(0)
+>>> g1 = Graph.from_points(rng.random((12, 2)), edges="full")
+>>> perm = rng.permutation(12)
+>>> res = match_graphs(g1, g1.permute(perm), method="rrwm")
+>>> bool(np.all(perm[res.assignment] == np.arange(12)))
+True
+"""
+
+from __future__ import annotations
+
+from ..graphs import Graph
+from .._validation import check_choice
+from ._affinity import as_affinity, gaussian_edge_affinity, gaussian_node_affinity
+from ._ga import ga
+from ._ipfp import ipfp
+from ._linear import hungarian, sinkhorn
+from ._pf import pf
+from ._result import MatchingResult
+from ._rrwm import rrwm
+from ._sm import sm
+
+__all__ = ["METHODS", "match_graphs"]
+
+METHODS = {
+    "hungarian": hungarian,
+    "sinkhorn": sinkhorn,
+    "sm": sm,
+    "rrwm": rrwm,
+    "ipfp": ipfp,
+    "ga": ga,
+    "pf": pf,
+}
+_LINEAR = ("hungarian", "sinkhorn")
+
+
+def match_graphs(g1: Graph, g2: Graph, *, method: str = "rrwm", affinity=None,
+                 sigma2: float = 0.15, node_affinity=None, **options) -> MatchingResult:
+    """Match two graphs.
+
+    Parameters
+    ----------
+    g1, g2 : Graph
+        The graphs, with ``n1`` and ``n2`` nodes.
+    method : {"rrwm", "sm", "ipfp", "ga", "pf", "hungarian", "sinkhorn"}, default="rrwm"
+        Solver. The quadratic ones (``sm``, ``rrwm``, ``ipfp``, ``ga``, ``pf``) maximize
+        ``vec(X)^T K vec(X)``; the linear ones (``hungarian``, ``sinkhorn``) maximize the unary
+        score only (``node_affinity``, or the diagonal of ``affinity``).
+    affinity : Affinity or array_like/sparse of shape (n1 n2, n1 n2), optional
+        The affinity ``K`` (a matrix uses pygmtools' layout: candidate ``(i, a)`` has index
+        ``a n1 + i``). Default: :func:`gaussian_edge_affinity` of the two graphs with ``sigma2``
+        and ``node_affinity`` (never materialized).
+    sigma2 : float, default=0.15
+        Kernel width of the default affinity.
+    node_affinity : array_like of shape (n1, n2), optional
+        Unary term. Default for the linear methods when ``affinity`` is not given:
+        :func:`gaussian_node_affinity` on the node features.
+    **options
+        Passed to the solver (e.g. ``max_iter``, ``tol``); see each solver's parameters.
+
+    Returns
+    -------
+    MatchingResult
+
+    Raises
+    ------
+    ValueError, TypeError
+        Unknown method, graphs that are not :class:`~transync.graphs.Graph` objects, an
+        ``affinity`` whose size does not match ``n1 n2``, or a linear method without a unary term.
+    """
+    check_choice(method, "method", tuple(METHODS))
+    if not isinstance(g1, Graph) or not isinstance(g2, Graph):
+        raise TypeError(f"`g1` and `g2` must be Graph objects, got {type(g1).__name__} and "
+                        f"{type(g2).__name__}")
+    n1, n2 = g1.n_nodes, g2.n_nodes
+    solver = METHODS[method]
+    if affinity is not None:
+        aff = as_affinity(affinity, n1=n1, n2=n2, name="affinity")
+        if method in _LINEAR and node_affinity is None:
+            return solver(aff, **options)
+    else:
+        aff = None
+    if method in _LINEAR:
+        if node_affinity is None:
+            if g1.node_features is None or g2.node_features is None:
+                raise ValueError(f"method={method!r} needs a unary term: pass `node_affinity` "
+                                 "(shape (n1, n2)), an `affinity` with a diagonal, or graphs with "
+                                 "`node_features`")
+            node_affinity = gaussian_node_affinity(g1, g2)
+        from .._validation import check_array
+
+        S = check_array(node_affinity, "node_affinity", ndim=2)
+        if S.shape != (n1, n2):
+            raise ValueError(f"`node_affinity` must have shape ({n1}, {n2}), got {S.shape}")
+        return solver(S, **options)
+    if aff is None:
+        aff = gaussian_edge_affinity(g1, g2, sigma2=sigma2, node_affinity=node_affinity)
+    elif node_affinity is not None:
+        raise ValueError("pass the unary term inside `affinity` (its diagonal), not as "
+                         "`node_affinity`, when `affinity` is given")
+    return solver(aff, **options)

@@ -1,0 +1,435 @@
+"""Permutation synchronization: ``synchronize_permutations`` and its methods.
+
+Conventions
+-----------
+``pairwise[(i, j)]`` is an assignment ``a`` with ``a[u] = v`` (node ``u`` of object ``i`` matched to
+node ``v`` of object ``j``, ``-1`` unmatched), i.e. the 0/1 matrix ``P_ij[u, v] = 1``. The absolute
+map of object ``i`` is ``X_i`` (``n_i x d``, ``X_i[u, labels[i][u]] = 1``) and consistency means
+``P_ij = X_i X_j^T``. The block matrix ``T`` has blocks ``w_ij P_ij`` (and ``w_ij P_ij^T`` below the
+diagonal) and identity blocks on the diagonal; for consistent input ``T = X X^T``.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse.csgraph import connected_components
+
+from .._validation import as_generator, check_choice, check_int, check_positive
+from ..exceptions import ConvergenceWarning, DegenerateInputError
+from ..permutations import _triangle_report
+from . import _spectral as spec
+from ._pairwise_input import StackedPairs, parse_pairwise
+from ._result import PermutationSyncResult
+
+__all__ = ["synchronize_permutations"]
+
+_METHODS = ("spectral", "orthogonal", "matcheig")
+_SOLVERS = ("auto", "dense", "matrix_free")
+
+
+# --------------------------------------------------------------------------------------------
+# helpers on stacked observations
+# --------------------------------------------------------------------------------------------
+
+def _subset(stk: StackedPairs, objs: np.ndarray) -> StackedPairs:
+    """Observations among ``objs`` (sorted), objects renumbered 0..len(objs)-1."""
+    local = np.full(stk.n_objects, -1, dtype=np.int64)
+    local[objs] = np.arange(objs.size)
+    keep = (local[stk.pairs[:, 0]] >= 0) & (local[stk.pairs[:, 1]] >= 0)
+    sizes = stk.sizes[objs]
+    n_max = int(sizes.max())
+    return StackedPairs(
+        n_objects=int(objs.size), sizes=sizes, pairs=local[stk.pairs[keep]],
+        maps=None if stk.maps is None else stk.maps[keep][:, :n_max],
+        soft=None if stk.soft is None else stk.soft[keep][:, :n_max, :n_max],
+        weights=stk.weights[keep])
+
+
+def _padded(labels, n_max):
+    out = np.full((len(labels), n_max), -1, dtype=np.int64)
+    for g, lab in enumerate(labels):
+        out[g, : lab.size] = lab
+    return out
+
+
+def _agreement(stk: StackedPairs, labels, d: int):
+    """(weighted agreements, observed matched entries, agreed entries) of labels vs input."""
+    lab = _padded(labels, stk.maps.shape[1])
+    inv = np.full((stk.n_objects, d + 1), -1, dtype=np.int64)
+    g, u = np.nonzero(lab >= 0)
+    inv[g, lab[g, u]] = u
+    agree = 0.0
+    n_obs = 0
+    n_ok = 0
+    for s in range(0, stk.pairs.shape[0], 50_000):
+        pr = stk.pairs[s:s + 50_000]
+        mp = stk.maps[s:s + 50_000]
+        derived = inv[pr[:, 1][:, None], lab[pr[:, 0]]]
+        hit = (mp >= 0) & (derived == mp)
+        agree += float((hit.sum(1) * stk.weights[s:s + 50_000]).sum())
+        n_obs += int((mp >= 0).sum())
+        n_ok += int(hit.sum())
+    return agree, n_obs, n_ok
+
+
+def _polar(M: np.ndarray) -> np.ndarray:
+    U, _, Vt = np.linalg.svd(M, full_matrices=False)
+    return U @ Vt
+
+
+# --------------------------------------------------------------------------------------------
+# one connected component
+# --------------------------------------------------------------------------------------------
+
+def _spectral_embedding(stk, d, solver, tol, rng, info):
+    """Top eigenvectors of the normalized block matrix (and the universe size if ``d`` is None)."""
+    M = int(stk.sizes.sum())
+    n_max = int(stk.sizes.max())
+    use = solver
+    if solver == "auto":
+        use = "dense" if M <= spec.DENSE_MAX else "matrix_free"
+    t0 = time.perf_counter()
+    dobs = spec.directed(stk)
+    # matrix-free products run in float32 (half the memory traffic); Ritz steps in float64
+    A = spec.block_matrix(stk, directed_obs=dobs,
+                          dtype=np.float64 if use == "dense" else np.float32)
+    info["seconds_build"] = time.perf_counter() - t0
+    info["operator_nnz"] = int(A.nnz)
+
+    def matmat(X):
+        return (A @ X.astype(A.dtype)).astype(np.float64)
+    info["solver"] = use
+    t0 = time.perf_counter()
+    n_prod = 0
+    converged = True
+    if d is None and stk.is_full:
+        d = n_max
+        info["n_universe_rule"] = "full permutations: d = number of nodes"
+        k_vals = d
+    elif d is None:
+        k_vals = min(M, 2 * n_max + 10)
+    else:
+        k_vals = d
+    k_vec = min(d if d is not None else n_max, M)
+    k_vals = min(k_vals, M)
+    if use == "dense":
+        Ad = A.toarray()
+        w, U = sla.eigh(Ad, subset_by_index=[M - max(k_vals, k_vec), M - 1])
+        vals, U = w[::-1], U[:, ::-1]
+        n_prod = 1
+    else:
+        b = min(M, max(max(k_vals, k_vec) + 6, int(1.15 * max(k_vals, k_vec))))
+        V0 = spec.reference_start(stk, b, dobs, rng)
+        vals, U, n_prod, _, converged = spec.block_krylov_eigs(
+            matmat, M, k_vec, k_values=k_vals, block=b, tol=tol, V0=V0, rng=rng)
+    if d is None:
+        d, rule = spec.estimate_universe(vals, n_max)
+        info["n_universe_rule"] = rule
+        info["n_universe_estimate"] = d
+        if d >= k_vals and k_vals < M:
+            info["n_universe_warning"] = "estimate at the end of the computed spectrum"
+        if d > U.shape[1] and use != "dense":
+            vals2, U, n2, _, converged = spec.block_krylov_eigs(
+                matmat, M, min(d, M), tol=tol, V0=U, rng=rng)
+            n_prod += n2
+        elif d > U.shape[1]:
+            w, U = sla.eigh(Ad, subset_by_index=[M - min(d, M), M - 1])
+            U = U[:, ::-1]
+    info["eigenvalues"] = np.asarray(vals[: max(k_vals, 1)])
+    info["seconds_eigen"] = time.perf_counter() - t0
+    return U[:, : min(d, M)], d, n_prod, converged, A
+
+
+def _component_spectral(stk, d, solver, tol, rng, info):
+    V, d, n_prod, ok, _ = _spectral_embedding(stk, d, solver, tol, rng, info)
+    t0 = time.perf_counter()
+    labels = spec.round_to_universe(V, stk.sizes, d)
+    info["seconds_round"] = time.perf_counter() - t0
+    return labels, d, n_prod, ok, V
+
+
+def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol):
+    V, d, n_prod, ok_eig, _ = _spectral_embedding(stk, d, solver, tol, rng, info)
+    sizes = stk.sizes
+    off = np.concatenate([[0], np.cumsum(sizes)])
+    N = stk.n_objects
+    n_max = int(sizes.max())
+    k = V.shape[1]
+    if k < d:
+        V = np.hstack([V, np.zeros((V.shape[0], d - k))])
+    # Q_i: n_i x d with orthonormal rows; stacked with a zero row at index n_max for "-1"
+    Qs = np.zeros((N, n_max + 1, d))
+    for g in range(N):
+        Qs[g, : sizes[g]] = _polar(V[off[g]:off[g + 1]] + 1e-12)
+    ptr, dst, dmaps, dw = spec.directed(stk)
+
+    def _B(g):
+        lo, hi = ptr[g], ptr[g + 1]
+        if lo == hi:
+            return np.zeros((sizes[g], d))
+        idx = dmaps[lo:hi, : sizes[g]]
+        gathered = Qs[dst[lo:hi, None], np.where(idx >= 0, idx, n_max)]   # (deg, n_g, d)
+        return np.tensordot(dw[lo:hi], gathered, axes=1)
+
+    def _objective():
+        return float(sum(np.sum(Qs[g, : sizes[g]] * _B(g)) for g in range(N)))
+
+    history = [_objective()]
+    converged = False
+    it = 0
+    for it in range(1, max_iter + 1):
+        for g in range(N):
+            B = _B(g)
+            if np.any(B):
+                Qs[g, : sizes[g]] = _polar(B)
+        history.append(_objective())
+        if abs(history[-1] - history[-2]) <= orth_tol * max(abs(history[-1]), 1e-12):
+            converged = True
+            break
+    if not converged:
+        warnings.warn(f"orthogonal synchronization stopped after max_iter={max_iter} sweeps "
+                      f"(relative change {abs(history[-1] - history[-2]) / max(abs(history[-1]), 1e-12):.2e} > tol)",
+                      ConvergenceWarning, stacklevel=4)
+    info["relaxed_objective_history"] = np.asarray(history)
+    info["polar_sweeps"] = it
+    stacked = np.vstack([Qs[g, : sizes[g]] for g in range(N)])
+    labels = spec.round_to_universe(stacked, sizes, d)
+    return labels, d, it, converged and ok_eig, stacked
+
+
+def _matcheig_pairwise(V: np.ndarray, sizes: np.ndarray, threshold: float):
+    """MatchEIG block rounding: Hungarian on ``V_i V_j^T`` (rows normalized), drop < threshold."""
+    off = np.concatenate([[0], np.cumsum(sizes)])
+    Vn = V / np.maximum(np.linalg.norm(V, axis=1, keepdims=True), 1e-300)
+
+    def fn(i, j):
+        S = Vn[off[i]:off[i + 1]] @ Vn[off[j]:off[j + 1]].T
+        r, c = linear_sum_assignment(S, maximize=True)
+        a = np.full(S.shape[0], -1, dtype=np.int64)
+        keep = S[r, c] >= threshold
+        a[r[keep]] = c[keep]
+        return a
+
+    return fn
+
+
+# --------------------------------------------------------------------------------------------
+# front door
+# --------------------------------------------------------------------------------------------
+
+def synchronize_permutations(pairwise, *, n_universe: int | None = None,
+                             method: str = "spectral", mask=None, weights=None, sizes=None,
+                             solver: str = "auto", disconnected: str = "separate",
+                             max_iter: int = 100, tol: float = 1e-6,
+                             eig_tol: float = 1e-4, threshold: float = 0.5,
+                             max_triangles: int = 100_000, rng=None) -> PermutationSyncResult:
+    r"""Make pairwise (partial) permutations cycle-consistent through a universe of nodes.
+
+    Finds absolute maps ``X_i`` (node of object ``i`` -> universe slot, ``n_i x d``, injective)
+    that maximize the agreement with the observations,
+
+    .. math:: \max_{X_i} \sum_{(i,j) \in \Omega} w_{ij} \langle P_{ij}, X_i X_j^\top \rangle ,
+
+    and returns them as ``labels``; every derived map ``pairwise(i, j)`` is cycle-consistent.
+
+    Methods:
+
+    * ``"spectral"`` (Pachauri et al. 2013; partial: multi-simplex model of ALGORITHMS.md §5):
+      the leading ``d`` eigenvectors of the degree-normalized block matrix
+      ``D^{-1/2} T D^{-1/2}``, then rounding: a pivoted QR picks one prototype row per universe
+      slot, a Procrustes rotation aligns them with the slots, every object is assigned by
+      rectangular Hungarian (every node placed, at most one node per slot) and a few
+      Procrustes/Hungarian refinements follow. Dense ``eigh`` when ``sum n_i <= 2000``, otherwise
+      matrix-free (sparse block matrix built once from index arrays; restarted block Krylov
+      with Rayleigh-Ritz), see ``solver``.
+    * ``"orthogonal"`` (ALGORITHMS.md §2.2 step 5): spectral start ``Q_i = polar(U_i)``,
+      Gauss-Seidel sweeps ``Q_i <- polar(sum_j w_ij P_ij Q_j)`` (each the exact block maximizer,
+      so the relaxed objective never decreases; its history is ``info["relaxed_objective_history"]``)
+      until the relative change is below ``tol`` or ``max_iter`` sweeps, then the same rounding.
+    * ``"matcheig"`` (Maset, Arrigoni, Fusiello 2017), a fast baseline: the same eigenvectors,
+      rows normalized, and each block ``U_i U_j^T`` rounded independently by Hungarian,
+      dropping matches below ``threshold``. Its ``pairwise(i, j)`` need not be cycle-consistent
+      (``cycle_consistent=False``); ``labels`` then holds the consistent rounding of the same
+      eigenvectors, i.e. the ``"spectral"`` answer, so that one result type serves every method.
+
+    Universe size: ``n_universe`` if given; otherwise ``n`` when all objects have ``n`` nodes and
+    every observed map is a bijection; otherwise the eigengap of the normalized spectrum
+    (``info["n_universe_estimate"]``, ``info["n_universe_rule"]``, ``info["eigenvalues"]``).
+
+    A disconnected observation graph is detected; with ``disconnected="separate"`` (default)
+    every connected component is synchronized on its own, into its own universe, and the ids are
+    offset so that different components never share a slot (``info["components"]``); with
+    ``"raise"`` a :class:`~transync.exceptions.DegenerateInputError` names the components.
+
+    Parameters
+    ----------
+    pairwise : dict {(i, j): assignment or 0/1 matrix}, iterable of (i, j, map) or array
+        Observations; ``(j, i)`` may be omitted (it is the inverse). When both ``(i, j)`` and
+        ``(j, i)`` are given they count as two observations of the pair, averaged in ``T``.
+        An ``(N, N, n)`` assignment or ``(N, N, n, n)`` block array is read where ``mask``.
+    n_universe : int, optional
+        Universe size ``d``, at least the largest object.
+    method : {"spectral", "orthogonal", "matcheig"}, default="spectral"
+    mask : (N, N) bool array, optional
+        Which pairs to use.
+    weights : (N, N) array or dict {(i, j): w}, optional
+        Non-negative confidence of each pair (default 1).
+    sizes : (N,) int array, optional
+        Object sizes when they cannot be read from the maps (default: assignment lengths,
+        matrix shapes and the largest target).
+    solver : {"auto", "dense", "matrix_free"}, default="auto"
+        Eigensolver; ``info["solver"]`` records the one used.
+    disconnected : {"separate", "raise"}, default="separate"
+    max_iter, tol : int, float
+        Polar sweeps and relative tolerance of ``"orthogonal"``.
+    eig_tol : float, default=1e-4
+        Relative residual tolerance of the matrix-free eigensolver.
+    threshold : float, default=0.5
+        ``"matcheig"`` drops block entries below it.
+    max_triangles : int, default=100000
+        Triangles sampled for the input-consistency report ``info["input_consistency"]``.
+    rng : None, int or numpy.random.Generator
+        Start block of the matrix-free eigensolver and triangle sampling.
+
+    Returns
+    -------
+    PermutationSyncResult
+
+    Raises
+    ------
+    ValueError
+        Non-permutation blocks, non-injective maps, mismatched sizes, ``i == j`` pairs, a
+        universe smaller than the largest object, bad options.
+
+    Examples
+    --------
+    >>> from transync.datasets import make_permutation_collection
+    >>> from transync.synchronization import synchronize_permutations
+    >>> data = make_permutation_collection(8, 6, corruption=0.25, rng=0)  # 7 of 28 pairs wrong
+    >>> res = synchronize_permutations(data.pairwise)
+    >>> data.accuracy(res.labels), res.n_universe, res.info["solver"]
+    (1.0, 6, 'dense')
+    >>> res.info["input_consistency"]["inconsistent_triangles"] > 0
+    True
+    >>> bool((res.pairwise(0, 3) == data.true_pairwise(0, 3)).all())
+    True
+    """
+    check_choice(method, "method", _METHODS)
+    check_choice(solver, "solver", _SOLVERS)
+    check_choice(disconnected, "disconnected", ("separate", "raise"))
+    max_iter = check_int(max_iter, "max_iter", minimum=1)
+    tol = check_positive(tol, "tol")
+    eig_tol = check_positive(eig_tol, "eig_tol")
+    threshold = float(threshold)
+    gen = as_generator(rng)
+    t_start = time.perf_counter()
+    stk = parse_pairwise(pairwise, mask=mask, weights=weights, sizes=sizes)
+    n_max = int(stk.sizes.max())
+    if n_universe is not None:
+        n_universe = check_int(n_universe, "n_universe", minimum=1)
+        if n_universe < n_max:
+            raise ValueError(f"`n_universe` must be >= the largest object size {n_max}, got "
+                             f"{n_universe}")
+    info: dict = {"method": method, "seconds_parse": time.perf_counter() - t_start}
+
+    # connected components of the observation graph (pairs with positive weight)
+    pos = stk.weights > 0
+    G = sp.coo_matrix((np.ones(int(pos.sum())), (stk.pairs[pos, 0], stk.pairs[pos, 1])),
+                      shape=(stk.n_objects, stk.n_objects))
+    n_comp, comp = connected_components(G, directed=False)
+    comps = [np.flatnonzero(comp == c) for c in range(n_comp)]
+    info["components"] = comps
+    if n_comp > 1 and disconnected == "raise":
+        raise DegenerateInputError(
+            f"the observation graph is disconnected: {n_comp} components, e.g. objects "
+            f"{comps[0].tolist()[:10]} and {comps[1].tolist()[:10]}; pass "
+            "disconnected='separate' to synchronize each component on its own")
+
+    labels: list[np.ndarray | None] = [None] * stk.n_objects
+    offset = 0
+    n_iter = 0
+    converged = True
+    comp_info = []
+    embeddings = []
+    for objs in comps:
+        cinfo: dict = {}
+        if objs.size == 1:
+            g = int(objs[0])
+            d_c = n_universe if n_universe is not None else int(stk.sizes[g])
+            labels[g] = np.arange(stk.sizes[g], dtype=np.int64) + offset
+            offset += d_c
+            comp_info.append({"objects": objs, "n_universe": d_c})
+            embeddings.append(None)
+            continue
+        sub = _subset(stk, objs)
+        if method == "orthogonal":
+            lab, d_c, it, ok, emb = _component_orthogonal(sub, n_universe, solver, eig_tol, gen,
+                                                         cinfo, max_iter, tol)
+        else:
+            lab, d_c, it, ok, emb = _component_spectral(sub, n_universe, solver, eig_tol, gen,
+                                                       cinfo)
+        for g, lab_g in zip(objs.tolist(), lab):
+            labels[g] = np.where(lab_g >= 0, lab_g + offset, -1)
+        cinfo.update({"objects": objs, "n_universe": d_c, "offset": offset})
+        comp_info.append(cinfo)
+        embeddings.append((objs, emb))
+        offset += d_c
+        n_iter += it
+        converged &= bool(ok)
+    d_total = offset
+    labels_t = tuple(labels)  # type: ignore[arg-type]
+
+    # summaries
+    if n_comp == 1:
+        for key in ("solver", "n_universe_estimate", "n_universe_rule", "eigenvalues",
+                    "relaxed_objective_history", "polar_sweeps", "seconds_build",
+                    "seconds_eigen", "seconds_round"):
+            if key in comp_info[0]:
+                info[key] = comp_info[0][key]
+    info["component_info"] = comp_info
+    agree, n_obs, n_ok = _agreement(stk, labels_t, d_total)
+    info["input_disagreement"] = float(1 - n_ok / n_obs) if n_obs else 0.0
+    info["input_consistency"] = _triangle_report(stk.pairs, stk.maps, stk.sizes,
+                                                 max_triangles=max_triangles, rng=gen)
+    objective = agree
+    pairwise_fn = None
+    consistent = True
+    if method == "matcheig":
+        consistent = False
+        fns = {}
+        for objs_emb in embeddings:
+            if objs_emb is None:
+                continue
+            objs, emb = objs_emb
+            fns.update({int(g): (k, objs) for k, g in enumerate(objs.tolist())})
+        comp_fns = [None if e is None else _matcheig_pairwise(e[1], stk.sizes[e[0]], threshold)
+                    for e in embeddings]
+        comp_index = {int(g): ci for ci, objs in enumerate(comps) for g in objs.tolist()}
+
+        def pairwise_fn(i, j, _fns=fns, _cf=comp_fns, _ci=comp_index):
+            ci, cj = _ci[i], _ci[j]
+            if ci != cj or _cf[ci] is None:
+                return np.full(stk.sizes[i], -1, dtype=np.int64)
+            return _cf[ci](_fns[i][0], _fns[j][0])
+
+        if stk.pairs.shape[0] <= 50_000:
+            objective = 0.0
+            for q in range(stk.pairs.shape[0]):
+                i, j = stk.pairs[q]
+                a = pairwise_fn(int(i), int(j))
+                ob = stk.maps[q, : stk.sizes[i]]
+                objective += stk.weights[q] * float(np.count_nonzero((ob >= 0) & (a == ob)))
+        else:
+            objective = float("nan")
+            info["objective_note"] = "not evaluated for matcheig above 50000 observed pairs"
+    info["seconds_total"] = time.perf_counter() - t_start
+    return PermutationSyncResult(labels=labels_t, n_universe=int(d_total),
+                                 objective=float(objective), n_iter=int(n_iter),
+                                 converged=bool(converged), cycle_consistent=consistent,
+                                 info=info, _pairwise_fn=pairwise_fn)

@@ -1,0 +1,124 @@
+"""Tests of synchronize_doubly_stochastic and birkhoff_von_neumann (ALGORITHMS.md §1.7, §4.2)."""
+
+import numpy as np
+import pytest
+
+from transync.datasets import make_permutation_collection
+from transync.exceptions import ConvergenceWarning
+from transync.permutations import assignment_to_matrix
+from transync.synchronization import (
+    BirkhoffSyncResult,
+    birkhoff_von_neumann,
+    synchronize_doubly_stochastic,
+)
+
+
+def _sinkhorn(K, n_iter=500):
+    for _ in range(n_iter):
+        K = K / K.sum(1, keepdims=True)
+        K = K / K.sum(0, keepdims=True)
+    return K
+
+
+def _soft_collection(N, n, noise, rng, corruption=0.0):
+    data = make_permutation_collection(N, n, corruption=corruption, rng=rng)
+    X = {}
+    for (i, j), a in data.pairwise.items():
+        P = assignment_to_matrix(a, n)
+        X[(i, j)] = _sinkhorn(P + noise * rng.random((n, n)) + 1e-3)
+    return data, X
+
+
+def test_consistent_input_gives_one_atom():
+    data = make_permutation_collection(6, 5, rng=0)
+    X = {k: assignment_to_matrix(a, 5) for k, a in data.pairwise.items()}
+    res = synchronize_doubly_stochastic(X)
+    assert isinstance(res, BirkhoffSyncResult)
+    assert res.converged and res.n_iter == 0
+    np.testing.assert_allclose(res.weights, [1.0])
+    assert res.atoms.shape == (1, 6, 5)
+    for k, block in res.blocks.items():
+        np.testing.assert_allclose(block, X[k], atol=1e-12)
+    assert res.objective == pytest.approx(0.0, abs=1e-12)
+    assert data.accuracy(res.labels) == 1.0
+
+
+@pytest.mark.parametrize("fully_corrective", [False, True])
+def test_blocks_doubly_stochastic_and_objective_monotone(rng, fully_corrective):
+    data, X = _soft_collection(6, 5, 0.6, rng, corruption=0.2)
+    with pytest.warns(ConvergenceWarning):          # FW rarely closes the gap in 8 steps
+        res = synchronize_doubly_stochastic(X, max_iter=8, fully_corrective=fully_corrective,
+                                            tol=1e-12)
+    assert res.n_iter == 8
+    np.testing.assert_allclose(res.weights.sum(), 1.0, atol=1e-12)
+    assert np.all(res.weights > 0)
+    for i in range(6):
+        for j in range(6):
+            B = res.block(i, j)
+            np.testing.assert_allclose(B.sum(0), 1.0, atol=1e-9)
+            np.testing.assert_allclose(B.sum(1), 1.0, atol=1e-9)
+            assert B.min() >= 0
+    h = res.objective_history
+    assert np.all(np.diff(h) <= 1e-12 * max(h[0], 1))
+    assert h[-1] < h[0]
+    # blocks dict agrees with block(i, j) and the atoms are consistent configurations
+    np.testing.assert_allclose(res.blocks[(0, 1)], res.block(0, 1), atol=1e-12)
+    np.testing.assert_array_equal(res.atoms[:, 0], np.tile(np.arange(5), (len(res.weights), 1)))
+
+
+def test_map_configuration_recovers_truth_under_noise(rng):
+    data, X = _soft_collection(8, 6, 0.3, rng)
+    with pytest.warns(ConvergenceWarning):
+        res = synchronize_doubly_stochastic(X, max_iter=3, tol=1e-12)
+    assert data.accuracy(res.labels) == 1.0
+    np.testing.assert_array_equal(res.pairwise(2, 5), data.true_pairwise(2, 5))
+
+
+def test_two_objects_reduce_to_bvn(rng):
+    n = 5
+    P = [rng.permutation(n) for _ in range(3)]
+    wts = np.array([0.5, 0.3, 0.2])
+    X01 = sum(a * assignment_to_matrix(p, n) for a, p in zip(wts, P))
+    res = synchronize_doubly_stochastic({(0, 1): X01}, fully_corrective=True, max_iter=20)
+    assert res.converged
+    np.testing.assert_allclose(res.block(0, 1), X01, atol=1e-8)
+    # like a BvN decomposition (not unique): every atom is a permutation inside the support
+    for lab in res.atoms:
+        assert np.all(X01[np.arange(n), np.argsort(lab[1])[lab[0]]] > 0)
+    assert res.weights.size <= n * n - 2 * n + 2
+
+
+def test_bvn_reconstructs(rng):
+    n = 6
+    perms = [rng.permutation(n) for _ in range(4)]
+    lam = rng.dirichlet(np.ones(4))
+    X = sum(a * assignment_to_matrix(p, n) for a, p in zip(lam, perms))
+    w, P = birkhoff_von_neumann(X)
+    assert P.shape == (w.size, n) and w.size <= n * n - 2 * n + 2
+    recon = sum(a * assignment_to_matrix(p, n) for a, p in zip(w, P))
+    np.testing.assert_allclose(recon, X, atol=1e-9)
+    np.testing.assert_allclose(w.sum(), 1.0, atol=1e-9)
+    # a Sinkhorn matrix with full support also decomposes
+    Y = _sinkhorn(rng.random((n, n)) + 0.1)
+    w, P = birkhoff_von_neumann(Y, tol=1e-12)
+    recon = sum(a * assignment_to_matrix(p, n) for a, p in zip(w, P))
+    np.testing.assert_allclose(recon, Y, atol=1e-8)
+
+
+@pytest.mark.parametrize("X, match", [
+    (np.array([[0.5, 0.4], [0.5, 0.5]]), "doubly stochastic"),
+    (np.array([[1.5, -0.5], [-0.5, 1.5]]), "non-negative"),
+    (np.ones((2, 3)) / 3, "square"),
+])
+def test_bvn_bad_input(X, match):
+    with pytest.raises(ValueError, match=match):
+        birkhoff_von_neumann(X)
+
+
+def test_ds_bad_input():
+    with pytest.raises(ValueError, match="doubly stochastic"):
+        synchronize_doubly_stochastic({(0, 1): np.full((3, 3), 0.5)})
+    with pytest.raises(ValueError, match="equal size"):
+        synchronize_doubly_stochastic({(0, 1): np.eye(3)[:2], (1, 2): np.eye(3)})
+    with pytest.raises(ValueError, match="i == j"):
+        synchronize_doubly_stochastic({(1, 1): np.eye(3)})

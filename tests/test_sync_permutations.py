@@ -1,0 +1,234 @@
+"""Tests of synchronize_permutations (spectral, orthogonal, matcheig; full and partial)."""
+
+import resource
+import time
+
+import numpy as np
+import pytest
+
+from transync.datasets import make_permutation_collection
+from transync.exceptions import DegenerateInputError
+from transync.permutations import assignment_to_matrix, cycle_inconsistency, invert
+from transync.synchronization import PermutationSyncResult, synchronize_permutations
+
+METHODS = ["spectral", "orthogonal", "matcheig"]
+SOLVERS = ["dense", "matrix_free"]
+
+
+def _all_pairs_exact(res, data):
+    for i in range(data.n_objects):
+        for j in range(data.n_objects):
+            if i != j and not np.array_equal(res.pairwise(i, j), data.true_pairwise(i, j)):
+                return False
+    return True
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_exact_recovery_full_consistent(method, solver):
+    data = make_permutation_collection(12, 7, rng=1)
+    res = synchronize_permutations(data.pairwise, method=method, solver=solver, rng=0)
+    assert isinstance(res, PermutationSyncResult)
+    assert res.info["solver"] == solver
+    assert res.n_universe == 7 and res.converged
+    assert _all_pairs_exact(res, data)
+    assert data.accuracy(res.labels) == 1.0
+    assert res.info["input_consistency"]["inconsistent_triangles"] == 0.0
+    assert res.info["input_disagreement"] == 0.0
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_exact_recovery_partial_missing_pairs(method, solver):
+    data = make_permutation_collection(14, 8, visibility=0.7, n_universe=10, observed=0.6, rng=2)
+    assert len(set(data.sizes.tolist())) > 1
+    res = synchronize_permutations(data.pairwise, n_universe=10, method=method, solver=solver,
+                                   rng=0)
+    assert res.n_universe == 10
+    assert _all_pairs_exact(res, data)
+
+
+def test_universe_estimated_from_eigengap():
+    data = make_permutation_collection(15, 8, visibility=0.75, n_universe=11, rng=3)
+    res = synchronize_permutations(data.pairwise)
+    assert res.info["n_universe_estimate"] == 11 == res.n_universe
+    assert "gap" in res.info["n_universe_rule"]
+    ev = res.info["eigenvalues"]
+    assert np.all(np.diff(ev) <= 1e-12)                   # descending
+    np.testing.assert_allclose(ev[:11], 1.0, atol=1e-8)  # normalized: d eigenvalues equal to 1
+    assert data.accuracy(res.labels) == 1.0
+
+
+def test_universe_estimated_matrix_free():
+    data = make_permutation_collection(12, 6, visibility=0.7, n_universe=9, rng=4)
+    res = synchronize_permutations(data.pairwise, solver="matrix_free", rng=0)
+    assert res.n_universe == 9 and data.accuracy(res.labels) == 1.0
+
+
+def test_conventions_matrix_input_and_reverse_keys(rng):
+    """P_ij[u, v] = 1 for a_ij[u] = v; consistency is P_ij = X_i X_j^T; (j, i) keys inverted."""
+    data = make_permutation_collection(6, 5, rng=rng)
+    mats = {(i, j): assignment_to_matrix(a, 5) for (i, j), a in data.pairwise.items()}
+    rev = {(j, i): invert(a, 5) for (i, j), a in data.pairwise.items()}
+    for pw in (mats, rev):
+        res = synchronize_permutations(pw)
+        assert _all_pairs_exact(res, data)
+        X = [res.absolute(g) for g in range(6)]
+        for (i, j), a in data.pairwise.items():
+            np.testing.assert_array_equal(X[i] @ X[j].T, assignment_to_matrix(a, 5))
+        T = res.to_matrix()
+        Xs = np.vstack(X)
+        np.testing.assert_array_equal(T, Xs @ Xs.T)
+
+
+def test_relabelling_nodes_relabels_output(rng):
+    """Renaming the nodes of one object permutes the synchronized maps the same way."""
+    data = make_permutation_collection(10, 6, corruption=0.2, rng=rng)
+    res = synchronize_permutations(data.pairwise)
+    perm = rng.permutation(6)            # new node perm[u] is old node u of object 0
+    inv = np.argsort(perm)
+    pw = {}
+    for (i, j), a in data.pairwise.items():
+        if i == 0:
+            b = np.empty_like(a)
+            b[perm] = a                  # new node perm[u] -> a[u]
+            pw[(i, j)] = b
+        else:
+            pw[(i, j)] = a
+    res2 = synchronize_permutations(pw)
+    np.testing.assert_array_equal(res2.pairwise(0, 3), res.pairwise(0, 3)[inv])
+    np.testing.assert_array_equal(res2.pairwise(2, 5), res.pairwise(2, 5))
+
+
+@pytest.mark.parametrize("method", ["spectral", "orthogonal"])
+def test_corrupted_recovery_and_consistency(method):
+    data = make_permutation_collection(30, 10, corruption=0.3, rng=5)
+    res = synchronize_permutations(data.pairwise, method=method)
+    assert data.accuracy(res.labels) >= 0.99
+    assert res.info["input_consistency"]["inconsistent_triangles"] > 0.3
+    assert cycle_inconsistency(res.pairwise_dict())["inconsistent_triangles"] == 0.0
+    assert 0.2 < res.info["input_disagreement"] < 0.35
+    # the objective counts the kept observed correspondences
+    kept = sum(np.count_nonzero(res.pairwise(i, j) == a) for (i, j), a in data.pairwise.items())
+    assert res.objective == pytest.approx(kept)
+
+
+def test_orthogonal_objective_is_monotone():
+    data = make_permutation_collection(20, 8, corruption=0.5, observed=0.7, rng=6)
+    res = synchronize_permutations(data.pairwise, method="orthogonal", max_iter=200)
+    hist = res.info["relaxed_objective_history"]
+    assert hist.size >= 2
+    assert np.all(np.diff(hist) >= -1e-9 * abs(hist[-1]))
+
+
+def test_orthogonal_nonconvergence_warns():
+    from transync.exceptions import ConvergenceWarning
+    data = make_permutation_collection(15, 8, corruption=0.6, rng=7)
+    with pytest.warns(ConvergenceWarning):
+        res = synchronize_permutations(data.pairwise, method="orthogonal", max_iter=1,
+                                       tol=1e-15)
+    assert not res.converged
+
+
+def test_matcheig_baseline():
+    data = make_permutation_collection(12, 6, corruption=0.2, rng=8)
+    res = synchronize_permutations(data.pairwise, method="matcheig")
+    assert res.cycle_consistent is False
+    spec = synchronize_permutations(data.pairwise, method="spectral")
+    for g in range(12):
+        np.testing.assert_array_equal(res.labels[g], spec.labels[g])
+    a = res.pairwise(0, 1)
+    assert a.shape == (6,) and np.unique(a[a >= 0]).size == np.count_nonzero(a >= 0)
+    clean = make_permutation_collection(8, 5, rng=9)
+    assert _all_pairs_exact(synchronize_permutations(clean.pairwise, method="matcheig"), clean)
+
+
+def test_weights_downweight_a_bad_pair():
+    data = make_permutation_collection(3, 4, rng=10)
+    pw = dict(data.pairwise)
+    pw[(0, 2)] = np.roll(pw[(0, 2)], 1)                       # wrong pair
+    w = {(0, 1): 1.0, (1, 2): 1.0, (0, 2): 0.1}
+    res = synchronize_permutations(pw, weights=w, n_universe=4)
+    np.testing.assert_array_equal(res.pairwise(0, 2), data.true_pairwise(0, 2))
+    W = np.ones((3, 3)); W[0, 2] = W[2, 0] = 0.1                # noqa: E702
+    res2 = synchronize_permutations(pw, weights=W)
+    np.testing.assert_array_equal(res2.pairwise(0, 2), data.true_pairwise(0, 2))
+
+
+def test_mask_and_block_array_input():
+    data = make_permutation_collection(5, 4, rng=11)
+    arr = np.zeros((5, 5, 4, 4))
+    for i in range(5):
+        for j in range(5):
+            if i != j:
+                arr[i, j] = assignment_to_matrix(data.true_pairwise(i, j), 4)
+    mask = np.ones((5, 5), bool)
+    mask[0, 1] = mask[1, 0] = False
+    res = synchronize_permutations(arr, mask=mask)
+    assert _all_pairs_exact(res, data)
+    res2 = synchronize_permutations(data.pairwise, mask=mask)
+    assert _all_pairs_exact(res2, data)
+
+
+def test_disconnected_components_are_synchronized_separately():
+    a = make_permutation_collection(4, 5, rng=12)
+    b = make_permutation_collection(3, 5, rng=13)
+    pw = dict(a.pairwise)
+    pw.update({(i + 4, j + 4): m for (i, j), m in b.pairwise.items()})
+    res = synchronize_permutations(pw)
+    comps = res.info["components"]
+    assert len(comps) == 2
+    assert res.n_universe == 10
+    assert set(np.concatenate(res.labels[:4]).tolist()).isdisjoint(
+        np.concatenate(res.labels[4:]).tolist())
+    assert np.all(res.pairwise(0, 5) == -1)
+    np.testing.assert_array_equal(res.pairwise(4, 6), b.true_pairwise(0, 2))
+    with pytest.raises(DegenerateInputError, match="disconnected"):
+        synchronize_permutations(pw, disconnected="raise")
+
+
+def test_isolated_object_with_sizes():
+    pw = {(0, 1): np.array([1, 0, 2])}
+    res = synchronize_permutations(pw, sizes=np.array([3, 3, 2]))
+    assert res.labels[2].tolist() == [6, 7] or res.labels[2].size == 2
+    assert len(res.info["components"]) == 2
+
+
+@pytest.mark.parametrize("pw, kwargs, match", [
+    ({(0, 1): np.array([[0.5, 0.5], [0.5, 0.5]])}, {}, "partial-permutation"),
+    ({(0, 1): np.array([[1, 1], [0, 0]])}, {}, "partial-permutation"),
+    ({(0, 1): np.array([0, 0])}, {}, "injective"),
+    ({(0, 0): np.array([0, 1])}, {}, "i == j"),
+    ({(0, 1): np.array([0, 1]), (0, 2): np.array([0, 1, 2])}, {}, "mismatched sizes"),
+    ({(0, 1): np.eye(2, 3), (1, 2): np.array([0, 1])}, {}, "mismatched sizes"),
+    ({(0, 1): np.array([0, 1, 2])}, {"n_universe": 2}, "n_universe"),
+    ({(0, 1): np.array([0, 1])}, {"method": "nope"}, "method"),
+    ({(0, 1): np.array([0, 5])}, {"sizes": np.array([2, 2])}, "n2|beyond|node"),
+    ({}, {}, "at least one"),
+])
+def test_bad_input_raises(pw, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        synchronize_permutations(pw, **kwargs)
+
+
+def test_cycle_inconsistency_sampling_matches_exact(rng):
+    data = make_permutation_collection(40, 6, corruption=0.3, rng=rng)
+    exact = cycle_inconsistency(data.pairwise)
+    assert exact["n_triangles"] == 40 * 39 * 38 // 6 and not exact["sampled"]
+    samp = cycle_inconsistency(data.pairwise, max_triangles=3000, rng=0)
+    assert samp["sampled"] and 0 < samp["n_triangles"] <= 3000
+    assert abs(samp["inconsistent_triangles"] - exact["inconsistent_triangles"]) < 0.05
+
+
+@pytest.mark.slow
+def test_target_n1000_matrix_free():
+    """Issue #3 target: N=1000, n=30, 20 % corrupted pairs; < 60 s, < 4 GB, accuracy >= 0.99."""
+    data = make_permutation_collection(1000, 30, corruption=0.2, rng=0)
+    t0 = time.perf_counter()
+    res = synchronize_permutations(data.pairwise, rng=0)
+    seconds = time.perf_counter() - t0
+    peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+    assert res.info["solver"] == "matrix_free"
+    assert data.accuracy(res.labels) >= 0.99
+    print(f"N=1000 n=30: {seconds:.1f} s, peak RSS {peak_gb:.2f} GB")   # reported, not asserted
+    assert peak_gb < 4.0

@@ -7,4 +7,5 @@ from ._graphs import (  # noqa: F401
     make_point_matching_problem,
 )
 from ._permutations import PermutationCollection, make_permutation_collection  # noqa: F401
+from ._scenes import PlanarScene, make_planar_scene  # noqa: F401
 from ._transforms import TransformProblem, make_noisy_homographies, make_noisy_linear_maps  # noqa: F401

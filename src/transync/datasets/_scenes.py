@@ -20,8 +20,11 @@ from .._validation import as_generator, check_choice, check_int, check_positive,
 
 __all__ = ["PlanarScene", "make_planar_scene"]
 
-_SOURCES = ("astronaut", "grass", "gravel", "rocket", "coffee", "chelsea", "camera",
-            "immunohistochemistry", "coins")
+# grey-level images shipped inside scikit-image (no downloads); regular or repeated content
+# (brick, text, page, checkerboard) is left out on purpose
+_SOURCES = ("astronaut", "camera", "chelsea", "coffee", "coins", "grass", "gravel",
+            "hubble_deep_field", "immunohistochemistry", "moon", "rocket", "retina", "cell",
+            "clock")
 _PRESETS = {
     "easy": {"max_angle": 15.0, "clutter": 0.0},
     "moderate": {"max_angle": 25.0, "clutter": 0.20},
@@ -69,44 +72,90 @@ def _source(name: str) -> np.ndarray:
 
     img = getattr(skimage.data, name)()
     if img.ndim == 3:
-        img = cv2.cvtColor(img[..., :3], cv2.COLOR_RGB2GRAY)
-    img = np.asarray(img, dtype=np.float32)
-    # stretch contrast so every tile is textured
-    lo, hi = np.percentile(img, [1, 99])
-    return np.clip((img - lo) / max(hi - lo, 1.0), 0, 1) * 255.0
+        img = cv2.cvtColor(np.ascontiguousarray(img[..., :3]), cv2.COLOR_RGB2GRAY)
+    return np.ascontiguousarray(img, dtype=np.float32)
 
 
-def _random_tile(size, rng, sources=_SOURCES):
-    src = _source(sources[rng.integers(len(sources))])
-    h, w = src.shape
-    ang = rng.uniform(0, 360)
-    scale = rng.uniform(0.5, 0.9) * size / min(h, w)
-    center = (rng.uniform(0.3, 0.7) * w, rng.uniform(0.3, 0.7) * h)
-    A = cv2.getRotationMatrix2D(center, ang, scale)
-    A[:, 2] += np.array([size / 2, size / 2]) - np.array(center)
-    tile = cv2.warpAffine(src, A, (size, size), flags=cv2.INTER_LINEAR,
-                          borderMode=cv2.BORDER_REFLECT)
-    gain = rng.uniform(0.7, 1.0)
-    return tile * gain + rng.uniform(0, 255 * (1 - gain))
+@functools.lru_cache(maxsize=16)
+def _patch_pool(size: int) -> tuple:
+    """Disjoint ``size`` x ``size`` crops of the scikit-image sources that carry texture.
+
+    Every crop is normalized to mean 128 and standard deviation 45. Crops never overlap, so a
+    texture built from distinct crops never shows the same content twice (no false matches).
+    """
+    out = []
+    for name in _SOURCES:
+        src = _source(name)
+        h, w = src.shape
+        for a in range(h // size):
+            for b in range(w // size):
+                p = src[a * size:(a + 1) * size, b * size:(b + 1) * size]
+                sd = float(p.std())
+                if sd < 8.0:
+                    continue
+                p = (p - p.mean()) / sd
+                gx = cv2.Sobel(p, cv2.CV_32F, 1, 0)
+                gy = cv2.Sobel(p, cv2.CV_32F, 0, 1)
+                if float(np.sqrt(gx * gx + gy * gy).mean()) < 0.35:   # smooth: little texture
+                    continue
+                out.append(np.ascontiguousarray(np.clip(p * 45.0 + 128.0, 0, 255), np.float32))
+    return tuple(out)
 
 
-def _texture(size_px, tile, rng, sources=_SOURCES):
-    n = int(np.ceil(size_px / tile))
-    out = np.zeros((n * tile, n * tile), dtype=np.float32)
-    for a in range(n):
-        for b in range(n):
-            # blend two random crops with a smooth random field: every tile is unique, so
-            # repeated source images never produce consistent false matches
-            t1 = _random_tile(tile, rng, sources)
-            t2 = _random_tile(tile, rng, sources)
-            field = cv2.GaussianBlur(rng.random((tile, tile)).astype(np.float32), (0, 0),
-                                     tile / 8)
-            field = np.clip((field - field.mean()) / (field.std() + 1e-6) * 0.25 + 0.5, 0, 1)
-            out[a * tile:(a + 1) * tile, b * tile:(b + 1) * tile] = field * t1 + (1 - field) * t2
-    # fine unique noise so that repeated sources never give identical descriptors
-    noise = cv2.GaussianBlur(rng.normal(0, 12, size=out.shape).astype(np.float32), (0, 0), 1.5)
-    out = out[:size_px, :size_px]
-    out += noise[:size_px, :size_px]
+def _source_patch_size(n_needed: int) -> int:
+    """Largest crop size whose pool still holds ``n_needed`` distinct crops (48 at least)."""
+    for size in (160, 144, 128, 112, 96, 80, 64, 56, 48):
+        if len(_patch_pool(size)) >= n_needed:
+            return size
+    return 48
+
+
+class _PatchDealer:
+    """Deals distinct source crops in a random order, each with a random rotation by a multiple
+    of 90 degrees, mirror and gain; it only cycles (with a new orientation) when the pool runs out."""
+
+    def __init__(self, size, rng):
+        self.pool = _patch_pool(size)
+        self.order = rng.permutation(len(self.pool))
+        self.k = 0
+        self.rng = rng
+
+    def next(self, out_size):
+        p = self.pool[self.order[self.k % len(self.order)]]
+        cycle = self.k // len(self.order)
+        self.k += 1
+        p = np.rot90(p, int(self.rng.integers(4)) + cycle)
+        if self.rng.random() < 0.5:
+            p = p[:, ::-1]
+        ow, oh = (out_size, out_size) if np.isscalar(out_size) else out_size
+        p = cv2.resize(np.ascontiguousarray(p), (int(ow), int(oh)), interpolation=cv2.INTER_CUBIC)
+        gain = self.rng.uniform(0.7, 1.1)
+        return (p - 128.0) * gain + 128.0 + self.rng.uniform(-20, 20)
+
+
+def _texture(size_px, cell, visible, dealer, rng):
+    """Plane texture: one distinct crop per visible cell, blended with overlapping smooth windows
+    (no seams, no periodic tiling), plus fine unique noise. ``visible`` is a boolean cell grid."""
+    n = visible.shape[0]
+    m = int(round(1.5 * cell))                       # window (patch) size
+    pad = m
+    acc = np.zeros((n * cell + 2 * pad, n * cell + 2 * pad), np.float32)
+    wsum = np.zeros_like(acc)
+    x = (np.arange(m) + 0.5) / m
+    win = np.sin(np.pi * x) ** 2
+    win2 = np.outer(win, win).astype(np.float32) + 1e-4
+    for a, b in zip(*np.nonzero(visible)):
+        p = dealer.next(m)
+        jy, jx = rng.integers(-cell // 6, cell // 6 + 1, size=2)
+        y0 = pad + a * cell + cell // 2 - m // 2 + int(jy)
+        x0 = pad + b * cell + cell // 2 - m // 2 + int(jx)
+        acc[y0:y0 + m, x0:x0 + m] += win2 * p
+        wsum[y0:y0 + m, x0:x0 + m] += win2
+    out = np.where(wsum > 1e-3, acc / np.maximum(wsum, 1e-6), 128.0)[pad:pad + n * cell,
+                                                                       pad:pad + n * cell]
+    # unique fine-scale structure: no two places of the plane look alike even at small scales
+    noise = cv2.GaussianBlur(rng.normal(0, 14, size=out.shape).astype(np.float32), (0, 0), 1.2)
+    out = out[:size_px, :size_px] + noise[:size_px, :size_px]
     return np.clip(out, 0, 255).astype(np.uint8)
 
 
@@ -225,37 +274,49 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
         Cs.append(C)
     extent = 2.0 * reach + 0.2     # the plane texture covers every view
     tex_px = int(extent * px_per_unit)
-    tile = max(64, int(0.55 * px_per_unit))
-    texture = _texture(tex_px, tile, rng)
     s = extent / tex_px
     S = np.array([[s, 0, -extent / 2], [0, s, -extent / 2], [0, 0, 1.0]])
+    # only the cells of the texture that some view sees get content: fewer cells, so the pool
+    # of distinct source crops stays large enough for crops to never repeat
+    cell = max(48, int(0.16 * px_per_unit))
+    n_cells = int(np.ceil(tex_px / cell))
+    visible = np.zeros((n_cells, n_cells), np.uint8)
+    for i in range(n):
+        G = _plane_homography(Ks[i], Rs[i], Cs[i], 0.0, S)
+        foot = np.linalg.solve(G, corners)
+        foot = (foot[:2] / foot[2]).T / cell
+        cv2.fillConvexPoly(visible, np.round(foot * 16).astype(np.int32), 1, cv2.LINE_8, 4)
+    visible = cv2.dilate(visible, np.ones((3, 3), np.uint8)) > 0
+    dealer = _PatchDealer(_source_patch_size(int(visible.sum()) + 60), rng)
+    texture = _texture(tex_px, cell, visible, dealer, rng)
 
-    # clutter: floating textured rectangles in front of the plane, placed over the reference view
+    # clutter: many small floating textured rectangles in front of the plane, placed over the
+    # reference view (small, so that no single object rivals the plane in the number of matches)
     Gr = _plane_homography(K, Rs[reference], Cs[reference], 0.0, S)
     patches = []
     covered = np.zeros((h, w), dtype=bool)
     attempts = 0
-    while covered.mean() < preset["clutter"] and attempts < 200:
+    while covered.mean() < preset["clutter"] and attempts < 400:
         attempts += 1
-        ph = rng.uniform(0.08, 0.22)
-        size = rng.uniform(0.12, 0.28) * np.array([1.0, rng.uniform(0.6, 1.6)])
+        ph = rng.uniform(0.06, 0.2)
+        size = rng.uniform(0.07, 0.16) * np.array([1.0, rng.uniform(0.6, 1.6)])
         # centre: a random reference pixel back-projected onto the plane
-        u = np.array([rng.uniform(0.1, 0.9) * w, rng.uniform(0.1, 0.9) * h, 1.0])
+        u = np.array([rng.uniform(0.05, 0.95) * w, rng.uniform(0.05, 0.95) * h, 1.0])
         X = np.linalg.solve(Gr, u)
         X = S @ (X / X[2])
         ptex_px = max(16, int(size.max() * px_per_unit))
         pw, phh = (int(round(ptex_px * size[0] / size.max())),
                    int(round(ptex_px * size[1] / size.max())))
-        ptex = _random_tile(max(pw, phh), rng)[:phh, :pw].astype(np.float32)
         sp = size.max() / ptex_px
         Sp = np.array([[sp, 0, X[0] - size[0] / 2], [0, sp, X[1] - size[1] / 2], [0, 0, 1.0]])
         Gp = _plane_homography(K, Rs[reference], Cs[reference], ph, Sp)
         cov = cv2.warpPerspective(np.ones((phh, pw), np.uint8), Gp, (w, h),
                                   flags=cv2.INTER_NEAREST) > 0
         gain = (cov & ~covered).mean()
-        if gain < 0.002 or covered.mean() + gain > preset["clutter"] + 0.03:
+        if gain < 0.002 or covered.mean() + gain > preset["clutter"] + 0.02:
             continue
         covered |= cov
+        ptex = np.clip(dealer.next((pw, phh)), 0, 255).astype(np.float32)
         patches.append({"height": ph, "S": Sp, "texture": ptex})
     patches.sort(key=lambda p: p["height"])
 

@@ -83,6 +83,52 @@ def _polar(M: np.ndarray) -> np.ndarray:
     return U @ Vt
 
 
+def _refine_labels(stk: StackedPairs, labels, d: int, max_sweeps: int, dobs=None):
+    """Projected power method on the discrete objective (Chen & Candes 2016, block form).
+
+    Gauss-Seidel sweeps ``X_g <- LMO(sum_j w_gj P_gj X_j)``: the objective is linear in ``X_g``
+    with the other objects fixed, so the rectangular Hungarian (every node placed, at most one
+    node per slot) is the exact block maximizer and the objective never decreases. A bonus far
+    below any weight keeps the current slot on ties (no drifting between equal optima). Stops
+    after a sweep that changes nothing, or after ``max_sweeps``. Returns
+    ``(labels, objective history, sweeps)``.
+    """
+    sizes = stk.sizes
+    N = stk.n_objects
+    n_max = int(sizes.max())
+    ptr, dst, dmaps, dw = dobs if dobs is not None else spec.directed(stk)
+    lab = _padded(labels, n_max + 1)                      # column n_max stays -1
+    pos = dw[dw > 0]
+    tie = 1e-9 * (float(pos.min()) if pos.size else 1.0)
+    history = [_agreement(stk, [lab[g, : sizes[g]] for g in range(N)], d)[0]]
+    sweeps = 0
+    for sweeps in range(1, max_sweeps + 1):
+        changed = 0
+        for g in range(N):
+            lo, hi = ptr[g], ptr[g + 1]
+            n_g = int(sizes[g])
+            if lo == hi:
+                continue
+            a = dmaps[lo:hi, :n_g]
+            tgt = lab[dst[lo:hi, None], np.where(a >= 0, a, n_max)]      # (deg, n_g) slots
+            e, u = np.nonzero(tgt >= 0)
+            S = np.bincount(u * d + tgt[e, u], weights=dw[lo:hi][e],
+                            minlength=n_g * d).reshape(n_g, d)
+            cur = lab[g, :n_g]
+            placed = np.flatnonzero(cur >= 0)
+            S[placed, cur[placed]] += tie
+            r, c = linear_sum_assignment(S, maximize=True)
+            new = np.full(n_g, -1, dtype=np.int64)
+            new[r] = c
+            if not np.array_equal(new, cur):
+                lab[g, :n_g] = new
+                changed += 1
+        history.append(_agreement(stk, [lab[g, : sizes[g]] for g in range(N)], d)[0])
+        if changed == 0:
+            break
+    return [lab[g, : sizes[g]].copy() for g in range(N)], history, sweeps
+
+
 # --------------------------------------------------------------------------------------------
 # one connected component
 # --------------------------------------------------------------------------------------------
@@ -146,15 +192,21 @@ def _spectral_embedding(stk, d, solver, tol, rng, info):
     return U[:, : min(d, M)], d, n_prod, converged, A
 
 
-def _component_spectral(stk, d, solver, tol, rng, info):
+def _component_spectral(stk, d, solver, tol, rng, info, refine=0):
     V, d, n_prod, ok, _ = _spectral_embedding(stk, d, solver, tol, rng, info)
     t0 = time.perf_counter()
     labels = spec.round_to_universe(V, stk.sizes, d)
     info["seconds_round"] = time.perf_counter() - t0
+    if refine > 0:
+        t0 = time.perf_counter()
+        labels, hist, sweeps = _refine_labels(stk, labels, d, refine)
+        info["discrete_objective_history"] = np.asarray(hist)
+        info["refine_sweeps"] = sweeps
+        info["seconds_refine"] = time.perf_counter() - t0
     return labels, d, n_prod, ok, V
 
 
-def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol):
+def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, refine):
     V, d, n_prod, ok_eig, _ = _spectral_embedding(stk, d, solver, tol, rng, info)
     sizes = stk.sizes
     off = np.concatenate([[0], np.cumsum(sizes)])
@@ -199,8 +251,28 @@ def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol):
     info["relaxed_objective_history"] = np.asarray(history)
     info["polar_sweeps"] = it
     stacked = np.vstack([Qs[g, : sizes[g]] for g in range(N)])
-    labels = spec.round_to_universe(stacked, sizes, d)
-    return labels, d, it, converged and ok_eig, stacked
+    # Round both the spectral start and the polar end point, refine each by the projected
+    # power method on the discrete objective, keep the better one. All candidates are scored
+    # by the same discrete objective that the method maximizes, so this is a safeguard against
+    # the polar iteration ending in a worse local optimum, not a change of objective.
+    cands = {"orthogonal": spec.round_to_universe(stacked, sizes, d),
+             "spectral": spec.round_to_universe(V[:, :k], sizes, d)}
+    dobs = (ptr, dst, dmaps, dw)
+    scores = {}
+    best = None
+    for name, lab in cands.items():
+        before = _agreement(stk, lab, d)[0]
+        sweeps = 0
+        if refine > 0:
+            lab, hist, sweeps = _refine_labels(stk, lab, d, refine, dobs)
+            info[f"discrete_objective_history_{name}"] = np.asarray(hist)
+        score = _agreement(stk, lab, d)[0]
+        scores[name] = {"rounded": before, "refined": score, "refine_sweeps": sweeps}
+        if best is None or score > best[1] + 1e-9 * max(abs(score), 1.0):
+            best = (name, score, lab)
+    info["candidates"] = scores
+    info["chosen"] = best[0]
+    return best[2], d, it, converged and ok_eig, stacked
 
 
 def _matcheig_pairwise(V: np.ndarray, sizes: np.ndarray, threshold: float):
@@ -228,6 +300,7 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
                              solver: str = "auto", disconnected: str = "separate",
                              max_iter: int = 100, tol: float = 1e-6,
                              eig_tol: float = 1e-4, threshold: float = 0.5,
+                             refine: int | None = None, min_score: float | None = None,
                              max_triangles: int = 100_000, rng=None) -> PermutationSyncResult:
     r"""Make pairwise (partial) permutations cycle-consistent through a universe of nodes.
 
@@ -327,6 +400,17 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
     tol = check_positive(tol, "tol")
     eig_tol = check_positive(eig_tol, "eig_tol")
     threshold = float(threshold)
+    if refine is None:
+        n_refine = max_iter if method == "orthogonal" else 0
+    else:
+        n_refine = check_int(refine, "refine", minimum=0)
+        if method == "matcheig" and n_refine:
+            raise ValueError("`refine` does not apply to method='matcheig' (its pairwise maps are "
+                             f"rounded block by block), got refine={refine!r}")
+    if min_score is not None:
+        min_score = check_positive(min_score, "min_score", allow_zero=True)
+        if min_score > 1:
+            raise ValueError(f"`min_score` must lie in [0, 1], got {min_score!r}")
     gen = as_generator(rng)
     t_start = time.perf_counter()
     stk = parse_pairwise(pairwise, mask=mask, weights=weights, sizes=sizes)
@@ -370,10 +454,10 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
         sub = _subset(stk, objs)
         if method == "orthogonal":
             lab, d_c, it, ok, emb = _component_orthogonal(sub, n_universe, solver, eig_tol, gen,
-                                                         cinfo, max_iter, tol)
+                                                         cinfo, max_iter, tol, n_refine)
         else:
             lab, d_c, it, ok, emb = _component_spectral(sub, n_universe, solver, eig_tol, gen,
-                                                       cinfo)
+                                                       cinfo, n_refine)
         for g, lab_g in zip(objs.tolist(), lab):
             labels[g] = np.where(lab_g >= 0, lab_g + offset, -1)
         cinfo.update({"objects": objs, "n_universe": d_c, "offset": offset})

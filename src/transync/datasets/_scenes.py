@@ -1,8 +1,8 @@
 """Rendered multi-view scenes of a textured plane with parallax clutter, with ground truth.
 
 World frame: the dominant plane is ``z = 0``; cameras sit above it (``z > 0``) and look at it.
-The plane texture is a mosaic of randomly scaled, rotated and cropped images shipped with
-scikit-image (no downloads). Clutter objects are textured rectangles floating parallel to the plane
+The plane texture is a mosaic of distinct, never repeated crops of images shipped with
+scikit-image (no downloads), blended with smooth windows, plus fine unique noise. Clutter objects are textured rectangles floating parallel to the plane
 at heights ``h > 0``; each is rendered through its own induced homography, so it moves with
 parallax relative to the plane and breaks the plane homography where it occludes the plane.
 """
@@ -133,9 +133,19 @@ class _PatchDealer:
         return (p - 128.0) * gain + 128.0 + self.rng.uniform(-20, 20)
 
 
-def _texture(size_px, cell, visible, dealer, rng):
+def _noise_patch(size, rng):
+    """Multi-scale random texture (unique by construction), mean 128 and deviation 45."""
+    p = np.zeros((size, size), np.float32)
+    for sigma in (1.0, 2.0, 4.0, 8.0):
+        p += cv2.GaussianBlur(rng.normal(0, 1, (size, size)).astype(np.float32), (0, 0), sigma) * sigma
+    return (p - p.mean()) / (p.std() + 1e-6) * 45.0 + 128.0
+
+
+def _texture(size_px, cell, visible, near, dealer, rng):
     """Plane texture: one distinct crop per visible cell, blended with overlapping smooth windows
-    (no seams, no periodic tiling), plus fine unique noise. ``visible`` is a boolean cell grid."""
+    (no seams, no periodic tiling), plus fine unique noise. ``visible`` and ``near`` are boolean
+    cell grids; cells seen only from far (``visible & ~near``) get the crops left over, then
+    multi-scale noise once the pool of distinct crops is used up."""
     n = visible.shape[0]
     m = int(round(1.5 * cell))                       # window (patch) size
     pad = m
@@ -144,8 +154,9 @@ def _texture(size_px, cell, visible, dealer, rng):
     x = (np.arange(m) + 0.5) / m
     win = np.sin(np.pi * x) ** 2
     win2 = np.outer(win, win).astype(np.float32) + 1e-4
-    for a, b in zip(*np.nonzero(visible)):
-        p = dealer.next(m)
+    cells = list(zip(*np.nonzero(near))) + list(zip(*np.nonzero(visible & ~near)))
+    for a, b in cells:
+        p = dealer.next(m) if dealer.k < len(dealer.order) - 60 else _noise_patch(m, rng)
         jy, jx = rng.integers(-cell // 6, cell // 6 + 1, size=2)
         y0 = pad + a * cell + cell // 2 - m // 2 + int(jy)
         x0 = pad + b * cell + cell // 2 - m // 2 + int(jx)
@@ -281,14 +292,22 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
     cell = max(48, int(0.16 * px_per_unit))
     n_cells = int(np.ceil(tex_px / cell))
     visible = np.zeros((n_cells, n_cells), np.uint8)
+    mag = np.zeros((n_cells, n_cells))        # largest image px per texture px over the views
+    cc = (np.stack(np.meshgrid(np.arange(n_cells), np.arange(n_cells)), -1).reshape(-1, 2) + 0.5)
+    cc = np.column_stack([cc * cell, np.ones(len(cc))]).T
     for i in range(n):
         G = _plane_homography(Ks[i], Rs[i], Cs[i], 0.0, S)
         foot = np.linalg.solve(G, corners)
         foot = (foot[:2] / foot[2]).T / cell
         cv2.fillConvexPoly(visible, np.round(foot * 16).astype(np.int32), 1, cv2.LINE_8, 4)
+        z = G[2] @ cc                             # |det J| of the plane-to-image map = det G / z^3
+        with np.errstate(divide="ignore"):
+            m_i = np.sqrt(np.abs(np.linalg.det(G)) / np.abs(z) ** 3)
+        mag = np.maximum(mag, np.where(z > 0, m_i, 0.0).reshape(n_cells, n_cells))
     visible = cv2.dilate(visible, np.ones((3, 3), np.uint8)) > 0
-    dealer = _PatchDealer(_source_patch_size(int(visible.sum()) + 60), rng)
-    texture = _texture(tex_px, cell, visible, dealer, rng)
+    near = visible & (mag >= 0.55)
+    dealer = _PatchDealer(_source_patch_size(int(near.sum()) + 60), rng)
+    texture = _texture(tex_px, cell, visible, near, dealer, rng)
 
     # clutter: many small floating textured rectangles in front of the plane, placed over the
     # reference view (small, so that no single object rivals the plane in the number of matches)

@@ -26,6 +26,7 @@ The public functions (:func:`~transync.matching.rrwm` etc.) are a thin loop over
 
 from __future__ import annotations
 
+import contextlib
 import warnings
 from typing import Protocol, runtime_checkable
 
@@ -139,10 +140,30 @@ class _BaseStepper:
                               method=self.method, n2=self.n2, info=self._info())
 
 
+# Below this many candidate pairs (n1 * n2) the solvers' matrix products are small: BLAS threads
+# buy little, and on a busy machine (or under the experiment runner's worker processes) their
+# spin-waiting makes each product up to 20x slower. Such loops run single-threaded.
+SINGLE_THREAD_BELOW = 200 * 200
+_CONTROLLER = None
+
+
+def _blas_limit(size: int):
+    """Context limiting BLAS to one thread for small problems (no-op otherwise)."""
+    global _CONTROLLER
+    if size >= SINGLE_THREAD_BELOW:
+        return contextlib.nullcontext()
+    if _CONTROLLER is None:
+        from threadpoolctl import ThreadpoolController
+
+        _CONTROLLER = ThreadpoolController()
+    return _CONTROLLER.limit(limits=1, user_api="blas")
+
+
 def _run(stepper) -> MatchingResult:
     """Thin loop of the public functions: step until done, warn if not converged."""
-    while not stepper.done:
-        stepper.step()
+    with _blas_limit(stepper.n1 * stepper.n2):
+        while not stepper.done:
+            stepper.step()
     if not stepper.converged:
         warnings.warn(f"{stepper.method}: stopped at max_iter={stepper.max_iter} before meeting "
                       "the tolerance; the result may be poor (raise `max_iter` or `tol`)",

@@ -83,6 +83,34 @@ def _polar(M: np.ndarray) -> np.ndarray:
     return U @ Vt
 
 
+def _node_scores(stk: StackedPairs, labels, d: int, dobs=None):
+    """Per-node support of the output: weighted Jaccard agreement with the observations.
+
+    For node ``u`` of object ``g`` and every observed pair ``(g, j)``: the observation claims a
+    partner when ``P_gj[u]`` is a node, the output claims one when ``j`` has a node in ``u``'s
+    slot; the score is (weight of pairs where both claim the same partner) / (weight of pairs
+    where at least one claims a partner), 0 when nothing is claimed.
+    """
+    sizes = stk.sizes
+    n_max = int(sizes.max())
+    ptr, dst, dmaps, dw = dobs if dobs is not None else spec.directed(stk)
+    lab = _padded(labels, n_max)
+    inv = np.full((stk.n_objects, d + 1), -1, dtype=np.int64)
+    g_idx, u_idx = np.nonzero(lab >= 0)
+    inv[g_idx, lab[g_idx, u_idx]] = u_idx
+    scores = []
+    for g in range(stk.n_objects):
+        lo, hi = ptr[g], ptr[g + 1]
+        n_g = int(sizes[g])
+        obs = dmaps[lo:hi, :n_g]                                    # (deg, n_g)
+        out = inv[dst[lo:hi, None], lab[g, :n_g][None, :]]          # label -1 -> column d: -1
+        w = dw[lo:hi, None]
+        agree = (w * ((obs >= 0) & (out == obs))).sum(0)
+        claim = (w * ((obs >= 0) | (out >= 0))).sum(0)
+        scores.append(np.where(claim > 0, agree / np.where(claim > 0, claim, 1.0), 0.0))
+    return scores
+
+
 def _refine_labels(stk: StackedPairs, labels, d: int, max_sweeps: int, dobs=None):
     """Projected power method on the discrete objective (Chen & Candes 2016, block form).
 
@@ -164,24 +192,39 @@ def _spectral_embedding(stk, d, solver, tol, rng, info):
         k_vals = d
     k_vec = min(d if d is not None else n_max, M)
     k_vals = min(k_vals, M)
-    if use == "dense":
-        Ad = A.toarray()
-        w, U = sla.eigh(Ad, subset_by_index=[M - max(k_vals, k_vec), M - 1])
-        vals, U = w[::-1], U[:, ::-1]
-        n_prod = 1
-    else:
+    Ad = A.toarray() if use == "dense" else None
+
+    def _eigs(k_vals, k_vec, V0):
+        if use == "dense":
+            w, U = sla.eigh(Ad, subset_by_index=[M - max(k_vals, k_vec), M - 1])
+            return w[::-1], U[:, ::-1], 1, True
         b = min(M, max(max(k_vals, k_vec) + 6, int(1.15 * max(k_vals, k_vec))))
-        V0 = spec.reference_start(stk, b, dobs, rng)
-        vals, U, n_prod, _, converged = spec.block_krylov_eigs(
+        vals, U, n_p, _, ok = spec.block_krylov_eigs(
             matmat, M, k_vec, k_values=k_vals, block=b, tol=tol, V0=V0, rng=rng)
+        return vals, U, n_p, ok
+
+    V0 = None if use == "dense" else spec.reference_start(
+        stk, min(M, max(max(k_vals, k_vec) + 6, int(1.15 * max(k_vals, k_vec)))), dobs, rng)
+    vals, U, n_prod, converged = _eigs(k_vals, k_vec, V0)
     if d is None:
-        d, rule = spec.estimate_universe(vals, n_max)
+        # Eigengap rule on the leading k_vals eigenvalues (k_vals = 2 n_max + 10 at first). If
+        # the largest gap is the last one computed, the true gap may lie further down: double
+        # k_vals (up to M) and look again.
+        while True:
+            d, rule = spec.estimate_universe(vals, n_max)
+            if d < vals.size - 1 or k_vals >= M:
+                break
+            k_vals = min(M, 2 * k_vals)
+            vals, U2, n2, converged = _eigs(k_vals, k_vec, U)
+            U = U2
+            n_prod += n2
         info["n_universe_rule"] = rule
         info["n_universe_estimate"] = d
-        if d >= k_vals and k_vals < M:
+        info["n_universe_candidates"] = (n_max, int(vals.size - 1))
+        if d == vals.size - 1 and vals.size < M:
             info["n_universe_warning"] = "estimate at the end of the computed spectrum"
         if d > U.shape[1] and use != "dense":
-            vals2, U, n2, _, converged = spec.block_krylov_eigs(
+            _, U, n2, _, converged = spec.block_krylov_eigs(
                 matmat, M, min(d, M), tol=tol, V0=U, rng=rng)
             n_prod += n2
         elif d > U.shape[1]:
@@ -467,15 +510,18 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
         n_iter += it
         converged &= bool(ok)
     d_total = offset
+    if min_score is not None:
+        scores = _node_scores(stk, labels, d_total)
+        labels = [np.where(sc >= min_score, lab, -1) for lab, sc in zip(labels, scores)]
+        info["node_scores"] = tuple(scores)
+        info["n_unplaced"] = int(sum(int((lab < 0).sum()) for lab in labels))
     labels_t = tuple(labels)  # type: ignore[arg-type]
 
     # summaries
     if n_comp == 1:
-        for key in ("solver", "n_universe_estimate", "n_universe_rule", "eigenvalues",
-                    "relaxed_objective_history", "polar_sweeps", "seconds_build",
-                    "seconds_eigen", "seconds_round"):
-            if key in comp_info[0]:
-                info[key] = comp_info[0][key]
+        for key, value in comp_info[0].items():
+            if key not in ("objects", "offset"):
+                info.setdefault(key, value)
     info["component_info"] = comp_info
     agree, n_obs, n_ok = _agreement(stk, labels_t, d_total)
     info["input_disagreement"] = float(1 - n_ok / n_obs) if n_obs else 0.0

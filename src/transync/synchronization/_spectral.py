@@ -222,8 +222,9 @@ def estimate_universe(vals: np.ndarray, n_max: int) -> tuple[int, str]:
     gaps = vals[:-1] - vals[1:]           # gaps[k-1] = l_k - l_{k+1}
     cand = gaps[n_max - 1:]
     d = int(n_max + np.argmax(cand))
-    return d, ("largest gap l_d - l_{d+1} of the degree-normalized block matrix among "
-               "d >= max object size")
+    return d, (f"eigengap: largest gap l_d - l_(d+1) of the degree-normalized block matrix "
+               f"over {n_max} <= d <= {vals.size - 1} (max object size .. number of leading "
+               f"eigenvalues computed - 1)")
 
 
 def _polar(M: np.ndarray) -> np.ndarray:

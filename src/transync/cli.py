@@ -85,6 +85,17 @@ def _headline(summary: list[dict]) -> str:
     return "\n".join(out)
 
 
+def _emit(payload: dict, out: str | None) -> int:
+    """Write ``payload`` as JSON to ``out``, or print it."""
+    text = json.dumps(payload, indent=2)
+    if out:
+        Path(out).write_text(text + "\n")
+        print(f"wrote {out}")
+    else:
+        print(text)
+    return 0
+
+
 def _load_points(path: str):
     import numpy as np
 
@@ -111,13 +122,7 @@ def _cmd_match(args) -> int:
     payload = {"method": args.method, "assignment": res.assignment.tolist(),
                "objective": res.objective, "n_iter": res.n_iter, "converged": res.converged,
                "edges": args.edges, "sigma2": args.sigma2, "coordinate_scale": scale}
-    text = json.dumps(payload, indent=2)
-    if args.out:
-        Path(args.out).write_text(text + "\n")
-        print(f"wrote {args.out}")
-    else:
-        print(text)
-    return 0
+    return _emit(payload, args.out)
 
 
 def _cmd_sync(args) -> int:
@@ -133,13 +138,7 @@ def _cmd_sync(args) -> int:
                "n_iter": int(res.n_iter)}
     info = {k: v for k, v in res.info.items() if isinstance(v, (int, float, str, bool))}
     payload["info"] = info
-    text = json.dumps(payload, indent=2)
-    if args.out:
-        Path(args.out).write_text(text + "\n")
-        print(f"wrote {args.out}")
-    else:
-        print(text)
-    return 0
+    return _emit(payload, args.out)
 
 
 def _cmd_datasets(args) -> int:

@@ -7,7 +7,8 @@ Accepted forms of ``pairwise``:
   soft for the doubly-stochastic function);
 * an iterable of ``(i, j, value)`` triples;
 * a dense array of shape ``(N, N, n, n)`` (blocks) or ``(N, N, n)`` (assignments); which pairs are
-  used is given by ``mask`` (default: every ``i != j``).
+  used is given by ``mask`` (default: every ``i != j``). Each unordered pair is read once:
+  ``[i, j]`` (``i < j``) when ``mask[i, j]``, otherwise ``[j, i]``; every object has ``n`` nodes.
 
 Both ``(i, j)`` and ``(j, i)`` may be given: they are two observations of the same pair, both are
 kept (each with its weight) and the block matrix averages them.
@@ -60,7 +61,7 @@ def _items(pairwise, mask):
             if not (isinstance(key, tuple) and len(key) == 2):
                 raise ValueError(f"`pairwise` keys must be pairs (i, j), got {key!r}")
             i, j = key
-            if mask is not None and not (mask[int(i), int(j)] or mask[int(j), int(i)]):
+            if mask is not None and not _in_mask(mask, i, j):
                 continue
             yield i, j, value
         return
@@ -69,10 +70,17 @@ def _items(pairwise, mask):
         if pairwise.shape[1] != n:
             raise ValueError(f"`pairwise` as an array must have shape (N, N, n[, n]), got "
                              f"{pairwise.shape}")
-        m = ~np.eye(n, dtype=bool) if mask is None else (np.asarray(mask, bool) & ~np.eye(n, dtype=bool))
+        if mask is not None and mask.shape != (n, n):
+            raise ValueError(f"`mask` must have shape ({n}, {n}) to match `pairwise`, got "
+                             f"{mask.shape}")
+        m = ~np.eye(n, dtype=bool) if mask is None else (mask & ~np.eye(n, dtype=bool))
+        # one read per unordered pair: [i, j] (i < j) where mask[i, j], else [j, i]
         iu, ju = np.nonzero(np.triu(m | m.T, 1))
         for i, j in zip(iu.tolist(), ju.tolist()):
-            yield i, j, pairwise[i, j]
+            if m[i, j]:
+                yield i, j, pairwise[i, j]
+            else:
+                yield j, i, pairwise[j, i]
         return
     try:
         it = iter(pairwise)
@@ -83,9 +91,17 @@ def _items(pairwise, mask):
         if not (isinstance(item, tuple) and len(item) == 3):
             raise ValueError(f"`pairwise` as an iterable must hold (i, j, map) triples, got {item!r}")
         i, j, value = item
-        if mask is not None and not (mask[int(i), int(j)] or mask[int(j), int(i)]):
+        if mask is not None and not _in_mask(mask, i, j):
             continue
         yield i, j, value
+
+
+def _in_mask(mask, i, j) -> bool:
+    i, j = int(i), int(j)
+    n = mask.shape[0]
+    if not (0 <= i < n and 0 <= j < n):
+        raise ValueError(f"`mask` has shape {mask.shape} but `pairwise` holds pair {(i, j)}")
+    return bool(mask[i, j] or mask[j, i])
 
 
 def _weight_of(weights, i, j):
@@ -113,6 +129,8 @@ def parse_pairwise(pairwise, *, mask=None, weights=None, sizes=None, soft: bool 
             raise ValueError(f"`weights` must be a square (N, N) array or a dict, got shape "
                              f"{weights.shape}")
     fixed = None
+    if sizes is None and isinstance(pairwise, np.ndarray) and pairwise.ndim in (3, 4):
+        sizes = np.full(pairwise.shape[0], pairwise.shape[2], dtype=np.int64)
     if sizes is not None:
         fixed = np.asarray(sizes)
         if fixed.ndim != 1 or fixed.dtype.kind not in "iu" or (fixed.size and fixed.min() < 1):

@@ -208,11 +208,15 @@ def _spectral_embedding(stk, d, solver, tol, rng, info):
     vals, U, n_prod, converged = _eigs(k_vals, k_vec, V0)
     if d is None:
         # Eigengap rule on the leading k_vals eigenvalues (k_vals = 2 n_max + 10 at first). If
-        # the largest gap is the last one computed, the true gap may lie further down: double
-        # k_vals (up to M) and look again.
+        # the largest gap is the last one computed, or the smallest computed eigenvalue is still
+        # above half the largest (we have not left the cluster of the d leading eigenvalues,
+        # which are all 1 for consistent input), the gap may lie further down: double k_vals (up
+        # to M) and look again.
         while True:
             d, rule = spec.estimate_universe(vals, n_max)
-            if d < vals.size - 1 or k_vals >= M:
+            at_end = d >= vals.size - 1
+            still_high = vals[-1] > 0.5 * vals[0]
+            if not (at_end or still_high) or k_vals >= M:
                 break
             k_vals = min(M, 2 * k_vals)
             vals, U2, n2, converged = _eigs(k_vals, k_vec, U)

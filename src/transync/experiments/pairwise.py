@@ -7,7 +7,7 @@ Metrics: accuracy over inliers, objective relative to the ground truth's, run ti
 
 The graphs carry no node attributes, so the linear baselines (``hungarian``, ``sinkhorn``) are
 given the first-order linearization of the QAP as their unary term: the total affinity
-``(K 1)[i, a]`` of each candidate pair, i.e. how well the edge attributes around ``i`` and ``a``
+``(K 1)[i, a]`` of each candidate pair (scaled to a maximum of 1), i.e. how well the edge attributes around ``i`` and ``a``
 agree, without any pairwise consistency.
 """
 
@@ -37,6 +37,7 @@ def trial(config: dict, rng: np.random.Generator) -> dict:
     unary = None
     if config["method"] in LINEAR:
         unary = aff.matvec(np.ones((aff.n1, aff.n2)))
+        unary /= max(float(unary.max()), 1e-300)      # scores in [0, 1], as Sinkhorn's tau expects
     res = match_graphs(p.g1, p.g2, method=config["method"], affinity=aff, node_affinity=unary)
     seconds = time.perf_counter() - t0
     return {

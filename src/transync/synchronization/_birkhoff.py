@@ -24,7 +24,7 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.optimize import linear_sum_assignment
 
-from .._validation import as_generator, check_array, check_int, check_positive
+from .._validation import as_generator, check_array, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning
 from . import _spectral as spec
 from ._pairwise_input import parse_pairwise
@@ -99,12 +99,15 @@ class BirkhoffSyncResult:
 
     Attributes
     ----------
-    blocks : dict {(i, j): (n, n) ndarray}
-        Consistent soft blocks ``Y_ij = sum_k weights[k] P_i^k P_j^kT`` for the observed pairs
-        (``i < j``); every block is doubly stochastic. ``block(i, j)`` gives any pair.
-    atoms : (K, N, n) int ndarray
+    blocks : dict {(i, j): (n_i, n_j) ndarray}
+        Consistent soft blocks ``Y_ij = sum_k weights[k] X_i^k X_j^kT`` for the observed pairs
+        (``i < j``). With equal sizes and ``n_universe = n`` every block is doubly stochastic;
+        in the partial (multi-simplex) model rows and columns sum to at most 1.
+        ``block(i, j)`` gives any pair.
+    atoms : (K, N, n_max) int ndarray
         Consistent configurations as universe labels: ``atoms[k, g, u]`` is the slot of node ``u``
-        of object ``g`` (canonical gauge: ``atoms[k, 0] = arange(n)``).
+        of object ``g`` (``-1`` = padding beyond ``n_g``); canonical gauge: slots numbered in
+        order of first appearance, so ``atoms[k, 0, :n_0] = arange(n_0)``.
     weights : (K,) ndarray
         Convex weights of the atoms (sum 1).
     labels : tuple of ndarray
@@ -117,7 +120,8 @@ class BirkhoffSyncResult:
     converged : bool
         The Frank-Wolfe gap fell below ``tol * sum w_ij ||X_ij||^2``.
     info : dict
-        ``"gap_history"``, ``"n_atoms"``, ``"fully_corrective"``...
+        ``"gap_history"``, ``"n_atoms"``, ``"fully_corrective"``, ``"solver"`` (eigensolver of
+        the k-hat step), ``"n_universe"``, ``"n_universe_rule"``...
     """
 
     blocks: Mapping[tuple[int, int], np.ndarray]
@@ -132,89 +136,146 @@ class BirkhoffSyncResult:
 
     @property
     def n_universe(self) -> int:
-        return int(self.atoms.shape[2])
+        return int(self.info.get("n_universe", self.atoms.shape[2]))
+
+    @property
+    def sizes(self) -> np.ndarray:
+        return (self.atoms[0] >= 0).sum(1)
+
+    def _check(self, g, name):
+        N = self.atoms.shape[1]
+        if not 0 <= int(g) < N:
+            raise ValueError(f"`{name}` must be an object index in [0, {N}), got {g}")
+        return int(g)
 
     def block(self, i: int, j: int) -> np.ndarray:
-        """Soft consistent block ``Y_ij`` for any pair of objects (identity when ``i == j``)."""
-        N, n = self.atoms.shape[1], self.atoms.shape[2]
-        for name, g in (("i", i), ("j", j)):
-            if not 0 <= int(g) < N:
-                raise ValueError(f"`{name}` must be an object index in [0, {N}), got {g}")
-        Y = np.zeros((n, n))
-        u = np.arange(n)
+        """Soft consistent block ``Y_ij`` (``n_i x n_j``) for any pair (identity if ``i == j``)."""
+        i, j = self._check(i, "i"), self._check(j, "j")
+        sizes = self.sizes
+        Y = np.zeros((sizes[i], sizes[j]))
         for w, lab in zip(self.weights, self.atoms):
-            Y[u, np.argsort(lab[j])[lab[i]]] += w
+            a = _map_from_labels(lab[i, : sizes[i]], lab[j, : sizes[j]], self.n_universe)
+            r = np.flatnonzero(a >= 0)
+            Y[r, a[r]] += w
         return Y
 
     def pairwise(self, i: int, j: int) -> np.ndarray:
-        """The MAP consistent assignment from object ``i`` to object ``j``."""
-        return np.argsort(self.labels[j])[self.labels[i]]
+        """The MAP consistent assignment from object ``i`` to object ``j`` (``-1`` unmatched)."""
+        i, j = self._check(i, "i"), self._check(j, "j")
+        return _map_from_labels(self.labels[i], self.labels[j], self.n_universe)
 
 
-def _pair_maps(labels: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """(Q, n) assignments i -> j of the configuration ``labels`` (N, n)."""
-    inv = np.argsort(labels, axis=1)
-    return np.take_along_axis(inv[pairs[:, 1]], labels[pairs[:, 0]], axis=1)
+def _map_from_labels(lab_i, lab_j, d):
+    inv = np.full(d + 1, -1, dtype=np.int64)
+    ok = lab_j >= 0
+    inv[lab_j[ok]] = np.flatnonzero(ok)
+    return inv[lab_i]
 
 
-def _canonical(labels: np.ndarray) -> np.ndarray:
-    return np.argsort(labels[0])[labels]
+def _pair_maps(labels: np.ndarray, pairs: np.ndarray, d: int) -> np.ndarray:
+    """(Q, n_max) assignments i -> j (``-1`` unmatched / padding) of padded ``labels`` (N, n_max)."""
+    N, n_max = labels.shape
+    inv = np.full((N, d + 1), -1, dtype=np.int64)
+    g, u = np.nonzero(labels >= 0)
+    inv[g, labels[g, u]] = u
+    return inv[pairs[:, 1][:, None], labels[pairs[:, 0]]]        # label -1 -> column d -> -1
 
 
-def _vertex_score(G: np.ndarray, w: np.ndarray, pairs: np.ndarray, labels: np.ndarray) -> float:
-    maps = _pair_maps(labels, pairs)
-    vals = np.take_along_axis(G, maps[:, :, None], axis=2)[:, :, 0]
-    return float((vals.sum(1) * w).sum())
+def _canonical(labels: np.ndarray, d: int) -> np.ndarray:
+    """Relabel slots in order of first appearance (object 0's nodes first)."""
+    flat = labels.ravel()
+    seen = flat[flat >= 0]
+    _, first = np.unique(seen, return_index=True)
+    used = seen[np.sort(first)]
+    new = np.full(d + 1, -1, dtype=np.int64)
+    new[used] = np.arange(used.size)
+    rest = np.setdiff1d(np.arange(d), used)
+    new[rest] = np.arange(used.size, d)
+    return new[labels]
 
 
-def _lmo(G, w, pairs, N, n, sweeps, rng):
-    """argmax_U <G, U U^T>: spectral start + Gauss-Seidel Hungarian sweeps (solving for k-hat)."""
-    M = N * n
+def _masked_take(B: np.ndarray, maps: np.ndarray) -> np.ndarray:
+    """``B[q, u, maps[q, u]]`` where ``maps >= 0``, else 0."""
+    vals = np.take_along_axis(B, np.maximum(maps, 0)[:, :, None], axis=2)[:, :, 0]
+    return np.where(maps >= 0, vals, 0.0)
+
+
+def _vertex_score(G, w, pairs, labels, d) -> float:
+    return float((_masked_take(G, _pair_maps(labels, pairs, d)).sum(1) * w).sum())
+
+
+def _lmo(G, w, pairs, sizes, d, sweeps, rng, solver):
+    """argmax over consistent (partial) configurations of <G, X X^T> (solving for k-hat).
+
+    Spectral start (top-``d`` eigenvectors of the weighted block matrix of ``G``; dense ``eigh``
+    or matrix-free block Krylov), rounding into ``d`` slots, then at most ``sweeps``
+    Gauss-Seidel sweeps ``X_g <- Hungarian(sum_j w_gj G_gj X_j)`` (rectangular ``n_g x d``: the
+    exact block maximizer, so the score never decreases).
+    """
+    N = sizes.size
+    n_max = int(sizes.max())
+    off = np.concatenate([[0], np.cumsum(sizes)])
+    M = int(off[-1])
     wG = G * w[:, None, None]
+    # row index of (g, u) in the stacked order, M (a zero row) for padding
+    pad_index = np.full((N, n_max), M, dtype=np.int64)
+    for g in range(N):
+        pad_index[g, : sizes[g]] = off[g] + np.arange(sizes[g])
+    valid = pad_index < M
 
     def matmat(V):
-        Vb = V.reshape(N, n, -1)
-        out = np.zeros_like(Vb)
-        np.add.at(out, pairs[:, 0], np.einsum("quv,qvk->quk", wG, Vb[pairs[:, 1]]))
-        np.add.at(out, pairs[:, 1], np.einsum("quv,quk->qvk", wG, Vb[pairs[:, 0]]))
-        return out.reshape(M, -1)
+        Vp = np.vstack([V, np.zeros((1, V.shape[1]))])[pad_index]       # (N, n_max, k)
+        out = np.zeros_like(Vp)
+        np.add.at(out, pairs[:, 0], np.einsum("quv,qvk->quk", wG, Vp[pairs[:, 1]]))
+        np.add.at(out, pairs[:, 1], np.einsum("quv,quk->qvk", wG, Vp[pairs[:, 0]]))
+        return out[valid]
 
-    if M <= spec.DENSE_MAX:
+    k = min(d, M)
+    use = solver if solver != "auto" else ("dense" if M <= spec.DENSE_MAX else "matrix_free")
+    if use == "dense":
         B = np.zeros((M, M))
         for q, (i, j) in enumerate(pairs):
-            B[i * n:(i + 1) * n, j * n:(j + 1) * n] += wG[q]
-            B[j * n:(j + 1) * n, i * n:(i + 1) * n] += wG[q].T
-        _, U = sla.eigh(B, subset_by_index=[M - n, M - 1])
+            B[off[i]:off[i + 1], off[j]:off[j + 1]] += wG[q][: sizes[i], : sizes[j]]
+            B[off[j]:off[j + 1], off[i]:off[i + 1]] += wG[q][: sizes[i], : sizes[j]].T
+        _, U = sla.eigh(B, subset_by_index=[M - k, M - 1])
         U = U[:, ::-1]
     else:
-        _, U, _, _, _ = spec.block_krylov_eigs(matmat, M, n, rng=rng)
-    labels = np.asarray(spec.round_to_universe(U, np.full(N, n), n, refine=1))
-    best = _vertex_score(G, w, pairs, labels)
-    # neighbour lists for sweeps
+        _, U, _, _, _ = spec.block_krylov_eigs(matmat, M, k, rng=rng)
+    lab_list = spec.round_to_universe(U, sizes, d, refine=1)
+    labels = np.full((N, n_max), -1, dtype=np.int64)
+    for g, lab in enumerate(lab_list):
+        labels[g, : sizes[g]] = lab
+    best = _vertex_score(G, w, pairs, labels, d)
     for _ in range(sweeps):
         changed = False
         for g in range(N):
-            S = np.zeros((n, n))
-            inv = np.argsort(labels, axis=1)
+            n_g = int(sizes[g])
+            S = np.zeros((n_g, d + 1))                    # column d collects padding (-1)
             for q in np.flatnonzero(pairs[:, 0] == g):
                 j = pairs[q, 1]
-                S += wG[q][:, inv[j]]              # (G_gj P_j)[u, a] = G_gj[u, inv_j[a]]
+                # (G_gj X_j)[u, a] = G_gj[u, v] for the node v of j in slot a
+                np.add.at(S.T, labels[j], wG[q][:n_g].T)
             for q in np.flatnonzero(pairs[:, 1] == g):
                 i = pairs[q, 0]
-                S += wG[q].T[:, inv[i]]
-            _, c = linear_sum_assignment(S, maximize=True)
-            if not np.array_equal(c, labels[g]):
-                old = labels[g].copy()
-                labels[g] = c
-                new = _vertex_score(G, w, pairs, labels)
-                if new > best + 1e-12:
-                    best = new
+                np.add.at(S.T, labels[i], wG[q][:, :n_g])
+            S = S[:, :d]
+            cur = labels[g, :n_g]
+            S[np.arange(n_g), cur] += 1e-12 * (np.abs(S).max() + 1.0)   # keep current on ties
+            r, c = linear_sum_assignment(S, maximize=True)
+            new = np.full(n_g, -1, dtype=np.int64)
+            new[r] = c
+            if not np.array_equal(new, cur):
+                old = cur.copy()
+                labels[g, :n_g] = new
+                score = _vertex_score(G, w, pairs, labels, d)
+                if score > best + 1e-12 * max(abs(best), 1.0):
+                    best = score
                     changed = True
                 else:
-                    labels[g] = old
+                    labels[g, :n_g] = old
         if not changed:
             break
-    return _canonical(labels), best
+    return _canonical(labels, d), best
 
 
 def _project_simplex(v: np.ndarray) -> np.ndarray:
@@ -225,9 +286,33 @@ def _project_simplex(v: np.ndarray) -> np.ndarray:
     return np.maximum(v - css[rho] / (rho + 1), 0)
 
 
+def _estimate_universe_soft(X, w, pairs, sizes, solver, rng):
+    """Eigengap of the degree-normalized soft block matrix (identity diagonal blocks)."""
+    N = sizes.size
+    n_max = int(sizes.max())
+    off = np.concatenate([[0], np.cumsum(sizes)])
+    M = int(off[-1])
+    B = np.eye(M)
+    for q, (i, j) in enumerate(pairs):
+        blk = w[q] * X[q][: sizes[i], : sizes[j]]
+        B[off[i]:off[i + 1], off[j]:off[j + 1]] += blk
+        B[off[j]:off[j + 1], off[i]:off[i + 1]] += blk.T
+    deg = B.sum(1)
+    dinv = 1.0 / np.sqrt(np.maximum(deg, 1e-300))
+    B = dinv[:, None] * B * dinv[None, :]
+    k = min(M, 2 * n_max + 10)
+    while True:
+        vals = sla.eigh(B, eigvals_only=True, subset_by_index=[M - k, M - 1])[::-1]
+        d, rule = spec.estimate_universe(vals, n_max)
+        if not (d >= vals.size - 1 or vals[-1] > 0.5 * vals[0]) or k >= M:
+            return d, rule, vals
+        k = min(M, 2 * k)
+
+
 def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter: int = 20,
-                                  inner_sweeps: int = 10, tol: float = 1e-6,
-                                  fully_corrective: bool = False, rng=None) -> BirkhoffSyncResult:
+                                  n_universe: int | None = None, inner_sweeps: int = 10,
+                                  tol: float = 1e-6, fully_corrective: bool = False,
+                                  solver: str = "auto", rng=None) -> BirkhoffSyncResult:
     """Project soft pairwise matches onto the hull of consistent permutation configurations.
 
     Conditional gradient of ALGORITHMS.md §4.2: start from the permutation synchronization of
@@ -238,18 +323,31 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
     quadratic on the segment ("solving for alpha"); with ``fully_corrective`` all atom weights are
     then re-optimized on the simplex by projected gradient. Stops when the Frank-Wolfe gap
     ``<G, U U^T - Y>`` is below ``tol * sum w_ij ||X_ij||^2``, or after ``max_iter`` iterations
-    (``ConvergenceWarning``). Objects must all have ``n`` nodes (pad with dummy nodes otherwise).
+    (``ConvergenceWarning``).
+
+    Objects of different sizes (or ``n_universe`` larger than the objects) use the multi-simplex
+    model of ALGORITHMS.md §5: every node goes to exactly one of ``d`` universe slots, every slot
+    takes at most one node per object; the vertices are partial permutations
+    ``X_ij = X_i X_j^T`` and the input blocks must be sub-doubly-stochastic (non-negative, rows
+    and columns summing to at most 1). With equal sizes ``n`` and ``d = n`` the blocks must be
+    doubly stochastic and so is every output block.
 
     Parameters
     ----------
-    pairwise : dict {(i, j): (n, n) doubly-stochastic matrix or assignment}
+    pairwise : dict {(i, j): (n_i, n_j) soft matrix or assignment}
         Soft matches ``X_ij`` of node ``u`` of ``i`` with node ``v`` of ``j``; ``(j, i)`` is the
         transpose. Both given: their weighted average is used.
     mask, weights : see :func:`synchronize_permutations`.
     max_iter : int, default=20
+    n_universe : int, optional
+        Universe size ``d >= max n_i``. Default: ``n`` for equal sizes, otherwise the eigengap of
+        the degree-normalized soft block matrix (``info["n_universe_rule"]``).
     inner_sweeps : int, default=10
     tol : float, default=1e-6
     fully_corrective : bool, default=False
+    solver : {"auto", "dense", "matrix_free"}, default="auto"
+        Eigensolver of the k-hat step: dense ``eigh`` when ``sum n_i <= 2000`` under ``"auto"``,
+        else matrix-free block Krylov on the residual block operator.
     rng : None, int or numpy.random.Generator
 
     Returns
@@ -271,52 +369,83 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
     max_iter = check_int(max_iter, "max_iter", minimum=0)
     inner_sweeps = check_int(inner_sweeps, "inner_sweeps", minimum=0)
     tol = check_positive(tol, "tol")
+    check_choice(solver, "solver", ("auto", "dense", "matrix_free"))
     gen = as_generator(rng)
     stk = parse_pairwise(pairwise, mask=mask, weights=weights, soft=True)
     sizes = stk.sizes
-    if not np.all(sizes == sizes[0]):
-        raise ValueError("`pairwise`: synchronize_doubly_stochastic needs objects of equal size "
-                         f"(pad with dummy nodes), got sizes {sorted(set(sizes.tolist()))}")
-    N, n = stk.n_objects, int(sizes[0])
+    N, n_max = stk.n_objects, int(sizes.max())
+    equal = bool(np.all(sizes == sizes[0]))
+    if n_universe is not None:
+        n_universe = check_int(n_universe, "n_universe", minimum=1)
+        if n_universe < n_max:
+            raise ValueError(f"`n_universe` must be >= the largest object size {n_max}, got "
+                             f"{n_universe}")
     Xq = stk.soft
     if Xq.min() < -1e-12:
         raise ValueError("`pairwise` blocks must be non-negative (doubly stochastic)")
-    dev = max(np.abs(Xq.sum(1) - 1).max(), np.abs(Xq.sum(2) - 1).max())
-    if dev > 1e-6:
-        raise ValueError("`pairwise` blocks must be doubly stochastic (rows and columns summing "
-                         f"to 1; use Sinkhorn first), got a deviation of {dev:.3g}")
+    full = equal and n_universe in (None, n_max)
+    if full:
+        dev = max(np.abs(Xq.sum(1) - 1).max(), np.abs(Xq.sum(2) - 1).max())
+        if dev > 1e-6:
+            raise ValueError("`pairwise` blocks must be doubly stochastic (rows and columns "
+                             f"summing to 1; use Sinkhorn first), got a deviation of {dev:.3g}")
+    else:
+        over = max(Xq.sum(1).max() - 1, Xq.sum(2).max() - 1)
+        if over > 1e-6:
+            raise ValueError("`pairwise` blocks must be sub-doubly stochastic for objects of "
+                             "different sizes (rows and columns summing to at most 1), got a "
+                             f"sum of {1 + over:.6g}")
     # merge duplicate observations of a pair (weights were split by parse_pairwise)
     key = stk.pairs[:, 0] * N + stk.pairs[:, 1]
     uniq, inverse = np.unique(key, return_inverse=True)
     pairs = np.column_stack([uniq // N, uniq % N])
     w = np.bincount(inverse, weights=stk.weights, minlength=uniq.size)
-    X = np.zeros((uniq.size, n, n))
+    X = np.zeros((uniq.size, n_max, n_max))
     np.add.at(X, inverse, Xq * stk.weights[:, None, None])
     X /= np.maximum(w, 1e-300)[:, None, None]
     norm_x = float((w * (X ** 2).sum((1, 2))).sum())
+    info: dict = {"fully_corrective": fully_corrective, "pairs": pairs}
+    if n_universe is not None:
+        d = n_universe
+        info["n_universe_rule"] = "given"
+    elif full:
+        d = n_max
+        info["n_universe_rule"] = "equal sizes: d = number of nodes"
+    else:
+        d, rule, vals = _estimate_universe_soft(X, w, pairs, sizes, solver, gen)
+        info["n_universe_rule"] = rule
+        info["eigenvalues"] = vals
+    info["n_universe"] = d
+    M = int(sizes.sum())
+    info["solver"] = solver if solver != "auto" else (
+        "dense" if M <= spec.DENSE_MAX else "matrix_free")
 
     def objective(Y):
         return 0.5 * float((w * ((X - Y) ** 2).sum((1, 2))).sum())
 
+    qi = np.arange(pairs.shape[0])[:, None]
+    ui = np.arange(n_max)[None, :]
+
     def S_of(labels):
-        maps = _pair_maps(labels, pairs)
+        maps = _pair_maps(labels, pairs, d)
         S = np.zeros_like(X)
-        q, u = np.indices(maps.shape)
-        S[q, u, maps] = 1.0
+        ok = maps >= 0
+        S[np.broadcast_to(qi, maps.shape)[ok], np.broadcast_to(ui, maps.shape)[ok], maps[ok]] = 1.0
         return S, maps
 
-    lab0, _ = _lmo(X, w, pairs, N, n, inner_sweeps, gen)
+    lab0, _ = _lmo(X, w, pairs, sizes, d, inner_sweeps, gen, solver)
     atoms = [lab0]
-    maps_list = [S_of(lab0)[1]]
+    S0, m0 = S_of(lab0)
+    maps_list = [m0]
     alpha = np.array([1.0])
-    Y = S_of(lab0)[0]
+    Y = S0
     history = [objective(Y)]
     gaps: list[float] = []
     converged = False
     it = 0
     for it in range(1, max_iter + 1):
         G = X - Y
-        lab, _ = _lmo(G, w, pairs, N, n, inner_sweeps, gen)
+        lab, _ = _lmo(G, w, pairs, sizes, d, inner_sweeps, gen, solver)
         S_hat, maps_hat = S_of(lab)
         D = S_hat - Y
         gap = float((w * (G * D).sum((1, 2))).sum())
@@ -339,12 +468,11 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
             K = len(atoms)
             A = np.empty((K, K))
             b = np.empty(K)
-            qi = np.arange(pairs.shape[0])[:, None]
-            ui = np.arange(n)[None, :]
             for k in range(K):
-                b[k] = float((w * X[qi, ui, maps_list[k]].sum(1)).sum())
+                b[k] = float((w * _masked_take(X, maps_list[k]).sum(1)).sum())
                 for m in range(k, K):
-                    A[k, m] = A[m, k] = float((w * (maps_list[k] == maps_list[m]).sum(1)).sum())
+                    same = (maps_list[k] == maps_list[m]) & (maps_list[k] >= 0)
+                    A[k, m] = A[m, k] = float((w * same.sum(1)).sum())
             L = max(np.linalg.eigvalsh(A)[-1], 1e-12)
             f_old = 0.5 * alpha @ A @ alpha - b @ alpha
             a_new = alpha.copy()
@@ -362,8 +490,8 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
         alpha = alpha[keep] / alpha[keep].sum()
         Y = np.zeros_like(X)
         for a, m in zip(alpha, maps_list):
-            q, u = np.indices(m.shape)
-            Y[q, u, m] += a
+            ok = m >= 0
+            Y[np.broadcast_to(qi, m.shape)[ok], np.broadcast_to(ui, m.shape)[ok], m[ok]] += a
         history.append(objective(Y))
     if not converged and max_iter > 0:
         warnings.warn(f"synchronize_doubly_stochastic stopped after max_iter={max_iter} "
@@ -371,10 +499,10 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
                       ConvergenceWarning, stacklevel=2)
     atoms_arr = np.asarray(atoms, dtype=np.int64)
     best = int(np.argmax(alpha))
-    blocks = {(int(i), int(j)): Y[q] for q, (i, j) in enumerate(pairs.tolist())}
-    info = {"gap_history": np.asarray(gaps), "n_atoms": len(atoms),
-            "fully_corrective": fully_corrective, "pairs": pairs}
-    return BirkhoffSyncResult(blocks=blocks, atoms=atoms_arr, weights=alpha,
-                              labels=tuple(atoms_arr[best]), objective=history[-1],
-                              objective_history=np.asarray(history), n_iter=it,
-                              converged=converged, info=info)
+    blocks = {(int(i), int(j)): Y[q][: sizes[i], : sizes[j]].copy()
+              for q, (i, j) in enumerate(pairs.tolist())}
+    info.update({"gap_history": np.asarray(gaps), "n_atoms": len(atoms)})
+    labels = tuple(atoms_arr[best, g, : sizes[g]].copy() for g in range(N))
+    return BirkhoffSyncResult(blocks=blocks, atoms=atoms_arr, weights=alpha, labels=labels,
+                              objective=history[-1], objective_history=np.asarray(history),
+                              n_iter=it, converged=converged, info=info)

@@ -118,7 +118,88 @@ def test_bvn_bad_input(X, match):
 def test_ds_bad_input():
     with pytest.raises(ValueError, match="doubly stochastic"):
         synchronize_doubly_stochastic({(0, 1): np.full((3, 3), 0.5)})
-    with pytest.raises(ValueError, match="equal size"):
-        synchronize_doubly_stochastic({(0, 1): np.eye(3)[:2], (1, 2): np.eye(3)})
+    with pytest.raises(ValueError, match="at most 1"):       # partial model: sub-DS blocks
+        synchronize_doubly_stochastic({(0, 1): np.full((2, 3), 0.6), (1, 2): np.eye(3)})
+    with pytest.raises(ValueError, match="n_universe"):
+        synchronize_doubly_stochastic({(0, 1): np.eye(3)}, n_universe=2)
     with pytest.raises(ValueError, match="i == j"):
         synchronize_doubly_stochastic({(1, 1): np.eye(3)})
+    with pytest.raises(ValueError, match="solver"):
+        synchronize_doubly_stochastic({(0, 1): np.eye(3)}, solver="eigs")
+
+
+def _partial_soft(data, rng, noise):
+    X = {}
+    for (i, j), a in data.pairwise.items():
+        P = assignment_to_matrix(a, int(data.sizes[j]))
+        if noise:
+            # mix with a random partial permutation of the same pair: stays sub-DS
+            b = -np.ones_like(a)
+            k = min(a.size, int(data.sizes[j]))
+            b[rng.permutation(a.size)[:k]] = rng.permutation(int(data.sizes[j]))[:k]
+            P = (1 - noise) * P + noise * assignment_to_matrix(b, int(data.sizes[j]))
+        X[(i, j)] = P
+    return X
+
+
+def test_partial_consistent_gives_one_atom(rng):
+    """Multi-simplex model (§5): objects of different sizes, consistent input -> exact, 1 atom."""
+    data = make_permutation_collection(7, 6, visibility=0.7, n_universe=8, rng=rng)
+    assert len(set(data.sizes.tolist())) > 1
+    X = _partial_soft(data, rng, 0.0)
+    for kw in ({"n_universe": 8}, {}):
+        res = synchronize_doubly_stochastic(X, **kw)
+        assert res.converged and res.weights.tolist() == [1.0]
+        assert res.n_universe == 8
+        assert data.accuracy(res.labels) == 1.0
+        for k, block in res.blocks.items():
+            np.testing.assert_array_equal(block, X[k])
+        assert res.objective == 0.0
+    assert "gap" in res.info["n_universe_rule"]
+
+
+def test_partial_noisy_sub_doubly_stochastic_and_monotone(rng):
+    data = make_permutation_collection(7, 6, visibility=0.7, n_universe=8, rng=rng)
+    X = _partial_soft(data, rng, 0.3)
+    with pytest.warns(ConvergenceWarning):
+        res = synchronize_doubly_stochastic(X, n_universe=8, max_iter=6, tol=1e-12,
+                                            fully_corrective=True)
+    h = res.objective_history
+    assert np.all(np.diff(h) <= 1e-12 * max(h[0], 1)) and h[-1] < h[0]
+    for i in range(7):
+        for j in range(7):
+            B = res.block(i, j)
+            assert B.shape == (data.sizes[i], data.sizes[j]) and B.min() >= 0
+            assert B.sum(0).max() <= 1 + 1e-9 and B.sum(1).max() <= 1 + 1e-9
+    # every atom is a partial configuration: injective labels per object, padding -1
+    for lab in res.atoms:
+        for g in range(7):
+            row = lab[g, : data.sizes[g]]
+            assert row.min() >= 0 and np.unique(row).size == row.size
+            assert np.all(lab[g, data.sizes[g]:] == -1)
+    assert data.accuracy(res.labels) == 1.0
+
+
+def test_matrix_free_branch_matches_dense(rng):
+    """The k-hat step's matrix-free eigensolver (used above 2000 nodes) on a small problem."""
+    data, X = _soft_collection(10, 6, 0.3, rng, corruption=0.1)
+    # the initial vertex (spectral start on X, no sweeps) is the same for both eigensolvers
+    init = {s: synchronize_doubly_stochastic(X, max_iter=0, inner_sweeps=0, solver=s, rng=0)
+            for s in ("dense", "matrix_free")}
+    np.testing.assert_array_equal(init["dense"].atoms, init["matrix_free"].atoms)
+    assert data.accuracy(init["matrix_free"].labels) == 1.0
+    # the full method: later k-hat vertices may differ (the LMO is a heuristic), the guarantees not
+    out = {}
+    for solver in ("dense", "matrix_free"):
+        with pytest.warns(ConvergenceWarning):
+            out[solver] = synchronize_doubly_stochastic(X, max_iter=4, tol=1e-12, solver=solver,
+                                                        fully_corrective=True, rng=0)
+        res = out[solver]
+        assert res.info["solver"] == solver
+        assert np.all(np.diff(res.objective_history) <= 1e-12 * res.objective_history[0])
+        for B in res.blocks.values():
+            np.testing.assert_allclose(B.sum(0), 1.0, atol=1e-9)
+            np.testing.assert_allclose(B.sum(1), 1.0, atol=1e-9)
+    d, m = out["dense"], out["matrix_free"]
+    np.testing.assert_array_equal(np.asarray(d.labels), np.asarray(m.labels))
+    assert m.objective == pytest.approx(d.objective, rel=0.05)

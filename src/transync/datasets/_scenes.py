@@ -116,12 +116,21 @@ class _PatchDealer:
 
     def __init__(self, size, rng):
         self.pool = _patch_pool(size)
+        self.size = size
         self.order = rng.permutation(len(self.pool))
         self.k = 0
         self.rng = rng
 
-    def next(self, out_size):
+    def next(self, out_size, scale=None):
+        """A crop resized to ``out_size``; with ``scale`` (output px per source px), only the
+        central part of the crop that gives that magnification is used."""
         p = self.pool[self.order[self.k % len(self.order)]]
+        if scale is not None:
+            ow, oh = (out_size, out_size) if np.isscalar(out_size) else out_size
+            cw = int(np.clip(round(ow / scale), 8, p.shape[1]))
+            ch = int(np.clip(round(oh / scale), 8, p.shape[0]))
+            y0, x0 = (p.shape[0] - ch) // 2, (p.shape[1] - cw) // 2
+            p = p[y0:y0 + ch, x0:x0 + cw]
         cycle = self.k // len(self.order)
         self.k += 1
         p = np.rot90(p, int(self.rng.integers(4)) + cycle)
@@ -335,7 +344,9 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
         if gain < 0.002 or covered.mean() + gain > preset["clutter"] + 0.02:
             continue
         covered |= cov
-        ptex = np.clip(dealer.next((pw, phh)), 0, 255).astype(np.float32)
+        # same magnification of the source as the plane texture: clutter is not sharper
+        ptex = np.clip(dealer.next((pw, phh), scale=1.5 * cell / dealer.size), 0, 255)
+        ptex = ptex.astype(np.float32)
         patches.append({"height": ph, "S": Sp, "texture": ptex})
     patches.sort(key=lambda p: p["height"])
 

@@ -68,6 +68,46 @@ def _corner_change(A, B, sizes):
     return np.asarray(out)
 
 
+def _resynchronize(H, H_dense, pw, idx, reference, sizes, dense_target, *, robust=True,
+                   dense_weight=100.0):
+    """Robust SL(3) synchronization of dense view-to-template estimates and sparse pairs."""
+    n = len(H)
+    extra = dense_target == "mean"
+    m = n + 1 if extra else n
+    node = n if extra else reference
+    T = np.full((m, m, 3, 3), np.nan)
+    mask = np.zeros((m, m), bool)
+    W = np.zeros((m, m))
+    T[:n, :n] = pw.H
+    mask[:n, :n] = pw.mask
+    keep = np.zeros(n, bool)
+    keep[idx] = True
+    mask[:n, :n] &= keep[:, None] & keep[None, :]
+    W[:n, :n] = np.where(mask[:n, :n], pw.weights, 0.0)
+    wd = dense_weight * max(float(W.max()), 1.0)
+    for i, Hi in H_dense.items():
+        T[node, i] = Hi
+        T[i, node] = np.linalg.inv(Hi)
+        mask[node, i] = mask[i, node] = True
+        W[node, i] = W[i, node] = wd
+    if not H_dense:
+        return H.copy(), None
+    size_list = list(sizes) + ([sizes[reference]] if extra else [])
+    sub = np.concatenate([idx, [n]]) if extra else idx
+    sub_ref = int(np.flatnonzero(sub == reference)[0])
+    res = synchronize_homographies(T[np.ix_(sub, sub)], mask=mask[np.ix_(sub, sub)],
+                                   weights=W[np.ix_(sub, sub)], reference=sub_ref,
+                                   robust=robust, image_size=np.array(
+                                       [size_list[k] for k in sub], float),
+                                   disconnected="component")
+    out = H.copy()
+    good = np.all(np.isfinite(res.maps), axis=(1, 2))
+    for k, i in enumerate(sub):
+        if i < n and good[k]:
+            out[i] = res.maps[k]
+    return out, res
+
+
 def view_graph_pairs(H_to_ref, sizes, *, reference, k=3):
     """Pairs (i, j) linking every view to its ``k`` nearest views (footprint centres in the
     reference frame); views without an estimate are linked to every other view."""
@@ -98,7 +138,7 @@ def view_graph_pairs(H_to_ref, sizes, *, reference, k=3):
 def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True,
                                 pairs="auto", n_neighbors=3, method="ransac", threshold=3.0,
                                 n_features=2000, robust=True, dense_target="mean",
-                                max_iter=3, tol=0.01, levels=3,
+                                max_iter=3, tol=0.02, levels=2, max_step=3.0,
                                 verbose=False) -> PlaneAlignmentResult:
     """Homographies of the dominant plane across views, with plane masks.
 
@@ -106,8 +146,15 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
     ``n_neighbors`` nearest views), robust SL(3) synchronization weighted by inlier counts,
     then alternating (a) plane segmentation from the views warped into the reference and
     (b) masked coarse-to-fine ECC of every view against the mean warped image (or the
-    reference), with the gauge re-fixed on the reference, until the homographies move less
-    than ``tol`` pixels.
+    reference) followed by re-synchronization, until the homographies move less than ``tol``
+    pixels.
+
+    Re-synchronization: the dense estimates are edges between every view and an extra node,
+    the frame of the mean warped image (or the reference view itself); they are synchronized
+    with robust SL(3) synchronization together with the sparse RANSAC pairs (weighted
+    ``dense_weight`` times the largest inlier count), with the gauge fixed on the reference
+    view. Views whose dense update diverged keep their sparse edges only, so they stay
+    consistent with their neighbours instead of being left at their previous estimate.
 
     Parameters
     ----------
@@ -126,10 +173,13 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
     dense_target : {"mean", "reference"}, default="mean"
     max_iter : int, default=3
         Rounds of segmentation + dense refinement.
-    tol : float, default=0.01
+    tol : float, default=0.02
         Stop when the largest mean corner change is below this (pixels).
-    levels : int, default=3
-        ECC pyramid levels.
+    levels : int, default=2
+        ECC pyramid levels of the first dense round (later rounds: full resolution only).
+    max_step : float, default=3.0
+        A dense update that moves a view's corners by more than this (pixels) is treated as a
+        divergence and discarded (the view keeps its synchronized estimate).
 
     Returns
     -------
@@ -187,43 +237,55 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
         warnings.warn(f"views {np.flatnonzero(~ok).tolist()} could not be linked to the reference "
                       "and are left out", ConvergenceWarning, stacklevel=2)
     idx = np.flatnonzero(ok)
+    r_sub = int(np.flatnonzero(idx == reference)[0])
     masks = [np.ones(g.shape, bool) for g in gray]
     history = []
     converged = True
     change = 0.0
     it = 0
+    resyncs = []
     for it in range(1, max_iter + 1 if (dense or segment) else 1):
         t0 = time.perf_counter()
         if segment:
-            sub = segment_plane([gray[i] for i in idx], H[idx],
-                                reference=int(np.flatnonzero(idx == reference)[0]))
+            sub = segment_plane([gray[i] for i in idx], H[idx], reference=r_sub)
             for k, i in enumerate(idx):
                 masks[i] = sub[k]
         t_seg = time.perf_counter() - t0
         t0 = time.perf_counter()
         H_new = H.copy()
+        rejected = []
         if dense:
             if dense_target == "mean":
                 tpl, cnt = mean_warped_image([gray[i] for i in idx], H[idx], size=sizes[reference],
-                                             masks=[masks[i] for i in idx],
-                                             reference=int(np.flatnonzero(idx == reference)[0]))
+                                             masks=[masks[i] for i in idx], reference=r_sub)
                 tmask = cnt > 0
                 tpl = np.nan_to_num(tpl)
             else:
                 tpl = gray[reference].astype(np.float32)
                 tmask = masks[reference]
+            # the first round starts from the sparse estimate (pyramid); later rounds start
+            # within a fraction of a pixel and run at full resolution only
+            lv = levels if it == 1 else 1
+            H_dense = {}
             for i in idx:
                 if dense_target == "reference" and i == reference:
                     continue
-                H_new[i], _ = refine_homography_ecc(tpl, gray[i], H[i], mask=masks[i],
-                                                    template_mask=tmask, levels=levels)
-            # re-synchronize: fix the gauge on the reference view
-            H_new[idx] = np.linalg.inv(H_new[reference]) @ H_new[idx]
-            H_new[idx] /= np.cbrt(np.linalg.det(H_new[idx]))[:, None, None]
+                Hi, ok_i = refine_homography_ecc(tpl, gray[i], H[i], mask=masks[i],
+                                                 template_mask=tmask, levels=lv,
+                                                 max_iter=40 if it == 1 else 15, eps=1e-4)
+                step = float(_corner_change(Hi[None], H[i][None], [sizes[i]])[0])
+                if ok_i and np.all(np.isfinite(Hi)) and step <= max_step:
+                    H_dense[i] = Hi
+                else:
+                    rejected.append(int(i))
+            # re-synchronization of the dense estimates together with the sparse pairs
+            H_new, rs = _resynchronize(H, H_dense, pw, idx, reference, sizes, dense_target,
+                                       robust=robust)
+            resyncs.append(rs)
         t_dense = time.perf_counter() - t0
         change = float(_corner_change(H_new[idx], H[idx], [sizes[i] for i in idx]).max())
         history.append({"iteration": it, "max_corner_change": change, "seconds_segment": t_seg,
-                        "seconds_dense": t_dense,
+                        "seconds_dense": t_dense, "rejected_dense": rejected,
                         "plane_fraction": float(np.mean([m.mean() for m in masks]))})
         if verbose:
             print(f"iteration {it}: max corner change {change:.4f} px")

@@ -85,8 +85,8 @@ def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, sm
     for i in range(n):
         v = valid[i] & (count >= 2)
         if v.sum() > 100:
-            x = warped[i][v].astype(np.float64)
-            y = med[v].astype(np.float64)
+            x = warped[i][v][::7].astype(np.float64)     # a subsample is plenty for 2 numbers
+            y = med[v][::7].astype(np.float64)
             r = np.abs(y - x - np.median(y - x))
             keep = r <= np.percentile(r, 70)
             a, b = np.polyfit(x[keep], y[keep], 1)
@@ -111,7 +111,7 @@ def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, sm
     rs = np.stack(rs)
     sel = valid & (count >= min_views)[None]
     r_scale = float(np.median(rs[sel])) + 1e-3 if sel.any() else 1.0
-    F = np.stack([zs, np.log1p(rs / r_scale), np.broadcast_to(tex, zs.shape)], axis=-1)
+    lr = np.log1p(rs / np.float32(r_scale))
     textured = (tex > np.median(tex[count >= min_views]))[None] if (count >= min_views).any() \
         else np.ones_like(sel)
     pos = sel & (((zs > 0.85) & (rs < 1.5 * r_scale)) | (~textured & (rs < 0.7 * r_scale)))
@@ -123,15 +123,16 @@ def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, sm
         ineg = np.flatnonzero(neg.ravel())
         ip = gen.choice(ip, size=min(20000, ip.size), replace=False)
         ineg = gen.choice(ineg, size=min(20000, ineg.size), replace=False)
-        Ff = F.reshape(-1, 3)
-        X = np.concatenate([Ff[ip], Ff[ineg]])
+        ii = np.concatenate([ip, ineg])
+        X = np.column_stack([zs.ravel()[ii], lr.ravel()[ii],
+                             np.broadcast_to(tex, zs.shape).ravel()[ii]])
         y = np.concatenate([np.ones(ip.size), np.zeros(ineg.size)])
         clf = LogisticRegression(C=1.0, max_iter=200)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             clf.fit(X, y)
         coef, icpt = clf.coef_[0].astype(np.float32), np.float32(clf.intercept_[0])
-        logit = F @ coef + icpt
+        logit = coef[0] * zs + coef[1] * lr + (coef[2] * tex + icpt)[None]
         prob = (1.0 / (1.0 + np.exp(-logit))).astype(np.float32)
     else:
         prob = (zs > 0.6).astype(np.float32)

@@ -173,7 +173,7 @@ def _map_from_labels(lab_i, lab_j, d):
 
 
 def _pair_maps(labels: np.ndarray, pairs: np.ndarray, d: int) -> np.ndarray:
-    """(Q, n_max) assignments i -> j (``-1`` unmatched / padding) of padded ``labels`` (N, n_max)."""
+    """(Q, n_max) maps i -> j (``-1`` unmatched / padding) of padded ``labels`` (N, n_max)."""
     N, n_max = labels.shape
     inv = np.full((N, d + 1), -1, dtype=np.int64)
     g, u = np.nonzero(labels >= 0)

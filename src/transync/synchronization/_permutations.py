@@ -293,7 +293,8 @@ def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, re
             break
     if not converged:
         warnings.warn(f"orthogonal synchronization stopped after max_iter={max_iter} sweeps "
-                      f"(relative change {abs(history[-1] - history[-2]) / max(abs(history[-1]), 1e-12):.2e} > tol)",
+                      f"(relative change "
+                      f"{abs(history[-1] - history[-2]) / max(abs(history[-1]), 1e-12):.2e} > tol)",
                       ConvergenceWarning, stacklevel=4)
     info["relaxed_objective_history"] = np.asarray(history)
     info["polar_sweeps"] = it
@@ -370,8 +371,15 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
       with Rayleigh-Ritz), see ``solver``.
     * ``"orthogonal"`` (ALGORITHMS.md §2.2 step 5): spectral start ``Q_i = polar(U_i)``,
       Gauss-Seidel sweeps ``Q_i <- polar(sum_j w_ij P_ij Q_j)`` (each the exact block maximizer,
-      so the relaxed objective never decreases; its history is ``info["relaxed_objective_history"]``)
-      until the relative change is below ``tol`` or ``max_iter`` sweeps, then the same rounding.
+      so the relaxed objective never decreases; its history is
+      ``info["relaxed_objective_history"]``)
+      until the relative change is below ``tol`` or ``max_iter`` sweeps. Both the polar end point
+      and the spectral start are rounded, each is refined by the projected power method
+      (Chen & Candes 2016; Gauss-Seidel ``X_i <- Hungarian(sum_j w_ij P_ij X_j)``, monotone in
+      the discrete objective, at most ``refine`` sweeps, default ``max_iter``), and the one with
+      the higher objective is returned (``info["candidates"]``, ``info["chosen"]``). Since every
+      candidate is scored by the objective the method maximizes, this is a safeguard against a
+      poor local optimum of the polar iteration, not a change of objective.
     * ``"matcheig"`` (Maset, Arrigoni, Fusiello 2017), a fast baseline: the same eigenvectors,
       rows normalized, and each block ``U_i U_j^T`` rounded independently by Hungarian,
       dropping matches below ``threshold``. Its ``pairwise(i, j)`` need not be cycle-consistent
@@ -379,8 +387,18 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
       eigenvectors, i.e. the ``"spectral"`` answer, so that one result type serves every method.
 
     Universe size: ``n_universe`` if given; otherwise ``n`` when all objects have ``n`` nodes and
-    every observed map is a bijection; otherwise the eigengap of the normalized spectrum
-    (``info["n_universe_estimate"]``, ``info["n_universe_rule"]``, ``info["eigenvalues"]``).
+    every observed map is a bijection; otherwise the eigengap of the degree-normalized spectrum:
+    ``d = argmax_{n_max <= d < K} (l_d - l_{d+1})`` over the ``K`` leading eigenvalues computed,
+    ``K = 2 n_max + 10`` at first, doubled (up to ``sum n_i``) while the largest gap is the
+    last one or the ``K``-th eigenvalue is still above half the first (the cluster of leading
+    eigenvalues, all 1 for consistent input, has not ended). ``info["n_universe_rule"]`` states
+    the rule and range used, ``info["n_universe_candidates"]`` the range ``(n_max, K - 1)``,
+    ``info["n_universe_estimate"]`` the result and ``info["eigenvalues"]`` the spectrum.
+
+    With ``min_score``, nodes whose placement is weakly supported are left unplaced (label
+    ``-1``): a node's score is the weighted fraction of its observed pairs in which the
+    observation and the output name the same partner, among those where either names one
+    (``info["node_scores"]``); nodes scoring below ``min_score`` are dropped.
 
     A disconnected observation graph is detected; with ``disconnected="separate"`` (default)
     every connected component is synchronized on its own, into its own universe, and the ids are
@@ -412,6 +430,12 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
         Relative residual tolerance of the matrix-free eigensolver.
     threshold : float, default=0.5
         ``"matcheig"`` drops block entries below it.
+    refine : int, optional
+        Maximum projected-power sweeps on the discrete objective after rounding. Default: 0 for
+        ``"spectral"`` (plain Pachauri et al.) and ``max_iter`` for ``"orthogonal"``; not
+        allowed for ``"matcheig"``.
+    min_score : float in [0, 1], optional
+        Leave nodes whose support is below it unplaced (``-1``); default: every node placed.
     max_triangles : int, default=100000
         Triangles sampled for the input-consistency report ``info["input_consistency"]``.
     rng : None, int or numpy.random.Generator

@@ -34,7 +34,11 @@ class PermutationSyncResult:
         the same eigenvectors (what ``method="spectral"`` would return).
     info : dict
         Method details: ``"method"``, ``"solver"`` (dense / matrix_free), ``"components"``,
-        ``"n_universe_estimate"``, ``"eigenvalues"``, ``"input_consistency"`` (the triangle report
+        ``"n_universe_estimate"``, ``"n_universe_rule"``, ``"n_universe_candidates"``,
+        ``"eigenvalues"``, ``"candidates"``/``"chosen"`` (``"orthogonal"``: objectives of the
+        refined spectral and polar roundings), ``"discrete_objective_history*"``,
+        ``"node_scores"``/``"n_unplaced"`` (with ``min_score``), ``"input_consistency"``
+        (the triangle report
         of :func:`transync.permutations.cycle_inconsistency`), ``"input_disagreement"`` (fraction of
         observed correspondences the output drops), timings.
     """

@@ -20,13 +20,18 @@ def plot_experiment(experiment, summary: list[dict], path) -> Path:
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
 
-    panels = [(sw, m) for sw in experiment.sweeps for m in sw.metrics]
-    ncols = min(4, max(1, len(panels)))
-    nrows = int(np.ceil(len(panels) / ncols))
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.4 * nrows), squeeze=False)
-    for ax in axes.ravel()[len(panels):]:
-        ax.set_visible(False)
-    for ax, (sw, metric) in zip(axes.ravel(), panels):
+    # one row per sweep, one column per metric
+    nrows = max(1, len(experiment.sweeps))
+    ncols = max([len(sw.metrics) for sw in experiment.sweeps] + [1])
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.3 * nrows), squeeze=False)
+    panels = []
+    for r, sw in enumerate(experiment.sweeps):
+        for c in range(ncols):
+            if c < len(sw.metrics):
+                panels.append((axes[r, c], sw, sw.metrics[c]))
+            else:
+                axes[r, c].set_visible(False)
+    for ax, sw, metric in panels:
         for method in sw.methods:
             rows = [r for r in summary if r["sweep"] == sw.name and r["method"] == method
                     and r["metric"] == metric and r["n"] > 0]

@@ -5,5 +5,6 @@
 
 REGISTRY = {
     "pairwise": "transync.experiments.pairwise",
+    "homography": "transync.experiments.homography",
     "sync": "transync.experiments.sync",
 }

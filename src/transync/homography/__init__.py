@@ -2,6 +2,7 @@
 plane segmentation and the accuracy measures used to evaluate them."""
 
 from ._dense import mean_warped_image, refine_homography_ecc
+from ._evaluate import chained_homographies, evaluate_alignment, to_reference_homographies
 from ._metrics import (
     brenner_focus,
     corner_accuracy,
@@ -9,21 +10,33 @@ from ._metrics import (
     pairwise_corner_error,
     segmentation_scores,
 )
+from ._multiplane import MultiPlaneResult, extract_planes, misclassification_error
 from ._pipeline import PlaneAlignmentResult, estimate_plane_homographies
 from ._segmentation import segment_plane
-from ._sparse import PairwiseHomographies, estimate_pairwise_homographies
+from ._sparse import (
+    PairwiseHomographies,
+    estimate_pairwise_homographies,
+    estimate_rectified_pairwise,
+)
 
 __all__ = [
+    "MultiPlaneResult",
     "PairwiseHomographies",
     "PlaneAlignmentResult",
     "brenner_focus",
+    "chained_homographies",
     "corner_accuracy",
     "corner_error",
     "estimate_pairwise_homographies",
+    "estimate_rectified_pairwise",
+    "evaluate_alignment",
+    "extract_planes",
     "estimate_plane_homographies",
     "mean_warped_image",
+    "misclassification_error",
     "pairwise_corner_error",
     "refine_homography_ecc",
     "segment_plane",
     "segmentation_scores",
+    "to_reference_homographies",
 ]

@@ -9,12 +9,19 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import check_choice, check_int, check_positive
+from .._validation import as_generator, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning
 from ..synchronization import synchronize_homographies
 from ._dense import mean_warped_image, refine_homography_ecc
 from ._segmentation import segment_plane
-from ._sparse import estimate_pairwise_homographies, load_images, sift_features, to_gray
+from ._sparse import (
+    PairwiseHomographies,
+    estimate_pairwise_homographies,
+    estimate_rectified_pairwise,
+    load_images,
+    sift_features,
+    to_gray,
+)
 
 __all__ = ["PlaneAlignmentResult", "estimate_plane_homographies", "view_graph_pairs"]
 
@@ -137,8 +144,9 @@ def view_graph_pairs(H_to_ref, sizes, *, reference, k=3):
 
 def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True,
                                 pairs="auto", n_neighbors=3, method="ransac", threshold=3.0,
-                                n_features=2000, robust=True, dense_target="mean",
-                                max_iter=3, tol=0.02, levels=2, max_step=3.0,
+                                n_features=2000, robust=True, dense_target="auto",
+                                max_iter=3, tol=0.02, levels=2, max_step=10.0, rectify=True,
+                                dense_weight=100.0, canvas_margin=0.2, rng=0,
                                 verbose=False) -> PlaneAlignmentResult:
     """Homographies of the dominant plane across views, with plane masks.
 
@@ -162,7 +170,8 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
     reference : int, default=0
     dense : bool, default=True
     segment : bool, default=True
-    pairs : "auto", "all" or list of (i, j), default="auto"
+    pairs : "auto", "all", list of (i, j) or PairwiseHomographies, default="auto"
+        The view graph, or precomputed pairwise estimates (then no matching is done).
     n_neighbors : int, default=3
     method : str, default="ransac"
         Robust estimator of :func:`estimate_pairwise_homographies` (USAC variants allowed).
@@ -170,28 +179,59 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
     n_features : int, default=2000
     robust : bool, default=True
         Robust synchronization (IRLS + rejection).
-    dense_target : {"mean", "reference"}, default="mean"
+    dense_target : {"auto", "mean", "reference"}, default="auto"
+        Template of the dense step: the mean warped image (no reference bias) or the reference
+        view; "auto" takes the mean image from 4 views on (with 2 or 3 views the mean image is
+        pulled half-way by every update and converges slowly).
     max_iter : int, default=3
         Rounds of segmentation + dense refinement.
     tol : float, default=0.02
         Stop when the largest mean corner change is below this (pixels).
     levels : int, default=2
         ECC pyramid levels of the first dense round (later rounds: full resolution only).
-    max_step : float, default=3.0
+    rectify : bool, default=True
+        Second sparse pass: SIFT on the views warped into the reference frame with the first
+        synchronized estimate, matching along the same view graph, synchronization again
+        (:func:`estimate_rectified_pairwise`); it removes most of the keypoint localization
+        error caused by perspective distortion between strongly tilted views.
+    dense_weight : float, default=100.0
+        Weight of every dense estimate in the re-synchronization, relative to the largest
+        inlier count of the sparse pairs.
+    rng : None, int or Generator, default=0
+        Seeds OpenCV's global random generator (RANSAC sampling) so that runs are repeatable.
+    canvas_margin : float, default=0.2
+        The mean warped image of the dense step extends the reference frame by this fraction
+        on every side (constrains the parts of strongly tilted views outside the reference).
+    max_step : float, default=10.0
         A dense update that moves a view's corners by more than this (pixels) is treated as a
         divergence and discarded (the view keeps its synchronized estimate).
 
     Returns
     -------
     PlaneAlignmentResult
+
+    Examples
+    --------
+    >>> from transync.datasets import make_planar_scene
+    >>> from transync.homography import corner_error
+    >>> scene = make_planar_scene(4, image_size=(240, 180), difficulty="easy", rng=0)
+    >>> res = estimate_plane_homographies(scene.images, n_features=800, max_iter=1)
+    >>> err = corner_error(res.homographies, scene.homographies, image_size=(240, 180))
+    >>> bool(err.max() < 0.5), res.masks[1].shape
+    (True, (180, 240))
     """
     t_start = time.perf_counter()
+    import cv2
+
+    cv2.setRNGSeed(int(as_generator(rng).integers(2**31 - 1)))
     imgs = load_images(images)
     n = len(imgs)
     if n < 2:
         raise ValueError(f"`images` must hold at least 2 images, got {n}")
     reference = check_int(reference, "reference", minimum=0, maximum=n - 1)
-    dense_target = check_choice(dense_target, "dense_target", ("mean", "reference"))
+    dense_target = check_choice(dense_target, "dense_target", ("auto", "mean", "reference"))
+    if dense_target == "auto":
+        dense_target = "mean" if n >= 4 else "reference"
     max_iter = check_int(max_iter, "max_iter", minimum=0)
     tol = check_positive(tol, "tol", allow_zero=True)
     gray = [to_gray(im) for im in imgs]
@@ -202,7 +242,12 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
     timing["features"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     kw = dict(method=method, threshold=threshold, features=feats)
-    if isinstance(pairs, str):
+    if isinstance(pairs, PairwiseHomographies):
+        if pairs.H.shape != (n, n, 3, 3):
+            raise ValueError(f"`pairs` holds pairwise homographies of shape {pairs.H.shape}, "
+                             f"expected ({n}, {n}, 3, 3)")
+        pw = pairs
+    elif isinstance(pairs, str):
         check_choice(pairs, "pairs", ("auto", "all"))
         if pairs == "all" or n <= n_neighbors + 2:
             pw = estimate_pairwise_homographies(gray, **kw)
@@ -216,7 +261,6 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
                      if reference not in p]
             pw1 = estimate_pairwise_homographies(gray, pairs=extra, **kw)
             H = np.where(pw0.mask[..., None, None], pw0.H, pw1.H)
-            from ._sparse import PairwiseHomographies
             pw = PairwiseHomographies(H=H, mask=pw0.mask | pw1.mask,
                                       weights=pw0.weights + pw1.weights,
                                       failed=pw0.failed + pw1.failed,
@@ -229,8 +273,36 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
     sync = synchronize_homographies(pw.H, mask=pw.mask, weights=pw.weights, reference=reference,
                                     robust=robust, image_size=np.array(sizes, float),
                                     disconnected="component")
+    maps = None
+    sync_info = {}
+    if rectify and not isinstance(pairs, PairwiseHomographies):
+        # second sparse pass between the views warped into the reference frame
+        ok0 = np.all(np.isfinite(sync.maps), axis=(1, 2))
+        edges = [(int(i), int(j)) for i, j in zip(*np.nonzero(np.triu(pw.mask, 1)))
+                 if ok0[i] and ok0[j]]
+        pw_r = estimate_rectified_pairwise(gray, sync.maps, edges, reference=reference,
+                                           n_features=n_features, method=method)
+        if pw_r.mask.any():
+            # synchronize the corrections C_i in the canvas (reference) frame, where every
+            # residual is measured with the same geometry (no extrapolation to the corners of
+            # strongly tilted views): H'_ij ~ inv(C_i) C_j, H_i <- inv(T) C_i T H_i
+            Tc, csize = pw_r.info["canvas"]
+            sync_r = synchronize_homographies(pw_r.info["H_warped"], mask=pw_r.mask,
+                                              weights=pw_r.weights, reference=reference,
+                                              robust=robust, image_size=csize,
+                                              disconnected="component")
+            ok_r = np.all(np.isfinite(sync_r.maps), axis=(1, 2))
+            if ok_r.sum() >= ok0.sum():
+                maps = np.full_like(sync.maps, np.nan)
+                for i in np.flatnonzero(ok_r):
+                    Hi = np.linalg.inv(Tc) @ sync_r.maps[i] @ Tc @ sync.maps[i]
+                    maps[i] = Hi / np.cbrt(np.linalg.det(Hi))
+                sync_info["rectified"] = sync_r
+                pw = pw_r
+    if maps is None:
+        maps = sync.maps.copy()
     timing["sync"] = time.perf_counter() - t0
-    H = sync.maps.copy()
+    H = maps
     H_sparse = H.copy()
     ok = np.all(np.isfinite(H), axis=(1, 2))
     if not ok.all():
@@ -255,8 +327,13 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
         H_new = H.copy()
         rejected = []
         if dense:
+            Tc = np.eye(3)
             if dense_target == "mean":
-                tpl, cnt = mean_warped_image([gray[i] for i in idx], H[idx], size=sizes[reference],
+                wr, hr = sizes[reference]
+                ox, oy = int(round(canvas_margin * wr)), int(round(canvas_margin * hr))
+                Tc[:2, 2] = ox, oy
+                tpl, cnt = mean_warped_image([gray[i] for i in idx], H[idx],
+                                             size=(wr + 2 * ox, hr + 2 * oy), offset=(ox, oy),
                                              masks=[masks[i] for i in idx], reference=r_sub)
                 tmask = cnt > 0
                 tpl = np.nan_to_num(tpl)
@@ -270,9 +347,10 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
             for i in idx:
                 if dense_target == "reference" and i == reference:
                     continue
-                Hi, ok_i = refine_homography_ecc(tpl, gray[i], H[i], mask=masks[i],
+                Hi, ok_i = refine_homography_ecc(tpl, gray[i], Tc @ H[i], mask=masks[i],
                                                  template_mask=tmask, levels=lv,
                                                  max_iter=40 if it == 1 else 15, eps=1e-4)
+                Hi = np.linalg.inv(Tc) @ Hi
                 step = float(_corner_change(Hi[None], H[i][None], [sizes[i]])[0])
                 if ok_i and np.all(np.isfinite(Hi)) and step <= max_step:
                     H_dense[i] = Hi
@@ -280,7 +358,7 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
                     rejected.append(int(i))
             # re-synchronization of the dense estimates together with the sparse pairs
             H_new, rs = _resynchronize(H, H_dense, pw, idx, reference, sizes, dense_target,
-                                       robust=robust)
+                                       robust=robust, dense_weight=dense_weight)
             resyncs.append(rs)
         t_dense = time.perf_counter() - t0
         change = float(_corner_change(H_new[idx], H[idx], [sizes[i] for i in idx]).max())
@@ -294,7 +372,9 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
             break
     else:
         converged = not dense or change < tol
-    if dense and segment:
+    if dense and segment and change > 0.1:
+        # masks of the last round were computed before its (sub-pixel) update; redo them only
+        # when the homographies still moved noticeably
         sub = segment_plane([gray[i] for i in idx], H[idx],
                             reference=int(np.flatnonzero(idx == reference)[0]))
         for k, i in enumerate(idx):
@@ -307,4 +387,5 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
                                 sparse_homographies=H_sparse, pairwise=pw, objective=change,
                                 n_iter=it, converged=converged,
                                 info={"history": history, "seconds": timing, "sync": sync,
+                                      "sync_rectified": sync_info.get("rectified"),
                                       "excluded": np.flatnonzero(~ok)})

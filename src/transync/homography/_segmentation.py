@@ -28,8 +28,8 @@ def _canvas(size, margin):
     return (w + 2 * mx, h + 2 * my), (mx, my)
 
 
-def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, smooth=2.0,
-                  min_views=3, rng=0, return_evidence=False):
+def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, smooth=4.0,
+                  min_views=3, threshold=0.35, rng=0, return_evidence=False):
     """Per-view plane masks from the consensus of the views warped into the reference frame.
 
     Parameters
@@ -42,11 +42,14 @@ def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, sm
         Window of the local ZNCC.
     margin : float, default=0.2
         The canvas extends the reference frame by this fraction on every side.
-    smooth : float, default=2.0
+    smooth : float, default=4.0
         Gaussian sigma (pixels) applied to the plane probabilities before thresholding.
     min_views : int, default=3
         Canvas pixels seen by fewer views are labelled plane only if they look like the
         consensus (no evidence against it).
+    threshold : float, default=0.35
+        Smoothed plane probability above which a pixel is labelled plane (below 0.5: the
+        self-trained classifier is conservative on weakly textured plane pixels).
 
     Returns
     -------
@@ -144,7 +147,7 @@ def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, sm
     k3 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
     for i in range(n):
         p = cv2.GaussianBlur(prob[i], (0, 0), smooth) if smooth > 0 else prob[i]
-        cm = ((p > 0.5) & valid[i]).astype(np.uint8)
+        cm = ((p > threshold) & valid[i]).astype(np.uint8)
         cm = cv2.morphologyEx(cm, cv2.MORPH_OPEN, k3)
         cm = cv2.morphologyEx(cm, cv2.MORPH_CLOSE, k3)
         # pixels outside the eroded valid region keep the label of their neighbourhood

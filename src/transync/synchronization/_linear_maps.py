@@ -137,8 +137,8 @@ def normalize_determinant(A):
     """
     A = np.asarray(A, dtype=float)
     d = A.shape[-1]
-    det = np.linalg.det(A)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):   # NaN maps (disconnected) stay NaN
+        det = np.linalg.det(A)
         if d % 2:
             scale = np.sign(det) * np.abs(det) ** (1.0 / d)
         else:

@@ -112,12 +112,8 @@ def make_noisy_linear_maps(n_objects=10, dim=3, *, group="GL", noise=0.05, outli
     truth = np.stack([np.eye(d)] + [_random_group_element(d, group, rng, spread=0.5)
                                     for _ in range(n - 1)])
     mask = _observation_graph(n, density, rng)
+    outliers = _pick_outlier_pairs(mask, outlier_fraction, rng)
     pairs = np.argwhere(np.triu(mask, 1))
-    n_out = int(round(outlier_fraction * len(pairs)))
-    out_idx = rng.choice(len(pairs), size=n_out, replace=False)
-    outliers = np.zeros((n, n), dtype=bool)
-    outliers[pairs[out_idx, 0], pairs[out_idx, 1]] = True
-    outliers |= outliers.T
     observed = np.full((n, n, d, d), np.nan)
     inv = np.linalg.inv(truth)
     for i, j in pairs:
@@ -224,12 +220,8 @@ def make_noisy_homographies(n_views=10, *, image_size=(640, 480), noise=0.5, out
     truth = np.stack([np.eye(3)] + [random_view_homography((w, h), rng, max_angle=max_angle)
                                     for _ in range(n - 1)])
     mask = _observation_graph(n, density, rng)
+    outliers = _pick_outlier_pairs(mask, outlier_fraction, rng)
     pairs = np.argwhere(np.triu(mask, 1))
-    n_out = int(round(outlier_fraction * len(pairs)))
-    out_idx = rng.choice(len(pairs), size=n_out, replace=False)
-    outliers = np.zeros((n, n), dtype=bool)
-    outliers[pairs[out_idx, 0], pairs[out_idx, 1]] = True
-    outliers |= outliers.T
     inv = np.linalg.inv(truth)
     c = _corners(w, h)
     observed = np.full((n, n, 3, 3), np.nan)
@@ -248,3 +240,14 @@ def make_noisy_homographies(n_views=10, *, image_size=(640, 480), noise=0.5, out
         observed[j, i] = Hji / Hji[2, 2]
     return TransformProblem(observed=observed, mask=mask, truth=truth, outliers=outliers,
                             image_size=(w, h), info={"noise": noise, "max_angle": max_angle})
+
+
+def _pick_outlier_pairs(mask: np.ndarray, fraction: float, rng) -> np.ndarray:
+    """Symmetric mask of ``round(fraction * #observed pairs)`` observed pairs drawn at random."""
+    n = mask.shape[0]
+    pairs = np.argwhere(np.triu(mask, 1))
+    n_out = int(round(fraction * len(pairs)))
+    out_idx = rng.choice(len(pairs), size=n_out, replace=False)
+    outliers = np.zeros((n, n), dtype=bool)
+    outliers[pairs[out_idx, 0], pairs[out_idx, 1]] = True
+    return outliers | outliers.T

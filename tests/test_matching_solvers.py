@@ -12,6 +12,7 @@ import pytest
 
 from transync.exceptions import ConvergenceWarning
 from transync.graphs import Graph
+from transync.metrics import matching_accuracy as accuracy
 from transync.matching import (
     GAStepper,
     IPFPStepper,
@@ -52,11 +53,6 @@ def planted(n_in, rng, *, deformation=0.0, out1=0, out2=0, edges="full"):
     g1 = Graph.from_points(P1, edges=edges)
     g2 = Graph.from_points(Q2[perm], edges=edges)
     return g1, g2, truth
-
-
-def accuracy(assignment, truth):
-    inl = truth >= 0
-    return float(np.mean(assignment[inl] == truth[inl]))
 
 
 @pytest.fixture

@@ -9,9 +9,12 @@ What is compared, exactly:
   vector moves less than 1e-5), so the soft eigenvector matrices agree to 1e-10 and the
   Hungarian-rounded assignments are identical, on planted and on noisy problems;
 * ``rrwm``: pygmtools' variant differs from the original (jump weight ``alpha`` instead of the
-  walk weight ``c``, fixed 20 Sinkhorn sweeps, no conflict removal, ``max_iter=50``); with its
-  defaults and transync's original defaults, both recover the planted solution of easy (zero- and
-  low-noise) problems, so their assignments are identical there;
+  walk weight ``c``, fixed 20 Sinkhorn half-sweeps, no conflict removal, ``max_iter=50``, rounds
+  the mixture); with its defaults and transync's original defaults, both recover the planted
+  solution of easy problems. ``rrwm(variant="pygmtools")`` runs pygmtools' loop: run for the same
+  50 iterations its rounded matrix equals pygmtools' output to 1e-10, and with its own stopping
+  rule its assignments are identical on noisy problems with outliers in both graphs and with
+  unequal sizes;
 * ``ipfp``: both implement Leordeanu et al.'s iteration from the uniform start; on easy problems
   both recover the planted solution, and transync's objective is never below pygmtools'.
 """
@@ -19,6 +22,7 @@ What is compared, exactly:
 from __future__ import annotations
 
 import functools
+import warnings
 
 import numpy as np
 import pytest
@@ -26,6 +30,7 @@ import pytest
 pygm = pytest.importorskip("pygmtools")
 pygm.set_backend("numpy")
 
+from transync.exceptions import ConvergenceWarning  # noqa: E402
 from transync.graphs import Graph  # noqa: E402
 from transync.matching import gaussian_edge_affinity, ipfp, rrwm, sm  # noqa: E402
 
@@ -47,7 +52,7 @@ def _pygm_K(g1, g2, sigma2):
 
 def _pygm_assignment(X):
     X = pygm.hungarian(X)
-    return np.argmax(X, axis=1)
+    return np.where(X.max(axis=1) > 0, np.argmax(X, axis=1), -1)
 
 
 @pytest.fixture
@@ -72,15 +77,42 @@ def test_sm_identical_to_pygmtools(deformation, rng):
         g1, g2, _ = _problem(rng, 9, deformation)
         K = _pygm_K(g1, g2, 0.15)
         X_pg = pygm.sm(K, 9, 9, max_iter=50)
-        import warnings
-
-        from transync.exceptions import ConvergenceWarning
-
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
             res = sm(K, n1=9, n2=9, max_iter=50)
         np.testing.assert_allclose(res.soft, X_pg, atol=1e-10)
         np.testing.assert_array_equal(res.assignment, _pygm_assignment(X_pg))
+
+
+def _outlier_problem(rng, n_in, out1, out2, deformation=0.03):
+    P = rng.random((n_in, 2))
+    Q = P + deformation * rng.standard_normal(P.shape)
+    P1 = np.vstack([P, rng.random((out1, 2))])
+    Q2 = np.vstack([Q, rng.random((out2, 2))])[rng.permutation(n_in + out2)]
+    return Graph.from_points(P1, edges="full"), Graph.from_points(Q2, edges="full")
+
+
+@pytest.mark.parametrize("out1,out2", [(0, 0), (4, 4), (0, 5), (5, 0)])
+def test_rrwm_pygmtools_variant_reproduces_pygmtools(out1, out2, rng):
+    for _ in range(2):
+        g1, g2 = _outlier_problem(rng, 10, out1, out2)
+        n1, n2 = g1.n_nodes, g2.n_nodes
+        K = _pygm_K(g1, g2, 0.15)
+        X_pg = pygm.rrwm(K, n1, n2)
+        a_pg = _pygm_assignment(X_pg)
+        # pygmtools' loop for its full 50 iterations: the same mixture, entrywise
+        with pytest.warns(ConvergenceWarning, match="rrwm"):
+            full = rrwm(K, n1=n1, n2=n2, variant="pygmtools", tol=1e-300, max_iter=50)
+        np.testing.assert_allclose(full.info["scores"], X_pg, rtol=0, atol=1e-10)
+        # defaults (stops once the mixture settles): the same assignment, through K or the
+        # factorized affinity
+        for aff in (K, gaussian_edge_affinity(g1, g2, sigma2=0.15)):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ConvergenceWarning)
+                res = rrwm(aff, n1=n1, n2=n2, variant="pygmtools") if aff is K else \
+                    rrwm(aff, variant="pygmtools")
+            np.testing.assert_array_equal(res.assignment, a_pg)
+            assert res.info["variant"] == "pygmtools" and res.n_iter <= 50
 
 
 def test_rrwm_and_ipfp_agree_on_easy_problems(rng):

@@ -227,3 +227,87 @@ def test_full_pipeline_targets(difficulty):
     assert ev["mean_error"] <= (0.06 if difficulty == "moderate" else 0.1)
     assert ev["brenner_ratio"] >= 0.9995
     assert ev["f1"] >= 0.95
+
+
+def test_sparse_residual_planted():
+    from transync.homography._pipeline import _apply, _sparse_residual
+
+    rng = np.random.default_rng(0)
+    H = np.stack([np.eye(3), np.array([[1.0, 0.02, 5], [0.01, 0.98, -3], [1e-4, 0, 1]])])
+    x1 = rng.uniform(0, 300, (50, 2))
+    x0 = _apply(H[1], x1)                       # view 1 -> reference (view 0)
+    corr = {(0, 1): (x0, x1)}
+    assert _sparse_residual(1, H[1], H, corr) < 1e-9
+    S = np.array([[1.0, 0, 0.7], [0, 1, 0], [0, 0, 1]])
+    assert _sparse_residual(1, S @ H[1], H, corr) == pytest.approx(0.7)
+    assert _sparse_residual(0, S, H, corr) == pytest.approx(0.7)
+    assert np.isnan(_sparse_residual(1, H[1], H, {}))
+
+
+def test_dense_safeguard_falls_back_on_wrong_mask(scene, monkeypatch):
+    """ECC fed with the clutter instead of the plane must not degrade the sparse solution."""
+    import transync.homography._pipeline as pipe
+
+    def wrong_masks(images, homographies, *, reference=0, **kw):
+        # planted failure of the segmentation: the complement of the true plane masks
+        return [~np.asarray(m) for m in scene.masks[:len(images)]]
+
+    monkeypatch.setattr(pipe, "segment_plane", wrong_masks)
+    kw = dict(n_features=1000, max_iter=1, pairs="all")
+    res = estimate_plane_homographies(scene.images, **kw)
+    es = corner_error(res.sparse_homographies, scene.homographies, image_size=(320, 240))
+    e = corner_error(res.homographies, scene.homographies, image_size=(320, 240))
+    views = res.info["history"][0]["dense_views"]
+    status = {k: v["status"] for k, v in views.items()}
+    assert sum(s != "accepted" for s in status.values()) >= 3
+    assert set(res.info["history"][0]["rejected_dense"]) == {k for k, s in status.items()
+                                                             if s != "accepted"}
+    assert all("sparse_after" in v for v in views.values() if v["status"] != "diverged")
+    assert e.mean() <= es.mean() + 0.02
+
+
+def test_dense_safeguard_rejects_planted_bad_updates(scene, monkeypatch):
+    """Dense updates planted 1.5 px off are rejected (sparse check), the others accepted."""
+    import transync.homography._pipeline as pipe
+
+    real = pipe.refine_homography_ecc
+    calls = []
+
+    def bad_ecc(template, image, H_init, **kw):
+        H, ok = real(template, image, H_init, **kw)
+        calls.append(len(calls))
+        if len(calls) in (3, 4):                 # the 3rd and 4th views of the round
+            S = np.array([[1.0, 0, 1.5], [0, 1, -1.0], [0, 0, 1]])
+            H = S @ H
+        return H, ok
+
+    monkeypatch.setattr(pipe, "refine_homography_ecc", bad_ecc)
+    kw = dict(n_features=1000, max_iter=1, pairs="all")
+    res = estimate_plane_homographies(scene.images, **kw)
+    status = {k: v["status"] for k, v in res.info["history"][0]["dense_views"].items()}
+    assert [k for k, s in status.items() if s == "rejected_sparse"] == [2, 3]
+    assert res.info["history"][0]["rejected_dense"] == [2, 3]
+    e = corner_error(res.homographies, scene.homographies, image_size=(320, 240))
+    es = corner_error(res.sparse_homographies, scene.homographies, image_size=(320, 240))
+    assert e.max() < es.max() + 0.05
+    calls.clear()
+    raw = estimate_plane_homographies(scene.images, dense_check=False, **kw)
+    er = corner_error(raw.homographies, scene.homographies, image_size=(320, 240))
+    assert er.max() > 0.5                        # without the safeguard the bad update stays
+
+
+def test_auto_pairs_exhaustive_then_view_graph(scene, monkeypatch):
+    """``pairs="auto"``: every pair up to EXHAUSTIVE_UP_TO views, the k-nearest view graph beyond."""
+    import transync.homography._pipeline as pipe
+
+    kw = dict(n_features=800, dense=False, segment=False, rectify=False)
+    full = estimate_plane_homographies(scene.images, **kw)
+    assert full.pairwise.mask.sum() == 5 * 4               # all 10 pairs, both directions
+    monkeypatch.setattr(pipe, "EXHAUSTIVE_UP_TO", 3)
+    graph = estimate_plane_homographies(scene.images, n_neighbors=1, **kw)
+    m = graph.pairwise.mask
+    assert m[0, 1:].all()                                  # every view linked to the reference
+    assert m.sum() < full.pairwise.mask.sum()
+    for res in (full, graph):
+        err = corner_error(res.homographies, scene.homographies, image_size=(320, 240))
+        assert err.max() < 0.5

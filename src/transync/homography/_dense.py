@@ -98,11 +98,16 @@ def mean_warped_image(images, homographies, *, size, masks=None, offset=(0, 0),
                                 interpolation=cv2.INTER_NEAREST) > 0
         both = vi & (cnt > 0)
         if normalize and both.sum() > 100:
-            # photometric gain/bias of this view against the running mean
+            # photometric gain/bias of this view against the running mean: least squares on
+            # every overlapping pixel, in closed form (a subsample made the fit, and with it
+            # the Brenner ratio of estimated vs true alignments, noisy at the 1e-3 level)
             x = wi[both].astype(np.float64)
             y = acc[both] / cnt[both]
-            a, b = np.polyfit(x, y, 1)
-            wi = a * wi + b
+            xm, ym = x.mean(), y.mean()
+            x -= xm
+            vx = float(x @ x)
+            a = float(x @ (y - ym)) / vx if vx > 0 else 1.0
+            wi = a * wi + (ym - a * xm)
         acc[vi] += wi[vi]
         cnt[vi] += 1
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -115,6 +115,28 @@ def _resynchronize(H, H_dense, pw, idx, reference, sizes, dense_target, *, robus
     return out, res
 
 
+def _crop_to_footprint(Tc, H, size, tpl, tmask, pad=16):
+    """Canvas transform, template and template mask cropped to the footprint of one view.
+
+    ``Tc @ H`` maps the view into the canvas; the crop is the bounding box of the mapped view
+    corners plus ``pad`` pixels, clipped to the canvas (the whole canvas when that box is
+    degenerate). Returns ``(C @ Tc, tpl[crop], tmask[crop])`` with ``C`` the crop translation.
+    """
+    w, h = size
+    c = np.array([[0, 0, 1], [w - 1, 0, 1], [w - 1, h - 1, 1], [0, h - 1, 1]], float).T
+    q = (Tc @ H) @ c
+    if not np.all(q[2] > 0):
+        return Tc, tpl, tmask
+    x, y = q[0] / q[2], q[1] / q[2]
+    Hc, Wc = tpl.shape[:2]
+    x0, x1 = (int(np.clip(v, 0, Wc)) for v in (np.floor(x.min()) - pad, np.ceil(x.max()) + pad))
+    y0, y1 = (int(np.clip(v, 0, Hc)) for v in (np.floor(y.min()) - pad, np.ceil(y.max()) + pad))
+    if x1 - x0 < 32 or y1 - y0 < 32:
+        return Tc, tpl, tmask
+    C = np.array([[1.0, 0, -x0], [0, 1.0, -y0], [0, 0, 1.0]])
+    return C @ Tc, tpl[y0:y1, x0:x1], tmask[y0:y1, x0:x1]
+
+
 def _sparse_correspondences(pw, H_warp=None, T=None):
     """Inlier correspondences of the sparse pairs in original view pixels:
     ``{(i, j): (x_i, x_j)}``. Matches of the rectified pass (found between views warped by
@@ -183,7 +205,7 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
                                 pairs="auto", n_neighbors=3, method="ransac", threshold=3.0,
                                 n_features=2000, robust=True, dense_target="auto",
                                 max_iter=3, tol=0.02, levels=2, max_step=10.0, rectify=True,
-                                dense_weight=100.0, canvas_margin=0.2, dense_check=True,
+                                dense_weight=100.0, canvas_margin=0.5, dense_check=True,
                                 sparse_tolerance=0.25, rng=0,
                                 verbose=False) -> PlaneAlignmentResult:
     """Homographies of the dominant plane across views, with plane masks.
@@ -244,9 +266,13 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
         inlier count of the sparse pairs.
     rng : None, int or Generator, default=0
         Seeds OpenCV's global random generator (RANSAC sampling) so that runs are repeatable.
-    canvas_margin : float, default=0.2
-        The mean warped image of the dense step extends the reference frame by this fraction
-        on every side (constrains the parts of strongly tilted views outside the reference).
+    canvas_margin : float, default=0.5
+        The canvas of the segmentation and of the mean warped image (the dense step's
+        template) extends the reference frame by this fraction on every side. Parts of a view
+        outside it get no segmentation and no dense constraint, so the homography is
+        extrapolated there: on hard generated scenes (views up to 45 degrees) 0.2 left the
+        dense mean corner error at 0.072 px on one scene, 0.5 gives 0.057 (0.8: 0.061, slower).
+        Each view's ECC runs on the canvas cropped to its footprint.
     max_step : float, default=10.0
         A dense update that moves a view's corners by more than this (pixels) is treated as a
         divergence and discarded (the view keeps its synchronized estimate).
@@ -280,7 +306,8 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
     t_start = time.perf_counter()
     import cv2
 
-    cv2.setRNGSeed(int(as_generator(rng).integers(2**31 - 1)))
+    gen = as_generator(rng)
+    cv2.setRNGSeed(int(gen.integers(2**31 - 1)))
     imgs = load_images(images)
     n = len(imgs)
     if n < 2:
@@ -299,7 +326,7 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
     feats = [sift_features(g, n_features=n_features) for g in gray]
     timing["features"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    kw = dict(method=method, threshold=threshold, features=feats)
+    kw = dict(method=method, threshold=threshold, features=feats, rng=gen)
     if isinstance(pairs, PairwiseHomographies):
         if pairs.H.shape != (n, n, 3, 3):
             raise ValueError(f"`pairs` holds pairwise homographies of shape {pairs.H.shape}, "
@@ -379,7 +406,8 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
     for it in range(1, max_iter + 1 if (dense or segment) else 1):
         t0 = time.perf_counter()
         if segment:
-            sub = segment_plane([gray[i] for i in idx], H[idx], reference=r_sub)
+            sub = segment_plane([gray[i] for i in idx], H[idx], reference=r_sub,
+                                margin=canvas_margin)
             for k, i in enumerate(idx):
                 masks[i] = sub[k]
         t_seg = time.perf_counter() - t0
@@ -408,10 +436,15 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
             for i in idx:
                 if dense_target == "reference" and i == reference:
                     continue
-                Hi, ok_i = refine_homography_ecc(tpl, gray[i], Tc @ H[i], mask=masks[i],
-                                                 template_mask=tmask, levels=lv,
+                Ti, tpl_i, tmask_i = Tc, tpl, tmask
+                if dense_target == "mean":
+                    # ECC costs per template pixel: crop the canvas to the view's footprint
+                    # (pixels outside it are invalid for this view anyway)
+                    Ti, tpl_i, tmask_i = _crop_to_footprint(Tc, H[i], sizes[i], tpl, tmask)
+                Hi, ok_i = refine_homography_ecc(tpl_i, gray[i], Ti @ H[i], mask=masks[i],
+                                                 template_mask=tmask_i, levels=lv,
                                                  max_iter=40 if it == 1 else 15, eps=1e-4)
-                Hi = np.linalg.inv(Tc) @ Hi
+                Hi = np.linalg.inv(Ti) @ Hi
                 step = float(_corner_change(Hi[None], H[i][None], [sizes[i]])[0])
                 rec = {"step": step}
                 if not (ok_i and np.all(np.isfinite(Hi)) and step <= max_step):
@@ -451,7 +484,8 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
         # masks of the last round were computed before its (sub-pixel) update; redo them only
         # when the homographies still moved noticeably
         sub = segment_plane([gray[i] for i in idx], H[idx],
-                            reference=int(np.flatnonzero(idx == reference)[0]))
+                            reference=int(np.flatnonzero(idx == reference)[0]),
+                            margin=canvas_margin)
         for k, i in enumerate(idx):
             masks[i] = sub[k]
     mean, _ = mean_warped_image([gray[i] for i in idx], H[idx], size=sizes[reference],

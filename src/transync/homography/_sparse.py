@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
 import cv2
 import numpy as np
 
-from .._validation import check_choice, check_int, check_positive
+from .._validation import as_generator, check_choice, check_int, check_positive
 
 __all__ = [
     "PairwiseHomographies",
@@ -162,7 +163,7 @@ def _all_pairs(n):
 def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio=0.8,
                                    threshold=3.0, max_iter=2000, confidence=0.995,
                                    min_inliers=20, n_features=4000,
-                                   features=None, refine=True) -> PairwiseHomographies:
+                                   features=None, refine=True, rng=0) -> PairwiseHomographies:
     """Pairwise homographies between views: SIFT, ratio test, robust fit (``cv2.findHomography``).
 
     Parameters
@@ -191,6 +192,9 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
         inlier residuals (at most ``threshold``, at least 0.5 px) and refit by least squares
         with Levenberg-Marquardt polish (a few rounds): points of nearby surfaces that RANSAC's
         fixed threshold admits no longer bias the homography.
+    rng : None, int or Generator, default=0
+        Seeds FLANN and RANSAC, pair by pair (pairs are fitted on up to 4 threads; results do
+        not depend on the number of threads). The default makes runs repeatable.
 
     Returns
     -------
@@ -222,32 +226,49 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
     if features is None:
         gray = [to_gray(im) for im in imgs]
         features = [sift_features(g, n_features=n_features) for g in gray]
-    matcher = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 64})
-    H = np.full((n, n, 3, 3), np.nan)
-    mask = np.zeros((n, n), dtype=bool)
-    weights = np.zeros((n, n))
-    failed, matches = [], {}
-    for i, j in pairs:
+    seed = int(as_generator(rng).integers(2**31 - 1 - len(pairs)))
+
+    def fit(k, i, j):
+        # one pair: ratio-test matches, robust fit; OpenCV's generator (FLANN's random trees,
+        # RANSAC) is per thread: seeded per pair, results do not depend on the threads
+        cv2.setRNGSeed(seed + k)
+        matcher = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 64})
         pi, di = features[i]
         pj, dj = features[j]
         m = _ratio_matches(di, dj, ratio, matcher)
         if len(m) < max(min_inliers, 4):
-            failed.append((i, j, f"{len(m)} ratio-test matches"))
-            continue
+            return None, f"{len(m)} ratio-test matches"
         src = pj[m[:, 1]]
         dst = pi[m[:, 0]]
         try:
             Hij, inl = cv2.findHomography(src, dst, _METHODS[method], threshold,
                                           maxIters=max_iter, confidence=confidence)
         except cv2.error as exc:  # degenerate configurations
-            failed.append((i, j, f"OpenCV error: {str(exc).strip()[:80]}"))
-            continue
+            return None, f"OpenCV error: {str(exc).strip()[:80]}"
         if Hij is None or inl is None:
-            failed.append((i, j, "no homography found"))
-            continue
+            return None, "no homography found"
         inl = inl.ravel().astype(bool)
         if refine and inl.sum() >= 8:
             Hij, inl = _refine_inliers(src, dst, Hij, inl, threshold)
+        return (Hij, dst, src, inl), None
+
+    jobs = [(k, int(i), int(j)) for k, (i, j) in enumerate(pairs)]
+    workers = min(len(jobs), os.cpu_count() or 1, 4)
+    if workers > 1 and len(jobs) >= 8:
+        # OpenCV's matching and RANSAC release the GIL: threads use every core
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            outcomes = list(pool.map(lambda job: fit(*job), jobs))
+    else:
+        outcomes = [fit(*job) for job in jobs]
+    H = np.full((n, n, 3, 3), np.nan)
+    mask = np.zeros((n, n), dtype=bool)
+    weights = np.zeros((n, n))
+    failed, matches = [], {}
+    for (_, i, j), (fit_ij, why) in zip(jobs, outcomes):
+        if fit_ij is None:
+            failed.append((i, j, why))
+            continue
+        Hij, dst, src, inl = fit_ij
         matches[(i, j)] = (dst, src, inl)
         k = int(inl.sum())
         if k < min_inliers or not np.all(np.isfinite(Hij)) or abs(np.linalg.det(Hij)) < 1e-12:

@@ -27,6 +27,7 @@ Usage::
 
     python benchmarks/pairwise.py --quick
     python benchmarks/pairwise.py --trials 20 --out benchmarks/results/pairwise.json
+    python benchmarks/pairwise.py --markdown benchmarks/results/pairwise.json   # README rows
 """
 
 from __future__ import annotations
@@ -193,6 +194,21 @@ def _print_row(row):
           f"{row['time_ratio']:6.1f} | {mem}", flush=True)
 
 
+def markdown(rows) -> str:
+    """The README's table rows for stored result rows (one line per row)."""
+    lines = []
+    for r in rows:
+        mem = "—"
+        if "peak_mib_transync" in r:
+            mem = f"{r['peak_mib_transync']:.1f} / {r['peak_mib_pygmtools']:.0f} MiB"
+        lines.append(
+            f"| {r['n']} | {'yes' if r['outliers'] else 'no'} | {r['deformation']} | "
+            f"{r['method']} | {r['acc_transync']:.3f} / {r['acc_pygmtools']:.3f} | "
+            f"{1e3 * r['time_transync_s']:.1f} ms / {1e3 * r['time_pygmtools_s']:.0f} ms | "
+            f"{r['time_ratio']:.1f}x | {mem} |")
+    return "\n".join(lines)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="small sizes, 3 trials")
@@ -204,7 +220,13 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-memory", action="store_true", help="skip the tracemalloc runs")
     ap.add_argument("--out", type=Path, default=None, help="write JSON results here")
+    ap.add_argument("--markdown", type=Path, nargs="+", default=None, metavar="JSON",
+                    help="print the Markdown table rows of stored results and exit")
     args = ap.parse_args(argv)
+    if args.markdown:
+        for path in args.markdown:
+            print(markdown(json.loads(path.read_text())["rows"]))
+        return
     sizes = args.sizes or ([10, 20] if args.quick else [10, 20, 50, 100])
     trials = args.trials or (3 if args.quick else 20)
     print("times: median seconds from point sets to assignment; accuracy: mean over trials; "

@@ -116,3 +116,23 @@ def test_killed_run_loses_at_most_the_trial_in_flight(tmp_path):
     assert rep.n_new == 20 - after_kill
     assert len(rep.records) == 20
     assert np.allclose(sorted(r["metrics"]["v"] for r in rep.records), [0] * 10 + [1] * 10)
+
+
+def test_finish_hook_files_listed_and_skipped_without_plot(tmp_path):
+    seen = []
+
+    def finish(records, summary, out_dir):
+        seen.append((len(records), len(summary)))
+        path = out_dir / "extra.md"
+        path.write_text(f"{len(records)} records\n")
+        return [path]
+
+    exp = _experiment(trials=2)
+    exp = Experiment(name=exp.name, trial=exp.trial, trials=2, sweeps=exp.sweeps, finish=finish)
+    rep = run_experiment(exp, tmp_path / "a", progress=False, plot=False)
+    assert rep.extra_files == () and seen == []
+    rep = run_experiment(exp, tmp_path / "b", progress=False)
+    assert rep.extra_files == (tmp_path / "b" / "extra.md",)
+    assert (tmp_path / "b" / "extra.md").read_text() == "12 records\n"
+    assert seen == [(12, len(rep.summary))]
+

@@ -59,6 +59,28 @@ def test_pipeline_small(scene):
     assert res.info["history"]
 
 
+def test_pipeline_callback_every_round(scene):
+    calls = []
+
+    def cb(it, H, masks):
+        calls.append((it, H, masks))
+        H[:] = np.nan          # copies: the pipeline must not see these edits
+        masks[0][:] = False
+
+    res = estimate_plane_homographies(scene.images, n_features=1000, max_iter=2, tol=0.0,
+                                      callback=cb)
+    assert [c[0] for c in calls] == [1, 2] == [h["iteration"] for h in res.info["history"]]
+    assert all(c[1].shape == (5, 3, 3) and len(c[2]) == 5 for c in calls)
+    assert np.all(np.isfinite(res.homographies)) and res.masks[0].any()
+    # round 1 flips the clutter pixels of the all-plane start; round 2 changes far fewer
+    ch = [h["mask_change"] for h in res.info["history"]]
+    assert 0.05 < ch[0] < 0.5 and ch[1] < ch[0] / 5
+    # the first call carries the segmentation computed from the sparse estimate
+    assert 0.5 < segmentation_scores(np.stack(calls[1][2]), scene.masks)["f1"] <= 1.0
+    with pytest.raises(TypeError, match="callback"):
+        estimate_plane_homographies(scene.images[:2], callback=3)
+
+
 def test_brenner_prefers_sharp():
     rng = np.random.default_rng(0)
     img = rng.random((64, 64))
@@ -210,7 +232,60 @@ def test_experiment_trial_and_build():
     assert out["max_error"] < 1.0 and out["brenner_ratio"] > 0.98
     out = trial({**cfg, "init_error": 2.0}, np.random.default_rng(0))
     assert np.isfinite(out["mean_error"])
+    # data sets override the scene parameters; sync_dense records the state before the dense
+    # step and the segmentation of every round (filled forward after convergence)
+    assert exp.sweeps[0].name == "datasets"
+    out = trial({**cfg, "dataset": "no clutter", "method": "sync_dense"},
+                np.random.default_rng(0))
+    for k in ("sparse_mean_error", "sparse_brenner_ratio", "precision", "recall", "f1"):
+        assert np.isfinite(out[k]), k
+    assert 1 <= out["n_iter"] <= 3
+    assert out["precision_r3"] == out["precision_r" + str(out["n_iter"])]
+    assert out["recall_r1"] > 0.95          # no clutter: (nearly) every pixel is plane
 
+
+def test_round_scores_fill_forward():
+    from transync.experiments.homography import _round_scores
+
+    truth = [np.array([[True, True], [False, False]])]
+    r1 = [np.array([[True, False], [True, False]])]      # P 1/2, R 1/2
+    r2 = [np.array([[True, True], [False, False]])]      # exact
+    out = _round_scores([r1, r2], truth, n_rounds=3)
+    assert (out["precision_r1"], out["recall_r1"]) == (0.5, 0.5)
+    assert out["precision_r2"] == out["precision_r3"] == 1.0 == out["recall_r3"]
+
+
+def test_experiment_thesis_outputs(tmp_path):
+    """Tables 5.1-5.5 and the figures from stored records (planted values), Fig. 5.1/5.4 from one
+    small scene."""
+    from transync.experiments.homography import finish
+
+    records = []
+    for d, err in (("1", 0.1), ("no clutter", 0.05)):
+        for t in range(2):
+            for method, m in (("ransac_to_reference", {"mean_error": 4 * err}),
+                              ("chained", {"mean_error": 8 * err}),
+                              ("sync_dense", {"mean_error": err, "sparse_mean_error": 2 * err,
+                                              "precision_r1": 0.9, "recall_r1": 0.8,
+                                              "precision": 0.95, "recall": 0.9, "f1": 0.92})):
+                m = {"max_error": 2 * m["mean_error"], "brenner_ratio": 1 - m["mean_error"] / 10,
+                     "sparse_brenner_ratio": 0.999, **m}
+                records.append({"sweep": "datasets", "error": None, "trial": t,
+                                "config": {"dataset": d, "method": method}, "metrics": m})
+    records.append({"sweep": "datasets", "error": "boom", "trial": 0,
+                    "config": {"dataset": "1", "method": "chained"}, "metrics": {}})
+    base = {"n_views": 4, "image_size": (200, 150), "max_angle": 20.0, "clutter": 0.2,
+            "features": 600}
+    paths = finish(records, [], tmp_path, base=base)
+    assert {p.name for p in paths} == {"tables_5_1-5_5.md", "fig_5_3a_datasets.png",
+                                       "fig_5_5_precision_recall.png",
+                                       "fig_5_1_5_4_segmentation.png"}
+    assert all(p.stat().st_size > 0 for p in paths)
+    md = (tmp_path / "tables_5_1-5_5.md").read_text()
+    # data set 1, mean corner error: RANSAC 0.4, chained 0.8, before dense 0.2, after 0.1
+    assert "| 1 | 2 | 0.400 ± 0.000 | 0.800 ± 0.000 | 0.200 ± 0.000 | 0.100 ± 0.000 |" in md
+    assert ("| no clutter | 0.900 ± 0.000 | 0.800 ± 0.000 | 0.950 ± 0.000 | 0.900 ± 0.000 | "
+            "0.920 ± 0.000 |") in md
 
 @pytest.mark.slow
 @pytest.mark.parametrize("difficulty", ["moderate", "hard"])

@@ -37,6 +37,8 @@ def _cmd_experiment(args) -> int:
     print(f"{report.n_new} new trials ({report.n_failed} failed) in {report.seconds:.1f} s; "
           f"{len(report.records)} stored in {out / 'results.sqlite'}")
     print(f"summary: {out / 'summary.md'}  plot: {report.figure}")
+    for path in report.extra_files:
+        print(f"also: {path}")
     return 1 if report.n_failed else 0
 
 
@@ -60,7 +62,8 @@ def _cmd_demo(args) -> int:
         failed += report.n_failed
         lines += [f"## {name}: {exp.description}", "",
                   f"{len(report.records)} trials, {report.n_failed} failed, "
-                  f"{report.seconds:.1f} s. Plot: `{name}/{report.figure.name}`", "",
+                  f"{report.seconds:.1f} s. Plot: `{name}/{report.figure.name}`"
+                  + "".join(f", `{name}/{p.name}`" for p in report.extra_files), "",
                   _headline(report.summary), ""]
     lines.append(f"Total time: {time.perf_counter() - t0:.1f} s")
     (out / "summary.md").write_text("\n".join(lines) + "\n")

@@ -31,6 +31,10 @@ def plot_experiment(experiment, summary: list[dict], path) -> Path:
                 panels.append((axes[r, c], sw, sw.metrics[c]))
             else:
                 axes[r, c].set_visible(False)
+    # one colour per method across all panels (sweeps may compare different subsets)
+    all_methods = list(dict.fromkeys(m for sw in experiment.sweeps for m in sw.methods))
+    cycle = plt.rcParams["axes.prop_cycle"].by_key().get("color", ["C0"])
+    colors = {m: cycle[k % len(cycle)] for k, m in enumerate(all_methods)}
     for ax, sw, metric in panels:
         for method in sw.methods:
             rows = [r for r in summary if r["sweep"] == sw.name and r["method"] == method
@@ -42,14 +46,21 @@ def plot_experiment(experiment, summary: list[dict], path) -> Path:
             x = np.asarray(xs, dtype=float) if numeric else np.arange(len(xs))
             mean = np.array([r["mean"] for r in rows])
             se = np.array([r["se"] for r in rows])
-            line, = ax.plot(x, mean, marker="o", ms=3.5, lw=1.5, label=method)
+            line, = ax.plot(x, mean, marker="o", ms=3.5, lw=1.5, label=method,
+                            color=colors[method])
             ax.fill_between(x, mean - se, mean + se, color=line.get_color(), alpha=0.2, lw=0)
             if not numeric:
-                ax.set_xticks(x, [json.dumps(v) for v in xs], rotation=30)
+                ax.set_xticks(x, [v if isinstance(v, str) else json.dumps(v) for v in xs],
+                              rotation=30)
         ax.set_xlabel(sw.xlabel or sw.variable)
         ax.set_ylabel(metric)
         ax.set_title(sw.name, fontsize=10)
-        if metric in ("seconds", "time") and ax.lines:
+        # log scale for times and for values spanning more than two decades (e.g. errors
+        # of a failing baseline next to sub-pixel ones)
+        ys = np.concatenate([ln.get_ydata() for ln in ax.lines]) if ax.lines else np.ones(1)
+        ys = ys[np.isfinite(ys)]
+        spans = ys.size and ys.min() > 0 and ys.max() / ys.min() > 100
+        if ax.lines and (metric in ("seconds", "time") or spans):
             ax.set_yscale("log")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, frameon=False)

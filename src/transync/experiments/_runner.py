@@ -74,6 +74,9 @@ class Experiment:
     trial: Callable[[dict, np.random.Generator], Mapping[str, float]]
     trials: int = 20
     description: str = ""
+    #: optional ``finish(records, summary, out_dir) -> list of paths``: figures and tables beyond
+    #: the standard plot (e.g. a thesis table built from the stored records); run with ``plot``
+    finish: Callable[[list, list, Path], Sequence[Path]] | None = None
 
 
 @dataclass(frozen=True)
@@ -88,6 +91,7 @@ class ExperimentReport:
     out_dir: Path
     figure: Path | None
     seconds: float
+    extra_files: tuple = ()
 
 
 def _config_key(sweep: str, config: Mapping) -> str:
@@ -178,7 +182,8 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
     progress : bool, default=True
         Show a tqdm progress bar.
     plot : bool, default=True
-        Write the figure.
+        Write the figure (and run ``experiment.finish``, whose files are listed in
+        ``extra_files``).
     """
     n_trials = check_int(trials if trials is not None else experiment.trials, "trials", minimum=1)
     workers = check_int(workers, "workers", minimum=1)
@@ -230,12 +235,15 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
     summary = summarize(experiment, records)
     _write_summary(summary, out)
     figure = None
+    extra: tuple = ()
     if plot:
         from ._plot import plot_experiment
 
         figure = plot_experiment(experiment, summary, out / f"{experiment.name}.png")
+        if experiment.finish is not None:
+            extra = tuple(Path(p) for p in experiment.finish(records, summary, out))
     return ExperimentReport(experiment.name, records, summary, len(todo), n_failed, out, figure,
-                            time.perf_counter() - t_start)
+                            time.perf_counter() - t_start, extra)
 
 
 class _NoBar:
@@ -312,7 +320,9 @@ def _write_summary(rows: list[dict], out: Path) -> None:
                            and json.dumps(r["value"], default=str) == v]
                     r = hit[0] if hit else None
                     cells.append("—" if r is None or not r["n"] else f"{r['mean']:.4g} ± {r['se']:.2g}")
-                lines.append(f"| {v} | " + " | ".join(cells) + " |")
+                label = json.loads(v)
+                lines.append(f"| {label if isinstance(label, str) else v} | "
+                             + " | ".join(cells) + " |")
     (out / "summary.md").write_text("\n".join(lines).lstrip() + "\n")
 
 

@@ -401,3 +401,32 @@ def test_pairwise_fits_repeatable_and_thread_independent(scene, monkeypatch):
         np.testing.assert_array_equal(a.mask, other.mask)
         np.testing.assert_array_equal(a.H[a.mask], other.H[other.mask])
         np.testing.assert_array_equal(a.weights, other.weights)
+
+
+def test_dense_edge_weight_relative_to_the_views_sparse_pairs():
+    """Re-synchronization: a view's dense edge weighs ``dense_weight`` x the sum of its sparse
+    weights, so scaling all inlier counts changes nothing, and the weight moves the result from
+    the sparse towards the dense estimate."""
+    from transync.homography._pipeline import _resynchronize
+    from transync.homography._sparse import PairwiseHomographies
+
+    n, size = 4, (320, 240)
+    rng = np.random.default_rng(0)
+    H = np.stack([np.eye(3)] + [np.eye(3) + np.diag([1, 1, 0]) @ rng.normal(0, 0.01, (3, 3))
+                                for _ in range(n - 1)])
+    H[1:, :2, 2] += rng.normal(0, 5, (n - 1, 2))
+    T = np.einsum("iab,jbc->ijac", np.linalg.inv(H), H)      # exact sparse pairs
+    mask = ~np.eye(n, dtype=bool)
+    shift = np.eye(3)
+    shift[0, 2] = 1.0                                         # dense estimate of view 2: 1 px off
+    H_dense = {i: (shift @ H[i] if i == 2 else H[i]) for i in range(n)}
+
+    def run(scale, dense_weight):
+        pw = PairwiseHomographies(H=T, mask=mask, weights=scale * mask.astype(float), failed=[])
+        out, _ = _resynchronize(H, H_dense, pw, np.arange(n), 0, [size] * n, "mean",
+                                robust=False, dense_weight=dense_weight)
+        return corner_error(out[2], H[2], image_size=size)
+
+    e = {w: run(50.0, w) for w in (0.01, 1.0, 100.0)}
+    assert e[0.01] < 0.05 < e[1.0] < e[100.0] < 1.0 and e[100.0] > 0.9
+    assert run(7 * 50.0, 1.0) == pytest.approx(e[1.0], rel=1e-6)

@@ -6,7 +6,8 @@ Methods on the same rendered scene (:func:`transync.datasets.make_planar_scene`)
 * ``chained`` - consecutive views matched and chained to the reference (the incremental,
   structure-from-motion-like baseline in place of the thesis's VisualSFM);
 * ``sync`` - :func:`transync.estimate_plane_homographies` without the dense step and
-  segmentation (view graph + robust SL(3) synchronization);
+  segmentation (sparse estimates of all pairs, or of a view graph beyond 40 views, and robust
+  SL(3) synchronization);
 * ``sync_dense`` - the whole pipeline (segmentation + dense ECC + re-synchronization). Its trials
   also record the synchronized sparse estimate of the same run (``sparse_*``: the state before
   the dense optimization) and the precision/recall of the plane masks after every round

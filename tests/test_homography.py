@@ -429,4 +429,7 @@ def test_dense_edge_weight_relative_to_the_views_sparse_pairs():
 
     e = {w: run(50.0, w) for w in (0.01, 1.0, 100.0)}
     assert e[0.01] < 0.05 < e[1.0] < e[100.0] < 1.0 and e[100.0] > 0.9
+    # equal say: the weighted least-squares compromise of this graph (1 px dense offset of view
+    # 2 against exact sparse pairs, all views with 3 pairs) puts view 2 at 3/7 px
+    assert e[1.0] == pytest.approx(3 / 7, rel=1e-6)
     assert run(7 * 50.0, 1.0) == pytest.approx(e[1.0], rel=1e-6)

@@ -367,8 +367,10 @@ def _plot_segmentation_example(base, path) -> Path:
     n = scene.n_views
     view = max(range(n // 2, n), key=lambda i: float((~scene.masks[i]).mean()))
     w, h = scene.image_size
-    warped = cv2.warpPerspective(scene.images[view], res.homographies[view], (w, h),
-                                 flags=cv2.INTER_LINEAR, borderValue=0)
+    Hv = res.homographies[view]
+    warped = (cv2.warpPerspective(scene.images[view], Hv, (w, h), flags=cv2.INTER_LINEAR,
+                                  borderValue=0)
+              if np.all(np.isfinite(Hv)) else np.zeros((h, w), np.uint8))   # view not registered
     first = rounds[0][view] if rounds else res.masks[view]
     final = res.masks[view]
     truth = scene.masks[view]

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
+
+from ._runner import value_label
 
 __all__ = ["plot_experiment"]
 
@@ -50,8 +51,7 @@ def plot_experiment(experiment, summary: list[dict], path) -> Path:
                             color=colors[method])
             ax.fill_between(x, mean - se, mean + se, color=line.get_color(), alpha=0.2, lw=0)
             if not numeric:
-                ax.set_xticks(x, [v if isinstance(v, str) else json.dumps(v) for v in xs],
-                              rotation=30)
+                ax.set_xticks(x, [value_label(v) for v in xs], rotation=30)
         ax.set_xlabel(sw.xlabel or sw.variable)
         ax.set_ylabel(metric)
         ax.set_title(sw.name, fontsize=10)

@@ -262,6 +262,20 @@ def _progress(total: int, name: str, enabled: bool):
     return tqdm(total=total, desc=f"experiment {name}", unit="trial", dynamic_ncols=True)
 
 
+def mean_se(values) -> tuple[float, float, int]:
+    """Mean, standard error and count of the finite values (None skipped); (nan, 0, 0) if none."""
+    vals = np.array([v for v in values if v is not None], dtype=float)
+    vals = vals[np.isfinite(vals)]
+    n = vals.size
+    return (float(vals.mean()) if n else math.nan,
+            float(vals.std(ddof=1) / math.sqrt(n)) if n > 1 else 0.0, int(n))
+
+
+def value_label(value) -> str:
+    """How a swept value is written in tables and tick labels (strings without JSON quotes)."""
+    return value if isinstance(value, str) else json.dumps(value, default=str)
+
+
 def summarize(experiment: Experiment, records: list[dict]) -> list[dict]:
     """Mean and standard error per (sweep, value, method, metric) over successful trials."""
     by_sweep = {sw.name: sw for sw in experiment.sweeps}
@@ -284,14 +298,10 @@ def summarize(experiment: Experiment, records: list[dict]) -> list[dict]:
             gkey = (sw.name, json.dumps(value, default=str), method)
             ms = groups.get(gkey, [])
             for metric in metrics:
-                vals = np.array([m[metric] for m in ms if metric in m and m[metric] is not None],
-                                dtype=float)
-                vals = vals[np.isfinite(vals)]
-                n = vals.size
+                mean, se, n = mean_se(m.get(metric) for m in ms)
                 rows.append(dict(sweep=sw.name, variable=sw.variable, value=value, method=method,
-                                 metric=metric, mean=float(vals.mean()) if n else math.nan,
-                                 se=float(vals.std(ddof=1) / math.sqrt(n)) if n > 1 else 0.0,
-                                 n=int(n), failed=failures.get(gkey, 0)))
+                                 metric=metric, mean=mean, se=se, n=n,
+                                 failed=failures.get(gkey, 0)))
     return rows
 
 
@@ -320,9 +330,7 @@ def _write_summary(rows: list[dict], out: Path) -> None:
                            and json.dumps(r["value"], default=str) == v]
                     r = hit[0] if hit else None
                     cells.append("—" if r is None or not r["n"] else f"{r['mean']:.4g} ± {r['se']:.2g}")
-                label = json.loads(v)
-                lines.append(f"| {label if isinstance(label, str) else v} | "
-                             + " | ".join(cells) + " |")
+                lines.append(f"| {value_label(json.loads(v))} | " + " | ".join(cells) + " |")
     (out / "summary.md").write_text("\n".join(lines).lstrip() + "\n")
 
 

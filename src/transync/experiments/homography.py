@@ -36,7 +36,6 @@ image (estimated vs true homographies, over the true plane masks), segmentation 
 from __future__ import annotations
 
 import functools
-import math
 import time
 from pathlib import Path
 
@@ -52,7 +51,7 @@ from ..homography._metrics import segmentation_scores
 from ..homography._pipeline import estimate_plane_homographies
 from ..homography._sparse import PairwiseHomographies
 from ..synchronization import synchronize_homographies
-from ._runner import Experiment, Sweep
+from ._runner import Experiment, Sweep, mean_se
 
 METHODS = ("ransac_to_reference", "chained", "sync", "sync_dense")
 
@@ -211,15 +210,8 @@ def build(*, quick: bool = False) -> Experiment:
 
 
 # --------------------------------------------------------------------------- thesis outputs
-def _mean_se(values):
-    v = np.asarray([x for x in values if x is not None and np.isfinite(x)], float)
-    if v.size == 0:
-        return math.nan, math.nan, 0
-    return float(v.mean()), float(v.std(ddof=1) / math.sqrt(v.size)) if v.size > 1 else 0.0, v.size
-
-
 def _cell(values, fmt="{:.4f}"):
-    m, se, n = _mean_se(values)
+    m, se, n = mean_se(values)
     if n == 0:
         return "—"
     return fmt.format(m) if n == 1 else (fmt + " ± " + fmt).format(m, se)
@@ -307,7 +299,7 @@ def _plot_datasets(data, path) -> Path:
     for ax, key, label in ((axes[0], "mean_error", "mean corner error (px)"),
                            (axes[1], "max_error", "worst-view corner error (px)")):
         for k, (title, method, prefix) in enumerate(_COLUMNS):
-            stats = [_mean_se([m.get(prefix + key) for m in data[d].get(method, [])])
+            stats = [mean_se([m.get(prefix + key) for m in data[d].get(method, [])])
                      for d in names]
             ax.bar(x + (k - (len(_COLUMNS) - 1) / 2) * width, [s[0] for s in stats], width,
                    yerr=[s[1] for s in stats], label=title, capsize=2)
@@ -332,8 +324,8 @@ def _plot_precision_recall(data, path) -> Path:
     for ax, key in ((axes[0], "precision"), (axes[1], "recall")):
         for d, by_method in data.items():
             ms = by_method.get("sync_dense", [])
-            stats = [_mean_se([m.get(f"{key}_r{k}") for m in ms]) for k in rounds]
-            stats.append(_mean_se([m.get(key) for m in ms]))
+            stats = [mean_se([m.get(f"{key}_r{k}") for m in ms]) for k in rounds]
+            stats.append(mean_se([m.get(key) for m in ms]))
             mean = np.array([s[0] for s in stats])
             se = np.array([s[1] for s in stats])
             xs = np.arange(len(stats))

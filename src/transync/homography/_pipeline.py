@@ -229,8 +229,9 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
     the frame of the mean warped image (or the reference view itself); they are synchronized
     with robust SL(3) synchronization together with the sparse RANSAC pairs (each view's
     dense edge weighted ``dense_weight`` times the sum of its sparse pairs' inlier counts),
-    with the gauge fixed on the reference view. Views whose dense update diverged keep their sparse edges only, so they stay
-    consistent with their neighbours instead of being left at their previous estimate.
+    with the gauge fixed on the reference view. Views whose dense update diverged keep their
+    sparse edges only, so they stay consistent with their neighbours instead of being left at
+    their previous estimate.
 
     Parameters
     ----------

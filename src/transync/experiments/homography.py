@@ -47,7 +47,7 @@ from ..homography._evaluate import (
     evaluate_alignment,
     to_reference_homographies,
 )
-from ..homography._metrics import segmentation_scores
+from ..metrics import segmentation_scores
 from ..homography._pipeline import estimate_plane_homographies
 from ..homography._sparse import PairwiseHomographies
 from ..synchronization import synchronize_homographies

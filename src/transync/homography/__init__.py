@@ -3,7 +3,7 @@ plane segmentation and the accuracy measures used to evaluate them."""
 
 from ._dense import mean_warped_image, refine_homography_ecc
 from ._evaluate import chained_homographies, evaluate_alignment, to_reference_homographies
-from ._metrics import (
+from ..metrics import (
     brenner_focus,
     corner_accuracy,
     corner_error,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._dense import mean_warped_image
-from ._metrics import brenner_focus, corner_error, pairwise_corner_error, segmentation_scores
+from ..metrics import brenner_focus, corner_error, pairwise_corner_error, segmentation_scores
 from ._sparse import estimate_pairwise_homographies, to_gray
 
 __all__ = ["chained_homographies", "evaluate_alignment", "to_reference_homographies"]

@@ -38,6 +38,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .._validation import check_array, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning, DegenerateInputError
+from ..geometry import normalization_matrix, normalize_determinant
 
 __all__ = [
     "LinearMapSyncResult",
@@ -124,29 +125,6 @@ class LinearMapSyncResult:
 # ----------------------------------------------------------------------------------------------
 # helpers
 # ----------------------------------------------------------------------------------------------
-def normalize_determinant(A):
-    """Scale square matrices to determinant +1 (real d-th root); works on stacks (..., d, d).
-
-    For odd ``d`` a negative determinant is fixed by a negative scale (the projective class is
-    unchanged). Singular matrices give NaN.
-
-    >>> import numpy as np
-    >>> H = normalize_determinant(2.0 * np.eye(3))
-    >>> bool(np.allclose(H, np.eye(3)))
-    True
-    """
-    A = np.asarray(A, dtype=float)
-    d = A.shape[-1]
-    with np.errstate(divide="ignore", invalid="ignore"):   # NaN maps (disconnected) stay NaN
-        det = np.linalg.det(A)
-        if d % 2:
-            scale = np.sign(det) * np.abs(det) ** (1.0 / d)
-        else:
-            scale = np.abs(det) ** (1.0 / d)
-        scale = np.where(det == 0, np.nan, scale)
-        return A / scale[..., None, None]
-
-
 def _residual(A, B, kind: str) -> np.ndarray:
     """Discrepancy between stacks of maps A and B (``B`` is the estimate); shape A.shape[:-2]."""
     if kind == "corner":
@@ -553,17 +531,6 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
     return LinearMapSyncResult(maps=maps, reference=reference, group=group, mask=obs,
                                weights=weights_out, inliers=inliers, residuals=residuals,
                                objective=objective, n_iter=n_iter, converged=converged, info=info)
-
-
-def normalization_matrix(image_size) -> np.ndarray:
-    """Hartley-style similarity taking pixel coordinates of a ``(width, height)`` image to ~[-1, 1].
-
-    >>> normalization_matrix((640, 480)) @ [320, 240, 1]
-    array([0., 0., 1.])
-    """
-    w, h = (float(v) for v in image_size)
-    s = 2.0 / max(w, h)
-    return np.array([[s, 0.0, -s * w / 2], [0.0, s, -s * h / 2], [0.0, 0.0, 1.0]])
 
 
 def _image_sizes(image_size, n):

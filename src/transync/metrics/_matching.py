@@ -1,26 +1,15 @@
-"""Evaluation metrics for matchings.
+"""Metrics for matchings: accuracy, precision/recall/F1, affinity score, cycle inconsistency.
 
 Assignments follow :mod:`transync.permutations`: ``assignment[u] = v``, ``-1`` = unmatched.
 A ground truth ``truth`` has the same form; ``truth[u] = -1`` marks an outlier node of the first
 object (no true partner).
-
-Examples
---------
->>> import numpy as np
->>> from transync.metrics import matching_accuracy, matching_precision_recall
->>> truth = np.array([0, 1, 2, -1])         # node 3 is an outlier
->>> pred = np.array([0, 2, 1, 3])
->>> matching_accuracy(pred, truth)
-0.333...
->>> matching_precision_recall(pred, truth)
-{'precision': 0.25, 'recall': 0.333..., 'f1': 0.285...}
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .permutations import assignment_to_matrix, check_assignment, cycle_inconsistency
+from ..permutations import assignment_to_matrix, check_assignment, cycle_inconsistency
 
 __all__ = [
     "affinity_score",

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from .._validation import check_array
+from ..geometry import image_corners as _corners
+from ..geometry import transfer_points as _transfer
 
 __all__ = [
     "brenner_focus",
@@ -13,17 +15,6 @@ __all__ = [
     "pairwise_corner_error",
     "segmentation_scores",
 ]
-
-
-def _corners(size):
-    w, h = float(size[0]), float(size[1])
-    return np.array([[0.0, 0.0], [w - 1, 0.0], [w - 1, h - 1], [0.0, h - 1]])
-
-
-def _transfer(H, pts):
-    p = pts @ H[..., :2, :2].swapaxes(-1, -2) + H[..., None, :2, 2]
-    z = pts @ H[..., 2, :2][..., :, None] + H[..., 2, 2][..., None, None]
-    return p / z
 
 
 def _sizes(image_size, n):

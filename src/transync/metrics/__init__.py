@@ -1,0 +1,44 @@
+"""Evaluation metrics: one home for every measure the library reports.
+
+* Matchings (:mod:`._matching`): :func:`matching_accuracy`, :func:`matching_precision_recall`,
+  :func:`affinity_score`, :func:`cycle_inconsistency`.
+* Plane homographies (:mod:`._homography`): :func:`corner_error`, :func:`pairwise_corner_error`,
+  :func:`corner_accuracy`, :func:`brenner_focus`, :func:`segmentation_scores`.
+
+Examples
+--------
+>>> import numpy as np
+>>> from transync.metrics import matching_accuracy, matching_precision_recall
+>>> truth = np.array([0, 1, 2, -1])         # node 3 is an outlier
+>>> pred = np.array([0, 2, 1, 3])
+>>> matching_accuracy(pred, truth)
+0.333...
+>>> matching_precision_recall(pred, truth)
+{'precision': 0.25, 'recall': 0.333..., 'f1': 0.285...}
+"""
+
+from ._homography import (
+    brenner_focus,
+    corner_accuracy,
+    corner_error,
+    pairwise_corner_error,
+    segmentation_scores,
+)
+from ._matching import (
+    affinity_score,
+    cycle_inconsistency,
+    matching_accuracy,
+    matching_precision_recall,
+)
+
+__all__ = [
+    "affinity_score",
+    "brenner_focus",
+    "corner_accuracy",
+    "corner_error",
+    "cycle_inconsistency",
+    "matching_accuracy",
+    "matching_precision_recall",
+    "pairwise_corner_error",
+    "segmentation_scores",
+]

@@ -49,6 +49,10 @@ def check_array(x, name: str, *, ndim: int | Sequence[int] | None = None, dtype=
     """Convert ``x`` to an array of ``dtype`` and check its number of dimensions and finiteness."""
     if x is None:
         raise TypeError(f"`{name}` must be an array, got None")
+    if np.iscomplexobj(x) and np.dtype(dtype).kind != "c":
+        raise TypeError(f"`{name}` must be real, got complex values ({_describe(x)})")
+    if isinstance(x, (str, bytes)):
+        raise TypeError(f"`{name}` must be an array, got {type(x).__name__} {x!r:.40}")
     try:
         arr = np.array(x, dtype=dtype, copy=copy) if copy else np.asarray(x, dtype=dtype)
     except (TypeError, ValueError) as exc:
@@ -141,7 +145,7 @@ def check_probability(value, name: str) -> float:
 
 
 def check_choice(value, name: str, choices) -> str:
-    if value not in choices:
+    if not isinstance(value, str) or value not in choices:
         opts = ", ".join(repr(c) for c in choices)
         raise ValueError(f"`{name}` must be one of {opts}, got {value!r}")
     return value

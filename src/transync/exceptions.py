@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
-__all__ = ["ConvergenceWarning", "DegenerateInputError", "TransyncError"]
+__all__ = [
+    "ConvergenceWarning",
+    "DegenerateInputError",
+    "ExperimentStoreError",
+    "TransyncError",
+    "UnlinkedViewsWarning",
+]
 
 
 class TransyncError(Exception):
@@ -15,3 +21,11 @@ class DegenerateInputError(TransyncError, ValueError):
 
 class ConvergenceWarning(UserWarning):
     """An iterative method stopped at its iteration limit before meeting its tolerance."""
+
+
+class ExperimentStoreError(TransyncError):
+    """An experiment's result store cannot be used (corrupted, locked by another run, unwritable)."""
+
+
+class UnlinkedViewsWarning(UserWarning):
+    """Some views could not be linked to the reference; their estimates are missing (NaN)."""

@@ -3,7 +3,9 @@
 In one run, on the same moderate (+-25 deg, ~20 % clutter) and hard (+-45 deg, ~33 % clutter)
 scenes: the OpenCV baselines (every view SIFT + RANSAC to the reference; consecutive views
 chained) against :func:`transync.estimate_plane_homographies` without the dense step (``sync``)
-and in full (``sync_dense``). Reports mean / max corner error of the non-reference views, the
+and in full (``sync_dense``), each through the trial function of ``transync experiment
+homography`` (so the benchmark and the experiment measure the same thing; ``sync`` is its own
+run with ``dense=False, segment=False``, timed like the others). Reports mean / max corner error of the non-reference views, the
 error over all overlapping pairs, accuracy at 1 px, the Brenner ratio of the mean warped image
 (estimated vs true homographies over the true masks; ``own`` = estimated homographies and masks
 vs the true ones), segmentation precision / recall / F1, time, the load average, and the ratios
@@ -20,43 +22,42 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import time
 
 import numpy as np
 
-from transync.datasets._scenes import make_planar_scene
-from transync.homography._evaluate import (
-    chained_homographies,
-    evaluate_alignment,
-    to_reference_homographies,
-)
-from transync.homography._pipeline import estimate_plane_homographies
+from transync.datasets import make_planar_scene
+from transync.experiments.homography import METHODS, trial
+
+#: the scene presets of make_planar_scene, as (max_angle, clutter) of the experiment's trials
+PRESETS = {"moderate": (25.0, 0.20), "hard": (45.0, 0.33)}
 
 
 def run_scene(difficulty, seed, n_views=20, size=(640, 480)):
-    scene = make_planar_scene(n_views, image_size=size, difficulty=difficulty, rng=seed)
+    """Every method of ``transync experiment homography`` on one scene: the experiment's own
+    :func:`~transync.experiments.homography.trial` (same scene for every method: rendered from
+    ``seed``), with all metrics; ``seconds`` is the estimation only, timed alike for every method.
+    """
+    max_angle, clutter = PRESETS[difficulty]
+    config = {"n_views": n_views, "image_size": tuple(size), "max_angle": max_angle,
+              "clutter": clutter, "features": 2000, "all_metrics": True}
     rows = []
-
-    def add(method, H, seconds, masks=None):
-        ev = evaluate_alignment(scene.images, H, scene.homographies, masks_true=scene.masks,
-                                masks_est=masks, pairwise=True)
-        rows.append({"difficulty": difficulty, "seed": seed, "method": method,
-                     "seconds": seconds, "load": os.getloadavg()[0], **ev})
-
-    t = time.perf_counter()
-    H = to_reference_homographies(scene.images)
-    add("ransac_to_reference", H, time.perf_counter() - t)
-    t = time.perf_counter()
-    H = chained_homographies(scene.images)
-    add("chained", H, time.perf_counter() - t)
-    t = time.perf_counter()
-    res = estimate_plane_homographies(scene.images)
-    sec = time.perf_counter() - t
-    add("sync", res.sparse_homographies, res.info["seconds"]["features"]
-        + res.info["seconds"]["matching"] + res.info["seconds"]["sync"])
-    add("sync_dense", res.homographies, sec, masks=res.masks)
-    rows[-1]["rounds"] = res.n_iter
+    for method in METHODS:
+        out = trial({**config, "method": method}, np.random.default_rng(seed))
+        row = {"difficulty": difficulty, "seed": seed, "method": method,
+               "load": os.getloadavg()[0], **out}
+        if "n_iter" in out:
+            row["rounds"] = out["n_iter"]
+        rows.append(row)
     return rows
+
+
+def check_scene(difficulty, seed, n_views=20, size=(640, 480)) -> bool:
+    """The trials render exactly the preset scene of ``make_planar_scene(difficulty=...)``."""
+    max_angle, clutter = PRESETS[difficulty]
+    a = make_planar_scene(n_views, image_size=size, difficulty=difficulty, rng=seed)
+    b = make_planar_scene(n_views, image_size=size, max_angle=max_angle, clutter=clutter,
+                          rng=np.random.default_rng(seed))
+    return all(np.array_equal(x, y) for x, y in zip(a.images, b.images))
 
 
 def _fmt(v, nd=3):
@@ -73,6 +74,8 @@ def main(argv=None):
     seeds = [0] if args.quick else args.seeds
     diffs = ["moderate"] if args.quick else args.difficulty
     rows = []
+    if not check_scene(diffs[0], seeds[0], size=(160, 120)):
+        raise SystemExit("the experiment's scenes differ from the make_planar_scene presets")
     for d in diffs:
         for s in seeds:
             rows += run_scene(d, s)

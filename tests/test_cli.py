@@ -44,7 +44,7 @@ def _toy_trial(config, rng):
 def toy_registry(monkeypatch):
     """A tiny experiment registered under the name 'toy' (the real ones take ~10 s quick)."""
     from transync.experiments import REGISTRY
-    from transync.experiments._runner import Experiment, Sweep
+    from transync.experiments import Experiment, Sweep
 
     mod = types.ModuleType("transync_toy_experiment")
     mod.__doc__ = "Toy experiment for CLI tests."
@@ -92,6 +92,206 @@ def test_python_dash_m_entry_point():
     assert r.returncode == 0 and r.stdout.startswith("transync ")
 
 
-def test_missing_input_file_is_a_clear_error(tmp_path):
-    with pytest.raises(SystemExit, match="no such file"):
-        main(["match", str(tmp_path / "nope.txt"), str(tmp_path / "nope2.txt")])
+def test_missing_input_file_is_a_clear_error(tmp_path, capsys):
+    assert main(["match", str(tmp_path / "nope.txt"), str(tmp_path / "nope2.txt")]) == 2
+    err = capsys.readouterr().err
+    assert err == f"transync: error: no such file: {tmp_path / 'nope.txt'}\n"
+
+
+def test_help_does_not_import_heavy_modules():
+    code = ("import sys\nfrom transync.cli import main\ntry:\n    main(['--help'])\n"
+            "except SystemExit:\n    pass\n"
+            "print(sorted(m for m in ('cv2', 'matplotlib', 'skimage') if m in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and r.stdout.strip().endswith("[]"), r.stdout + r.stderr
+
+
+@pytest.fixture
+def bad_inputs(tmp_path):
+    import cv2
+
+    (tmp_path / "empty.txt").write_text("")
+    (tmp_path / "header.csv").write_text("x,y\n1,2\n3,4\n")
+    (tmp_path / "ragged.txt").write_text("1 2\n3 4\n\n5 6 7\n")
+    (tmp_path / "nan.txt").write_text("1 2\nnan 4\n")
+    cv2.imwrite(str(tmp_path / "img.png"), np.full((8, 8), 128, np.uint8))
+    np.savetxt(tmp_path / "p2.txt", np.arange(10.0).reshape(5, 2))
+    np.savetxt(tmp_path / "p3.txt", np.arange(15.0).reshape(5, 3))
+    np.save(tmp_path / "vec.npy", np.arange(4.0))
+    (tmp_path / "empty.json").write_text("{}")
+    (tmp_path / "broken.json").write_text('{"pairs": [\n[0, 1, [0, 1]],\n')
+    (tmp_path / "badpair.json").write_text('{"pairs": [[0, 1, "abc"]]}')
+    (tmp_path / "one.txt").write_text("1 1\n")
+    (tmp_path / "near.txt").write_text("0 0\n1 0\n")
+    (tmp_path / "far.txt").write_text("0 0\n1000 0\n")
+    return tmp_path
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["sync", "{d}/empty.json"], r"empty\.json: expected a JSON object \{\"pairs\""),
+    (["sync", "{d}/broken.json"], r"broken\.json, line 3: not valid JSON"),
+    (["sync", "{d}/badpair.json"], r"badpair\.json: pairs\[0\] must be \[i, j, assignment\]"),
+    (["demo", "--experiments", "foo", "--out", "{d}/demo"],
+     r"unknown experiment 'foo'; choose from homography, pairwise, sync"),
+    (["experiment", "nope"], r"unknown experiment 'nope'; choose from"),
+    (["match", "{d}/empty.txt", "{d}/p2.txt"], r"empty\.txt: no points found"),
+    (["match", "{d}/header.csv", "{d}/p2.txt"],
+     r"header\.csv, line 1: expected numbers, got 'x,y'"),
+    (["match", "{d}/ragged.txt", "{d}/p2.txt"],
+     r"ragged\.txt, line 4: expected 2 coordinates \(as on line 1\), got 3"),
+    (["match", "{d}/nan.txt", "{d}/p2.txt"], r"nan\.txt, line 2: coordinates must be finite"),
+    (["match", "{d}/img.png", "{d}/p2.txt"], r"img\.png: not a text file of points"),
+    (["match", "{d}/vec.npy", "{d}/p2.txt"], r"vec\.npy: expected an array of shape"),
+    (["match", "{d}/one.txt", "{d}/p2.txt"], r"need at least 2 points in each set"),
+    (["match", "{d}/near.txt", "{d}/far.txt", "--sigma2", "1e-6"],
+     r"(edge affinity is zero for every candidate pair|`sigma2`=1e-06 is too small)"),
+    (["match", "{d}/p2.txt", "{d}/p3.txt"],
+     r"different dimensions: .*p2\.txt has 2 coordinates a point, .*p3\.txt has 3"),
+])
+def test_errors_are_one_line_and_exit_2(bad_inputs, capsys, argv, expected):
+    import re
+
+    argv = [a.format(d=bad_inputs) for a in argv]
+    assert main(argv) == 2
+    cap = capsys.readouterr()
+    assert cap.out == ""
+    lines = cap.err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("transync: error: "), cap.err
+    assert re.search(expected, lines[0]), lines[0]
+    assert not (bad_inputs / "demo").exists()
+
+
+@pytest.mark.parametrize("argv", [["experiment", "pairwise", "--trials", "0"],
+                                  ["experiment", "pairwise", "--workers", "-1"],
+                                  ["match", "a", "b", "--sigma2", "nan"],
+                                  ["match", "a", "b", "--method", "bogus"]])
+def test_bad_options_are_usage_errors(capsys, argv):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith("transync: error: argument --"), err
+    assert "(see `transync " in err
+
+
+def test_debug_shows_the_traceback_and_unexpected_errors_stay_one_line(bad_inputs, capsys,
+                                                                       monkeypatch):
+    assert main(["--debug", "sync", str(bad_inputs / "empty.json")]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback (most recent call last)" in err
+    assert err.splitlines()[-1].startswith("transync: error: ")
+    import transync.matching
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("planted")
+
+    monkeypatch.setattr(transync.matching, "match_graphs", boom)
+    p = str(bad_inputs / "p2.txt")
+    assert main(["match", p, p]) == 2
+    err = capsys.readouterr().err
+    assert err == ("transync: error: unexpected RuntimeError: planted (please report it; rerun "
+                   "with --debug for the traceback)\n")
+
+
+@pytest.mark.parametrize("method", ["hungarian", "sinkhorn"])
+def test_linear_methods_use_a_unary_term_and_recover_shuffled_points(tmp_path, method):
+    rng = np.random.default_rng(3)
+    P = rng.random((12, 2)) * 500
+    perm = rng.permutation(12)
+    np.savetxt(tmp_path / "a.txt", P)
+    np.savetxt(tmp_path / "b.txt", P[perm])
+    out = tmp_path / "m.json"
+    assert main(["match", str(tmp_path / "a.txt"), str(tmp_path / "b.txt"), "--method", method,
+                 "--out", str(out)]) == 0
+    res = json.loads(out.read_text())
+    truth = np.argsort(perm)                      # b[truth[i]] == a[i]
+    assert res["assignment"] == truth.tolist()
+    assert res["unary"].startswith("first-order linearization")
+
+
+def test_experiment_seed_is_not_mistaken_for_stored_work(tmp_path, capsys, toy_registry):
+    out = tmp_path / "exp"
+    args = ["experiment", "toy", "--quick", "--out", str(out), "--no-progress", "--no-progress"]
+    assert main(args) == 0
+    assert capsys.readouterr().out.startswith("8 new trials")
+    assert main([*args, "--seed", "1"]) == 0
+    assert capsys.readouterr().out.startswith("8 new trials (0 failed)")
+    assert main([*args, "--seed", "1"]) == 0
+    assert "0 new trials (0 failed)" in capsys.readouterr().out
+
+
+def test_corrupted_store_is_one_line(tmp_path, capsys, toy_registry):
+    out = tmp_path / "exp"
+    out.mkdir()
+    (out / "results.sqlite").write_text("garbage" * 50)
+    assert main(["experiment", "toy", "--quick", "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"transync: error: {out / 'results.sqlite'} is not a readable")
+    assert len(err.splitlines()) == 1 and "salvage" in err
+
+
+@pytest.fixture(scope="module")
+def scene():
+    from transync.datasets import make_planar_scene
+
+    return make_planar_scene(5, image_size=(320, 240), difficulty="moderate", rng=0)
+
+
+def test_cli_homography(tmp_path, scene):
+    import cv2
+
+    from transync.metrics import corner_error
+
+    paths = []
+    for k, im in enumerate(scene.images[:4]):
+        p = tmp_path / f"v{k}.png"
+        cv2.imwrite(str(p), im)
+        paths.append(str(p))
+    out = tmp_path / "out"
+    assert main(["homography", *paths, "--reference", "0", "--out", str(out),
+                 "--features", "800", "--max-iter", "1"]) == 0
+    data = json.loads((out / "homographies.json").read_text())
+    H = np.array(data["homographies"])
+    assert H.shape == (4, 3, 3)
+    assert corner_error(H, scene.homographies[:4], image_size=(320, 240)).max() < 0.5
+    assert len(list((out / "masks").glob("*.png"))) == 4
+    assert (out / "mean_warped.png").exists() and (out / "report.md").exists()
+
+
+def test_cli_homography_failures_leave_no_output_folder(tmp_path, capsys):
+    import re
+
+    import cv2
+
+    paths = []
+    for k in range(2):                      # blank images: nothing to relate
+        p = tmp_path / f"blank{k}.png"
+        cv2.imwrite(str(p), np.full((120, 160), 90, np.uint8))
+        paths.append(str(p))
+    out = tmp_path / "out"
+    assert main(["homography", *paths, "--out", str(out), "--no-dense"]) == 2
+    err = capsys.readouterr().err
+    assert re.match(r"transync: error: .*(no two of the 2 images could be related|no pair of "
+                    r"the 2 views could be matched)", err), err
+    assert len(err.splitlines()) == 1 and not out.exists()
+    (tmp_path / "notes.txt").write_text("hello")
+    assert main(["homography", paths[0], str(tmp_path / "notes.txt"), "--out", str(out)]) == 2
+    assert "notes.txt: not an image format OpenCV can read" in capsys.readouterr().err
+    assert main(["homography", paths[0], str(tmp_path / "gone.png"), "--out", str(out)]) == 2
+    assert "no such image file" in capsys.readouterr().err
+    assert main(["homography", *paths, "--reference", "2", "--out", str(out)]) == 2
+    assert "--reference must be an image index in [0, 1], got 2" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_datasets_command(monkeypatch, tmp_path, capsys):
+    monkeypatch.setenv("TRANSYNC_DATA", str(tmp_path / "nowhere"))
+    assert main(["datasets"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("transync: error: TRANSYNC_DATA=") and "does not exist" in err
+    (tmp_path / "graf").mkdir()
+    (tmp_path / "graf" / "img1.ppm").write_bytes(b"P6")
+    monkeypatch.setenv("TRANSYNC_DATA", str(tmp_path))
+    assert main(["datasets"]) == 0
+    out = capsys.readouterr().out
+    assert f"data home: {tmp_path}" in out and "graf" in out and "1 files" in out

@@ -72,3 +72,33 @@ def test_graph_collection_flip_changes_topology():
 def test_generator_validation(kw, msg):
     with pytest.raises((ValueError, TypeError), match=msg):
         make_pairwise_problem(**kw)
+
+
+def test_collection_ground_truth_is_a_multimatching():
+    c = make_graph_collection(n_graphs=3, n_inliers=5, n_outliers=2, rng=1)
+    from transync.permutations import MultiMatching
+    assert isinstance(c.ground_truth, MultiMatching) and c.ground_truth.n_universe == 5
+    for i in range(3):
+        for j in range(3):
+            np.testing.assert_array_equal(c.truth(i, j), c.ground_truth.pairwise(i, j))
+    assert int((c.truth(0, 1) >= 0).sum()) == 5            # outliers have no partner
+
+
+@pytest.mark.parametrize("fn, kwargs, exc, match", [
+    (make_graph_collection, {"n_graphs": 1}, ValueError, "`n_graphs` must be >= 2"),
+    (make_graph_collection, {"n_graphs": 10**4, "n_inliers": 1000}, ValueError,
+     "dense adjacency entries"),
+    (make_graph_collection, {"flip": 2.0}, ValueError, r"`flip` must lie in \[0, 1\]"),
+    (make_graph_collection, {"shuffle": 1}, TypeError, "`shuffle` must be a bool"),
+    (make_graph_collection, {"rng": 1.5}, TypeError, "`rng` must be None"),
+    (make_pairwise_problem, {"n_inliers": 0}, ValueError, "`n_inliers` must be >= 1"),
+    (make_pairwise_problem, {"density": -1.0}, ValueError, "`density` must be finite"),
+    (make_pairwise_problem, {"n_inliers": 10**5}, ValueError, "dense adjacency entries"),
+    (make_point_matching_problem, {"deformation": np.inf}, ValueError,
+     "`deformation` must be finite"),
+    (make_point_matching_problem, {"rotate": "no"}, TypeError, "`rotate` must be a bool"),
+    (make_point_matching_problem, {"n_outliers": -1}, ValueError, "`n_outliers` must be >= 0"),
+])
+def test_generator_parameters_are_validated(fn, kwargs, exc, match):
+    with pytest.raises(exc, match=match):
+        fn(**kwargs)

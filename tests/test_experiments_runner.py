@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from transync.experiments._runner import Experiment, Sweep, run_experiment
+from transync.experiments import Experiment, Sweep, run_experiment
 
 
 def noisy_trial(config, rng):
@@ -77,7 +77,7 @@ def test_killed_run_loses_at_most_the_trial_in_flight(tmp_path):
     mod = tmp_path / "slowexp.py"
     mod.write_text(textwrap.dedent("""
         import time
-        from transync.experiments._runner import Experiment, Sweep, run_experiment
+        from transync.experiments import Experiment, Sweep, run_experiment
         def trial(config, rng):
             time.sleep(0.15)
             return {"v": float(config["x"])}

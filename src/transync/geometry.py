@@ -24,13 +24,19 @@ array([[ 5., -2.],
 
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 
+from ._validation import check_array
+
 __all__ = [
+    "hartley_normalization",
     "image_corners",
     "normalization_matrix",
     "normalize_determinant",
     "transfer_points",
+    "translation",
 ]
 
 
@@ -38,7 +44,9 @@ def normalize_determinant(A) -> np.ndarray:
     """Scale square matrices to determinant +1 (real d-th root); works on stacks ``(..., d, d)``.
 
     For odd ``d`` a negative determinant is fixed by a negative scale (the projective class is
-    unchanged). Singular matrices give NaN, so that a missing map stays visibly missing.
+    unchanged); for even ``d`` no real scale can change its sign, and it becomes -1. Singular
+    matrices (condition number above 1e14) and matrices with NaN or infinite entries give NaN,
+    so that a missing map stays visibly missing.
 
     Parameters
     ----------
@@ -55,16 +63,24 @@ def normalize_determinant(A) -> np.ndarray:
     >>> bool(np.allclose(H, np.eye(3)))
     True
     """
-    A = np.asarray(A, dtype=float)
+    A = _square_stack(A, "A")
     d = A.shape[-1]
-    with np.errstate(divide="ignore", invalid="ignore"):   # NaN maps (disconnected) stay NaN
-        det = np.linalg.det(A)
+    bad = ~np.isfinite(A).all(axis=(-2, -1))
+    with np.errstate(all="ignore"):   # NaN maps (disconnected) stay NaN
+        # log-determinant: no overflow for large entries
+        sign, logdet = np.linalg.slogdet(np.where(bad[..., None, None], 0.0, A))
+        # numerically singular: condition number above 1e14 (an exact zero determinant can
+        # come out of floating point as a tiny nonzero one)
+        A0 = np.where(bad[..., None, None], 0.0, A)
+        big = np.abs(A0).max(axis=(-2, -1), keepdims=True)
+        sv = np.linalg.svd(A0 / np.where(big > 0, big, 1.0), compute_uv=False)
+        bad = bad | (sign == 0) | ~np.isfinite(logdet) | (sv[..., -1] <= 1e-14 * sv[..., 0])
+        scale = np.exp(logdet / d)
         if d % 2:
-            scale = np.sign(det) * np.abs(det) ** (1.0 / d)
-        else:
-            scale = np.abs(det) ** (1.0 / d)
-        scale = np.where(det == 0, np.nan, scale)
-        return A / scale[..., None, None]
+            scale = sign * scale
+        out = A / np.where(bad, 1.0, scale)[..., None, None]
+    out[bad] = np.nan
+    return out
 
 
 def image_corners(size) -> np.ndarray:
@@ -84,7 +100,7 @@ def image_corners(size) -> np.ndarray:
     >>> image_corners((3, 2)).tolist()
     [[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]]
     """
-    w, h = float(size[0]), float(size[1])
+    w, h = _image_size(size, "size")
     return np.array([[0.0, 0.0], [w - 1, 0.0], [w - 1, h - 1], [0.0, h - 1]])
 
 
@@ -109,11 +125,15 @@ def transfer_points(H, points) -> np.ndarray:
     >>> transfer_points(H, [[1.0, 1.0]]).tolist()
     [[[1.0, 1.0]], [[2.0, 2.0]]]
     """
-    H = np.asarray(H, dtype=float)
-    pts = np.asarray(points, dtype=float)
-    p = pts @ H[..., :2, :2].swapaxes(-1, -2) + H[..., None, :2, 2]
-    z = pts @ H[..., 2, :2][..., :, None] + H[..., 2, 2][..., None, None]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    H = check_array(H, "H", finite=False)
+    if H.ndim < 2 or H.shape[-2:] != (3, 3):
+        raise ValueError(f"`H` must have shape (..., 3, 3), got shape {H.shape}")
+    pts = check_array(points, "points", finite=False)
+    if pts.ndim < 2 or pts.shape[-1] != 2:
+        raise ValueError(f"`points` must have shape (k, 2) or (..., k, 2), got shape {pts.shape}")
+    with np.errstate(all="ignore"):
+        p = pts @ H[..., :2, :2].swapaxes(-1, -2) + H[..., None, :2, 2]
+        z = pts @ H[..., 2, :2][..., :, None] + H[..., 2, 2][..., None, None]
         return p / z
 
 
@@ -133,6 +153,82 @@ def normalization_matrix(image_size) -> np.ndarray:
     >>> normalization_matrix((640, 480)) @ [320, 240, 1]
     array([0., 0., 1.])
     """
-    w, h = (float(v) for v in image_size)
+    w, h = _image_size(image_size, "image_size")
     s = 2.0 / max(w, h)
     return np.array([[s, 0.0, -s * w / 2], [0.0, s, -s * h / 2], [0.0, 0.0, 1.0]])
+
+
+def translation(tx, ty) -> np.ndarray:
+    """The homography ``[x, y] -> [x + tx, y + ty]`` (e.g. the offset of a canvas origin).
+
+    Examples
+    --------
+    >>> translation(2, -1) @ [1.0, 1.0, 1.0]
+    array([3., 0., 1.])
+    """
+    for name, v in (("tx", tx), ("ty", ty)):
+        if isinstance(v, bool) or not isinstance(v, numbers.Real) or not np.isfinite(v):
+            raise TypeError(f"`{name}` must be a finite real number, got {type(v).__name__} {v!r}")
+    return np.array([[1.0, 0.0, float(tx)], [0.0, 1.0, float(ty)], [0.0, 0.0, 1.0]])
+
+
+def hartley_normalization(points):
+    """Hartley's isotropic normalization of a 2-D point set.
+
+    The similarity ``T`` moves the centroid to the origin and scales the points to a mean
+    distance of ``sqrt(2)`` from it (Hartley, "In defense of the eight-point algorithm", 1997).
+
+    Parameters
+    ----------
+    points : array_like of shape (k, 2)
+
+    Returns
+    -------
+    T : ndarray of shape (3, 3)
+    normalized : ndarray of shape (k, 2)
+        ``transfer_points(T, points)``. Coincident points (no spread) get ``T`` a pure translation.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> T, x = hartley_normalization([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+    >>> x.round(6).tolist()
+    [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]
+    >>> bool(np.allclose(transfer_points(np.linalg.inv(T), x), [[0, 0], [2, 0], [2, 2], [0, 2]]))
+    True
+    """
+    pts = check_array(points, "points", finite=False)
+    if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) == 0:
+        raise ValueError(f"`points` must have shape (k, 2) with k >= 1, got shape {pts.shape}")
+    if not np.all(np.isfinite(pts)):
+        raise ValueError("`points` must be finite, got NaN or infinite entries")
+    with np.errstate(all="ignore"):
+        c = pts.mean(axis=0)
+        d = float(np.linalg.norm(pts - c, axis=1).mean())
+        s = np.sqrt(2.0) / d if d > 0 else 1.0
+        T = np.array([[s, 0.0, -s * c[0]], [0.0, s, -s * c[1]], [0.0, 0.0, 1.0]])
+        normalized = (pts - c) * s
+    if not (np.all(np.isfinite(T)) and np.all(np.isfinite(normalized)) and s * s > 0):
+        raise ValueError("`points` cannot be normalized in floating point: their centroid or "
+                         f"spread overflows (largest magnitude {np.abs(pts).max():.3g})")
+    return T, normalized
+
+
+def _square_stack(A, name: str) -> np.ndarray:
+    """A float stack of square matrices ``(..., d, d)`` with ``d >= 1`` (entries may be NaN)."""
+    A = check_array(A, name, finite=False)
+    if A.ndim < 2 or A.shape[-1] != A.shape[-2] or A.shape[-1] == 0:
+        raise ValueError(f"`{name}` must be a square matrix or a stack of them, shape (..., d, d) "
+                         f"with d >= 1, got shape {A.shape}")
+    return A
+
+
+def _image_size(size, name: str) -> tuple[float, float]:
+    """``(width, height)`` as two finite positive floats."""
+    if isinstance(size, (str, bytes)) or size is None:
+        raise TypeError(f"`{name}` must be (width, height), got {type(size).__name__} {size!r}")
+    arr = check_array(size, name, finite=False)
+    if arr.shape != (2,) or not np.all(np.isfinite(arr)) or not np.all(arr > 0):
+        raise ValueError(f"`{name}` must be (width, height) with finite positive entries, "
+                         f"got {arr.tolist()!r}")
+    return float(arr[0]), float(arr[1])

@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import Delaunay, cKDTree
+from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from ._validation import check_array, check_choice, check_int, check_shape
 
@@ -36,7 +36,9 @@ class Graph:
     Parameters
     ----------
     adjacency : ndarray of shape (n, n)
-        Edge weights, 0 where there is no edge. Diagonal must be zero (no self-loops).
+        Edge weights, 0 where there is no edge. Diagonal must be zero (no self-loops). An
+        undirected graph's adjacency must be symmetric; one that is so up to rounding
+        (``numpy.allclose``) is stored as its exactly symmetric part.
     points : ndarray of shape (n, dim), optional
         Node coordinates (keypoints, landmarks).
     node_features : ndarray of shape (n, f), optional
@@ -59,6 +61,11 @@ class Graph:
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        if not isinstance(self.directed, (bool, np.bool_)):
+            raise TypeError(f"`directed` must be a bool, got {type(self.directed).__name__} "
+                            f"{self.directed!r}")
+        if not isinstance(self.meta, dict):
+            raise TypeError(f"`meta` must be a dict, got {type(self.meta).__name__}")
         A = check_array(self.adjacency, "adjacency", ndim=2)
         if A.shape[0] != A.shape[1]:
             raise ValueError(f"`adjacency` must be square, got shape {A.shape}")
@@ -68,9 +75,11 @@ class Graph:
             raise ValueError("`adjacency` must have a zero diagonal (no self-loops)")
         if np.min(A) < 0:
             raise ValueError(f"`adjacency` weights must be non-negative, got minimum {A.min():.6g}")
-        if not self.directed and not np.allclose(A, A.T):
-            raise ValueError("`adjacency` must be symmetric for an undirected graph "
-                             "(pass directed=True otherwise)")
+        if not self.directed and not np.array_equal(A, A.T):
+            if not np.allclose(A, A.T):
+                raise ValueError("`adjacency` must be symmetric for an undirected graph "
+                                 "(pass directed=True otherwise)")
+            A = np.where(A == A.T, A, 0.5 * A + 0.5 * A.T)    # rounding noise: exactly symmetric
         object.__setattr__(self, "adjacency", A)
         n = A.shape[0]
         if self.points is not None:
@@ -91,7 +100,7 @@ class Graph:
                                  "graph")
             object.__setattr__(self, "edge_features", E)
         if self.node_labels is not None:
-            L = np.asarray(self.node_labels)
+            L = _check_labels(self.node_labels)
             if L.shape != (n,):
                 raise ValueError(f"`node_labels` must have shape ({n},), got {L.shape}")
             object.__setattr__(self, "node_labels", L)
@@ -134,9 +143,11 @@ class Graph:
 
     def permute(self, perm) -> Graph:
         """Relabel nodes: node ``u`` of the result is node ``perm[u]`` of this graph."""
-        perm = np.asarray(perm, dtype=np.int64)
-        if sorted(perm.tolist()) != list(range(self.n_nodes)):
-            raise ValueError(f"`perm` must be a permutation of range({self.n_nodes})")
+        perm = check_array(perm, "perm", dtype=None)
+        if perm.dtype.kind not in "iu" or perm.shape != (self.n_nodes,) or not np.array_equal(
+                np.sort(perm), np.arange(self.n_nodes)):
+            raise ValueError(f"`perm` must be a permutation of range({self.n_nodes}) (integers), "
+                             f"got {_describe_array(perm)}")
         take = (lambda x: None if x is None else x[perm])
         E = None if self.edge_features is None else self.edge_features[np.ix_(perm, perm)]
         return Graph(self.adjacency[np.ix_(perm, perm)], points=take(self.points),
@@ -170,7 +181,7 @@ class Graph:
         elif edges == "delaunay":
             if P.shape[1] != 2:
                 raise ValueError(f"`edges='delaunay'` needs 2-d points, got dimension {P.shape[1]}")
-            simplices = Delaunay(P).simplices
+            simplices = _delaunay(P)
             for a, b in ((0, 1), (1, 2), (0, 2)):
                 M[simplices[:, a], simplices[:, b]] = True
         else:
@@ -192,6 +203,8 @@ class Graph:
         """Build from a networkx graph; node order is ``list(G.nodes)``."""
         import networkx as nx
 
+        if not isinstance(G, nx.Graph):
+            raise TypeError(f"`G` must be a networkx graph, got {type(G).__name__}")
         nodes = list(G.nodes)
         if not nodes:
             raise ValueError("`G` must have at least one node")
@@ -221,3 +234,25 @@ class Graph:
             if self.node_labels is not None:
                 G.nodes[v]["label"] = self.node_labels[v].item()
         return G
+
+
+def _delaunay(P: np.ndarray) -> np.ndarray:
+    """Delaunay simplices; degenerate sets (collinear or repeated points) are joggled (``QJ``)."""
+    try:
+        return Delaunay(P).simplices
+    except QhullError:
+        return Delaunay(P, qhull_options="QJ").simplices
+
+
+def _check_labels(labels) -> np.ndarray:
+    """Node labels: integers (or strings/objects), never complex or NaN."""
+    if np.iscomplexobj(labels):
+        raise TypeError("`node_labels` must be integer labels, got complex values")
+    L = np.asarray(labels)
+    if L.dtype.kind == "f" and not np.all(np.isfinite(L)):
+        raise ValueError("`node_labels` must be finite, got NaN or infinite entries")
+    return L
+
+
+def _describe_array(x: np.ndarray) -> str:
+    return f"array of shape {x.shape} and dtype {x.dtype}"

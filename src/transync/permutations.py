@@ -5,6 +5,10 @@ array ``assignment`` of length ``n1``: ``assignment[u] = v`` maps node ``u`` to 
 and ``-1`` marks an unmatched node. The matching matrix is ``X[u, v] = 1`` iff
 ``assignment[u] == v``. Matrices appear only through the converters here.
 
+A multi-matching of many objects is a :class:`MultiMatching`: universe labels per object, from
+which every pairwise map is derived (cycle-consistent by construction); it is the only place
+where labels become pairwise maps.
+
 Examples
 --------
 >>> import numpy as np
@@ -22,7 +26,8 @@ array([[0, 0, 1],
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -30,11 +35,14 @@ from scipy.optimize import linear_sum_assignment
 from ._validation import as_generator, check_array, check_int
 
 __all__ = [
+    "MAX_NODES",
     "UNMATCHED",
+    "MultiMatching",
     "assignment_to_matrix",
     "check_assignment",
     "compose",
     "cycle_inconsistency",
+    "cycle_inconsistency_arrays",
     "identity",
     "invert",
     "is_partial_permutation_matrix",
@@ -44,6 +52,30 @@ __all__ = [
 ]
 
 UNMATCHED = -1
+MAX_NODES = 10**8      # largest object (and dense matching matrix) the converters build
+
+
+def _as_label_array(lab, name: str) -> np.ndarray:
+    """A 1-d int64 copy of an index array; integral floats are accepted, NaN, fractions,
+    strings, complex and other dtypes refused with a message naming ``name``."""
+    if isinstance(lab, (str, bytes)):
+        raise TypeError(f"`{name}` must be a 1-d integer index array, got {type(lab).__name__}")
+    arr = np.asarray(lab)
+    if arr.ndim != 1:
+        raise ValueError(f"`{name}` must be a 1-d index array, got shape {arr.shape}")
+    if arr.size and arr.dtype.kind not in "iu":
+        if arr.dtype.kind != "f":
+            raise TypeError(f"`{name}` must hold integers (node indices, -1 = unmatched), got "
+                            f"dtype {arr.dtype}")
+        bad = ~np.isfinite(arr) | (arr != np.round(arr))
+        if bad.any():
+            raise TypeError(f"`{name}` must hold integers (node indices, -1 = unmatched), got "
+                            f"{float(arr[bad][0])} at position {int(np.flatnonzero(bad)[0])}")
+        if np.abs(arr).max() >= 2**62:
+            raise ValueError(f"`{name}` entries must be node indices, got {arr.max()!r}")
+    if arr.dtype.kind == "u" and arr.size and arr.max() >= 2**62:
+        raise ValueError(f"`{name}` entries must be node indices, got {int(arr.max())}")
+    return np.array(arr, dtype=np.int64)
 
 
 def check_assignment(assignment, name: str = "assignment", *, n2: int | None = None,
@@ -52,15 +84,9 @@ def check_assignment(assignment, name: str = "assignment", *, n2: int | None = N
 
     Raises ``ValueError`` when values fall outside ``[-1, n2)`` or a target is used twice.
     """
-    arr = np.asarray(assignment)
-    if arr.ndim != 1:
-        raise ValueError(f"`{name}` must be a 1-d index array, got shape {arr.shape}")
-    if arr.size and arr.dtype.kind not in "iu":
-        if arr.dtype.kind == "f" and np.all(np.isfinite(arr)) and np.all(arr == np.round(arr)):
-            arr = arr.astype(np.int64)
-        else:
-            raise TypeError(f"`{name}` must hold integers, got dtype {arr.dtype}")
-    arr = arr.astype(np.int64, copy=False)
+    arr = _as_label_array(assignment, name)
+    if arr.size and arr.max() >= 2**62:
+        raise ValueError(f"`{name}` entries must be node indices, got {int(arr.max())}")
     if n1 is not None and arr.shape[0] != n1:
         raise ValueError(f"`{name}` must have length {n1}, got length {arr.shape[0]}")
     if arr.size and arr.min() < UNMATCHED:
@@ -75,17 +101,22 @@ def check_assignment(assignment, name: str = "assignment", *, n2: int | None = N
 
 def identity(n: int) -> np.ndarray:
     """The identity assignment of ``n`` nodes."""
-    return np.arange(check_int(n, "n", minimum=0), dtype=np.int64)
+    return np.arange(check_int(n, "n", minimum=0, maximum=MAX_NODES), dtype=np.int64)
 
 
 def random_permutation(n: int, rng=None) -> np.ndarray:
     """A uniformly random permutation of ``n`` nodes as an assignment."""
-    return as_generator(rng).permutation(check_int(n, "n", minimum=0)).astype(np.int64)
+    n = check_int(n, "n", minimum=0, maximum=MAX_NODES)
+    return as_generator(rng).permutation(n).astype(np.int64)
 
 
 def assignment_to_matrix(assignment, n2: int, *, dtype=float) -> np.ndarray:
     """Matching matrix ``X`` of shape ``(n1, n2)`` with ``X[u, assignment[u]] = 1``."""
+    n2 = check_int(n2, "n2", minimum=0, maximum=MAX_NODES)
     a = check_assignment(assignment, n2=n2)
+    if a.shape[0] * n2 > MAX_NODES:
+        raise ValueError(f"`assignment` of length {a.shape[0]} and n2={n2} would build a matrix "
+                         f"of {a.shape[0] * n2:.3g} entries (more than {MAX_NODES:.0e})")
     X = np.zeros((a.shape[0], n2), dtype=dtype)
     rows = np.flatnonzero(a >= 0)
     X[rows, a[rows]] = 1
@@ -93,8 +124,15 @@ def assignment_to_matrix(assignment, n2: int, *, dtype=float) -> np.ndarray:
 
 
 def is_partial_permutation_matrix(X, *, atol: float = 1e-8) -> bool:
-    """True when ``X`` is 0/1 (to ``atol``) with at most one 1 per row and per column."""
-    X = np.asarray(X, dtype=float)
+    """True when ``X`` is 0/1 (to ``atol``) with at most one 1 per row and per column.
+
+    A predicate: any real array answers (non-2-D arrays and NaN entries answer False); complex
+    or non-numeric input raises ``TypeError``.
+
+    >>> is_partial_permutation_matrix([[0, 1], [0, 0]]), is_partial_permutation_matrix([[1, 1]])
+    (True, False)
+    """
+    X = check_array(X, "X", finite=False)
     if X.ndim != 2:
         return False
     binary = np.all((np.abs(X) <= atol) | (np.abs(X - 1) <= atol))
@@ -105,8 +143,8 @@ def matrix_to_assignment(X, *, name: str = "X") -> np.ndarray:
     """Assignment from a 0/1 partial-permutation matrix (rows without a 1 become -1)."""
     X = check_array(X, name, ndim=2)
     if not is_partial_permutation_matrix(X):
-        raise ValueError(f"`{name}` must be a 0/1 matrix with at most one 1 per row and column; "
-                         "round soft matrices with `solve_lap` first")
+        raise ValueError(f"`{name}` must be a 0/1 partial-permutation matrix (at most one 1 per "
+                         "row and column); round soft matrices with `solve_lap` first")
     a = np.full(X.shape[0], UNMATCHED, dtype=np.int64)
     rows, cols = np.nonzero(X > 0.5)
     a[rows] = cols
@@ -115,6 +153,7 @@ def matrix_to_assignment(X, *, name: str = "X") -> np.ndarray:
 
 def invert(assignment, n2: int) -> np.ndarray:
     """Inverse map: ``b[v] = u`` where ``assignment[u] = v``, ``-1`` for unused targets."""
+    n2 = check_int(n2, "n2", minimum=0, maximum=MAX_NODES)
     a = check_assignment(assignment, n2=n2)
     b = np.full(n2, UNMATCHED, dtype=np.int64)
     rows = np.flatnonzero(a >= 0)
@@ -205,16 +244,42 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
     maps = np.full((len(canon), n_max), UNMATCHED, dtype=np.int64)
     for q, a in enumerate(canon.values()):
         maps[q, : a.shape[0]] = a
-    return _triangle_report(pairs, maps, size_arr, max_triangles=max_triangles, rng=rng)
+    return cycle_inconsistency_arrays(pairs, maps, size_arr, max_triangles=max_triangles, rng=rng)
 
 
-def _triangle_report(pairs: np.ndarray, maps: np.ndarray, sizes: np.ndarray, *,
-                     max_triangles: int = 200_000, rng=None) -> dict[str, float]:
-    """Vectorized triangle check on stacked maps (private; pairs oriented ``i < j``).
+def _int_array(x, name: str, ndim: int) -> np.ndarray:
+    arr = np.asarray(x) if isinstance(x, np.ndarray) else check_array(x, name, ndim=ndim)
+    if arr.dtype.kind not in "iu":
+        arr = check_array(arr, name, ndim=ndim)
+        if not np.all(arr == np.round(arr)):
+            raise TypeError(f"`{name}` must hold integers")
+    if arr.ndim != ndim:
+        raise ValueError(f"`{name}` must have {ndim} dimensions, got shape {arr.shape}")
+    return arr.astype(np.int64, copy=False)
 
-    ``maps[q]`` is the assignment ``pairs[q, 0] -> pairs[q, 1]`` padded with -1 to a common
-    width. Duplicate pairs: the first occurrence is used.
+
+def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_000,
+                               rng=None) -> dict[str, float]:
+    """:func:`cycle_inconsistency` on stacked arrays (no dict; for large collections).
+
+    ``pairs`` is ``(Q, 2)`` with ``pairs[q, 0] < pairs[q, 1]``; ``maps[q]`` is the assignment
+    ``pairs[q, 0] -> pairs[q, 1]`` padded with -1 to a common width; ``sizes`` holds the number
+    of nodes of every object. Duplicate pairs: the first occurrence is used.
+
+    >>> cycle_inconsistency_arrays([[0, 1], [1, 2], [0, 2]], [[1, 0], [1, 0], [0, 1]], [2, 2, 2])
+    {'n_triangles': 1, 'inconsistent_triangles': 0.0, 'cycle_error': 0.0, 'sampled': False}
     """
+    pairs, maps = _int_array(pairs, "pairs", 2), _int_array(maps, "maps", 2)
+    sizes = _int_array(sizes, "sizes", 1)
+    if pairs.shape[1:] != (2,) or maps.shape[0] != pairs.shape[0]:
+        raise ValueError(f"`pairs` must be (Q, 2) and `maps` (Q, n), got shapes {pairs.shape} "
+                         f"and {maps.shape}")
+    if pairs.size and (pairs.min() < 0 or pairs.max() >= sizes.size
+                       or np.any(pairs[:, 0] >= pairs[:, 1])):
+        raise ValueError(f"`pairs` must hold object indices i < j in [0, {sizes.size})")
+    if maps.size and (maps.min() < UNMATCHED or maps.max() >= max(int(sizes.max()), 1)):
+        raise ValueError("`maps` entries must be node indices or -1")
+    check_int(max_triangles, "max_triangles", minimum=1)
     n_obj = int(sizes.shape[0])
     n_max = maps.shape[1]
     pid = np.full((n_obj, n_obj), -1, dtype=np.int64)
@@ -268,3 +333,259 @@ def _triangle_report(pairs: np.ndarray, maps: np.ndarray, sizes: np.ndarray, *,
         "cycle_error": float(err / n_tri) if n_tri else 0.0,
         "sampled": bool(sampled),
     }
+
+
+# ----------------------------------------------------------------------------------------------
+# multi-matchings: universe labels, the one place where labels become pairwise maps
+# ----------------------------------------------------------------------------------------------
+
+def _pad(labels: Sequence[np.ndarray]) -> np.ndarray:
+    n_max = max((lab.shape[0] for lab in labels), default=0)
+    out = np.full((len(labels), n_max), UNMATCHED, dtype=np.int64)
+    for g, lab in enumerate(labels):
+        out[g, : lab.shape[0]] = lab
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class MultiMatching:
+    """A cycle-consistent multi-matching: every node of every object placed in a universe.
+
+    ``labels[g][u]`` is the universe slot (``0 .. n_universe - 1``) of node ``u`` of object ``g``,
+    ``-1`` when the node is not placed; no two nodes of one object share a slot. The pairwise
+    map ``i -> j`` sends ``u`` to the node of ``j`` in the same slot (``-1`` when there is none),
+    so every derived map is cycle-consistent by construction. This is the one place where labels
+    become pairwise maps: synchronization results carry one as ``.matching`` and the synthetic
+    generators carry their ground truth as ``.ground_truth``.
+
+    Parameters
+    ----------
+    labels : sequence of 1-d int arrays
+        One array per object (objects may have different sizes, also 0).
+    n_universe : int, optional
+        Universe size ``d``; default ``max(labels) + 1``. Must exceed every label.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Labels that are not 1-d integer arrays, below -1 or ``>= n_universe``, or that put two
+        nodes of one object in the same slot.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.permutations import MultiMatching
+    >>> m = MultiMatching([np.array([0, 1, 2]), np.array([2, 0, -1]), np.array([1, 2])])
+    >>> m.n_universe, m.sizes.tolist()
+    (3, [3, 3, 2])
+    >>> m.pairwise(0, 1)                   # node 0 of object 0 sits with node 1 of object 1
+    array([ 1, -1,  0])
+    >>> m.absolute(2).astype(int)
+    array([[0, 1, 0],
+           [0, 0, 1]])
+    >>> truth = MultiMatching([np.array([0, 1, 2]), np.array([2, 0, 1]), np.array([1, 2])])
+    >>> truth.accuracy(m)                  # fraction of the true correspondences m recovers
+    0.714...
+    """
+
+    labels: tuple[np.ndarray, ...]
+    n_universe: int | None = None
+    _padded: np.ndarray = field(init=False, repr=False)
+    _inv: np.ndarray | None = field(init=False, repr=False, default=None)
+
+    def __post_init__(self):
+        labels = self.labels
+        if isinstance(labels, np.ndarray) and labels.ndim == 2:
+            labels = list(labels)
+        if isinstance(labels, (str, bytes)) or not isinstance(labels, Sequence):
+            raise TypeError("`labels` must be a sequence of 1-d int arrays (one per object), got "
+                            f"{type(labels).__name__}")
+        checked = tuple(_as_label_array(lab, f"labels[{g}]") for g, lab in enumerate(labels))
+        padded = _pad(checked)
+        top = int(padded.max(initial=-1))
+        if padded.size and padded.min() < UNMATCHED:
+            g = int(np.flatnonzero((padded < UNMATCHED).any(1))[0])
+            raise ValueError(f"`labels[{g}]` entries must be >= -1, got {int(checked[g].min())}")
+        if self.n_universe is None:
+            d = top + 1
+        else:
+            d = check_int(self.n_universe, "n_universe", minimum=0)
+            if top >= d:
+                g = int(np.flatnonzero((padded >= d).any(1))[0])
+                raise ValueError(f"`labels[{g}]` entries must be < n_universe={d}, got "
+                                 f"{int(checked[g].max())}")
+        srt = np.sort(padded, axis=1)
+        dup = (srt[:, 1:] == srt[:, :-1]) & (srt[:, 1:] >= 0)
+        if dup.any():
+            g = int(np.flatnonzero(dup.any(1))[0])
+            raise ValueError(f"`labels[{g}]` must be injective: two nodes of object {g} share "
+                             "a universe slot")
+        for lab in checked:
+            lab.flags.writeable = False
+        # slots renumbered 0 .. k-1 over the used ones (k <= number of nodes): the tables
+        # behind pairwise maps never depend on n_universe
+        used, inverse = np.unique(padded, return_inverse=True)
+        compact = (inverse.reshape(padded.shape) - int(used.size and used[0] < 0)).astype(np.int64)
+        compact[padded < 0] = UNMATCHED
+        compact.flags.writeable = False
+        object.__setattr__(self, "labels", checked)
+        object.__setattr__(self, "n_universe", int(d))
+        object.__setattr__(self, "_padded", compact)
+
+    @classmethod
+    def from_labels(cls, labels, n_universe: int | None = None) -> MultiMatching:
+        """Build (and validate) from labels; a :class:`MultiMatching` is returned as is."""
+        if isinstance(labels, MultiMatching) and n_universe in (None, labels.n_universe):
+            return labels
+        if isinstance(labels, MultiMatching):
+            labels = labels.labels
+        return cls(labels, n_universe)
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, MultiMatching):
+            return NotImplemented
+        return (self.n_universe == other.n_universe and self.n_objects == other.n_objects
+                and all(np.array_equal(a, b) for a, b in zip(self.labels, other.labels)))
+
+    __hash__ = None  # type: ignore[assignment]
+
+    @property
+    def n_objects(self) -> int:
+        return len(self.labels)
+
+    @property
+    def sizes(self) -> np.ndarray:
+        """Number of nodes of every object, ``(n_objects,)`` int."""
+        return np.array([lab.shape[0] for lab in self.labels], dtype=np.int64)
+
+    def _object(self, g, name: str) -> int:
+        g = check_int(g, name)
+        if not 0 <= g < self.n_objects:
+            raise ValueError(f"`{name}` must be an object index in [0, {self.n_objects}), got {g}")
+        return g
+
+    def _inverse(self) -> np.ndarray:
+        """``inv[g, a]`` = node of object ``g`` in (compact) slot ``a``; the last column (= slot
+        -1) is -1."""
+        if self._inv is None:
+            k = int(self._padded.max(initial=-1)) + 1
+            inv = np.full((self.n_objects, k + 1), UNMATCHED, dtype=np.int64)
+            g, u = np.nonzero(self._padded >= 0)
+            inv[g, self._padded[g, u]] = u
+            inv.flags.writeable = False
+            object.__setattr__(self, "_inv", inv)             # computed once (frozen object)
+        return self._inv
+
+    def pairwise(self, i: int, j: int) -> np.ndarray:
+        """Assignment from object ``i`` to object ``j`` (``-1`` = no partner in ``j``)."""
+        i, j = self._object(i, "i"), self._object(j, "j")
+        sizes = self.sizes
+        inv = np.full(int(self._padded.max(initial=-1)) + 2, UNMATCHED, dtype=np.int64)
+        lab_j = self._padded[j, : sizes[j]]
+        placed = lab_j >= 0
+        inv[lab_j[placed]] = np.flatnonzero(placed)
+        return inv[self._padded[i, : sizes[i]]]           # label -1 -> inv[-1] = -1
+
+    def _pairs(self, pairs) -> np.ndarray:
+        if pairs is None:
+            return np.column_stack(np.triu_indices(self.n_objects, 1)).astype(np.int64)
+        arr = check_array(pairs, "pairs", ndim=(1, 2))
+        arr = arr.reshape(-1, 2) if arr.size else np.zeros((0, 2))
+        if arr.shape[1] != 2 or not np.all(arr == np.round(arr)):
+            raise ValueError(f"`pairs` must be a (P, 2) array of object indices, got shape "
+                             f"{np.shape(pairs)}")
+        arr = arr.astype(np.int64)
+        if arr.size and (arr.min() < 0 or arr.max() >= self.n_objects):
+            raise ValueError(f"`pairs` must hold object indices in [0, {self.n_objects}), got "
+                             f"{int(arr.min())} .. {int(arr.max())}")
+        return arr
+
+    def pairwise_array(self, pairs=None) -> np.ndarray:
+        """Maps of many pairs at once: ``(P, n_max)`` int, row ``p`` the map ``i -> j`` of
+        ``pairs[p] = (i, j)`` padded with -1 (default: every ``i < j``)."""
+        pairs = self._pairs(pairs)
+        inv = self._inverse()
+        return inv[pairs[:, 1][:, None], self._padded[pairs[:, 0]]]
+
+    def pairwise_dict(self, pairs=None) -> dict[tuple[int, int], np.ndarray]:
+        """``{(i, j): pairwise(i, j)}`` for ``pairs`` (default: every ``i < j``)."""
+        pairs = self._pairs(pairs)
+        maps = self.pairwise_array(pairs)
+        sizes = self.sizes
+        return {(int(i), int(j)): maps[p, : sizes[i]].copy()
+                for p, (i, j) in enumerate(pairs.tolist())}
+
+    def absolute(self, g: int) -> np.ndarray:
+        """The ``(n_g, n_universe)`` 0/1 matrix ``X_g`` (node -> universe slot)."""
+        lab = self.labels[self._object(g, "g")]
+        return assignment_to_matrix(lab, self.n_universe)
+
+    def to_matrix(self, *, max_size: int = 20000) -> np.ndarray:
+        """The ``(sum n_g, sum n_g)`` 0/1 block matrix with blocks ``P_ij = X_i X_j^T``.
+
+        Diagonal blocks are identities (also for unplaced nodes). Meant for small problems: a
+        total above ``max_size`` nodes raises ``ValueError``.
+        """
+        total = int(self.sizes.sum())
+        if total > max_size:
+            raise ValueError(f"to_matrix() would build a {total} x {total} matrix (more than "
+                             f"max_size={max_size} nodes); use pairwise(i, j) for large problems")
+        k = int(self._padded.max(initial=-1)) + 1           # used slots only: same X X^T
+        X = np.vstack([assignment_to_matrix(self._padded[g, :n], k)
+                       for g, n in enumerate(self.sizes)] or [np.zeros((0, k))])
+        T = X @ X.T
+        np.fill_diagonal(T, 1.0)
+        return T
+
+    def accuracy(self, other, *, pairs=None) -> float:
+        """Fraction of the correspondences of ``self`` (the reference) that ``other`` recovers.
+
+        A correspondence is a node ``u`` of ``i`` and a node ``v`` of ``j`` (``i != j``) in the
+        same slot of ``self``; it is recovered when ``other`` also matches ``u`` to ``v``.
+        ``other`` is a :class:`MultiMatching` (or its labels, or anything with a ``.matching``),
+        or a mapping ``{(i, j): assignment}`` of pairwise maps, e.g. outputs that are not
+        cycle-consistent (a missing pair recovers nothing; ``(j, i)`` is used, inverted, when
+        only it is given). Evaluated over every ``i < j`` or over the ``(P, 2)`` ``pairs``;
+        1.0 when there is no correspondence to recover.
+        """
+        pairs = self._pairs(pairs)
+        if pairs.shape[0] == 0:
+            return 1.0
+        if isinstance(other, Mapping):
+            pred = self._maps_from_mapping(other, pairs)
+        else:
+            if not isinstance(other, MultiMatching) and isinstance(
+                    getattr(other, "matching", None), MultiMatching):
+                other = other.matching
+            other = MultiMatching.from_labels(other)
+            if other.n_objects != self.n_objects or not np.array_equal(other.sizes, self.sizes):
+                raise ValueError(f"`other` must hold {self.n_objects} objects of sizes "
+                                 f"{self.sizes.tolist()[:10]}, got {other.n_objects} objects of "
+                                 f"sizes {other.sizes.tolist()[:10]}")
+            pred = None
+        hit = tot = 0
+        for start in range(0, pairs.shape[0], 20000):
+            chunk = pairs[start:start + 20000]
+            true_v = self.pairwise_array(chunk)
+            pred_v = (other.pairwise_array(chunk) if pred is None
+                      else pred[start:start + 20000])
+            ok = true_v >= 0
+            tot += int(ok.sum())
+            hit += int((ok & (pred_v == true_v)).sum())
+        return float(hit / tot) if tot else 1.0
+
+    def _maps_from_mapping(self, maps: Mapping, pairs: np.ndarray) -> np.ndarray:
+        sizes = self.sizes
+        n_max = int(sizes.max(initial=0))
+        out = np.full((pairs.shape[0], n_max), UNMATCHED, dtype=np.int64)
+        for p, (i, j) in enumerate(pairs.tolist()):
+            if (i, j) in maps:
+                a = check_assignment(maps[(i, j)], f"other[{(i, j)}]", n1=int(sizes[i]),
+                                     n2=int(sizes[j]))
+            elif (j, i) in maps:
+                a = invert(check_assignment(maps[(j, i)], f"other[{(j, i)}]", n1=int(sizes[j]),
+                                            n2=int(sizes[i])), int(sizes[j]))
+            else:
+                continue
+            out[p, : a.shape[0]] = a
+        return out

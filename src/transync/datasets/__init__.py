@@ -1,4 +1,8 @@
-"""Synthetic generators and real-data loaders."""
+"""Synthetic generators and real-data loaders.
+
+The rendered scenes and the image loaders need OpenCV (and scikit-image); they are imported on
+first use, so that ``import transync.datasets`` stays light.
+"""
 from ._graphs import (  # noqa: F401
     GraphCollectionProblem,
     PairwiseProblem,
@@ -6,16 +10,52 @@ from ._graphs import (  # noqa: F401
     make_pairwise_problem,
     make_point_matching_problem,
 )
-from ._permutations import PermutationCollection, make_permutation_collection  # noqa: F401
-from ._scenes import PlanarScene, make_planar_scene  # noqa: F401
-from ._transforms import TransformProblem, make_noisy_homographies, make_noisy_linear_maps  # noqa: F401
 from ._home import data_home  # noqa: F401
-from ._image_loaders import (  # noqa: F401
-    AdelaideRMFPair,
-    HomographySequence,
-    list_adelaidermf,
-    load_adelaidermf,
-    load_graf,
-    load_hpatches_sequence,
-    load_oxford_sequence,
+from ._permutations import PermutationCollection, make_permutation_collection  # noqa: F401
+from ._transforms import (  # noqa: F401
+    TransformProblem,
+    make_noisy_homographies,
+    make_noisy_linear_maps,
 )
+
+#: public name -> private module that defines it, imported on first access
+_LAZY = {
+    "PlanarScene": "._scenes",
+    "make_planar_scene": "._scenes",
+    "AdelaideRMFPair": "._image_loaders",
+    "HomographySequence": "._image_loaders",
+    "list_adelaidermf": "._image_loaders",
+    "load_adelaidermf": "._image_loaders",
+    "load_graf": "._image_loaders",
+    "load_hpatches_sequence": "._image_loaders",
+    "load_oxford_sequence": "._image_loaders",
+}
+
+__all__ = [
+    "GraphCollectionProblem",
+    "PairwiseProblem",
+    "PermutationCollection",
+    "TransformProblem",
+    "data_home",
+    "make_graph_collection",
+    "make_noisy_homographies",
+    "make_noisy_linear_maps",
+    "make_pairwise_problem",
+    "make_permutation_collection",
+    "make_point_matching_problem",
+    *_LAZY,
+]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))

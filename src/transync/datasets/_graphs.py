@@ -27,6 +27,7 @@ import numpy as np
 
 from .._validation import as_generator, check_int, check_positive, check_probability
 from ..graphs import Graph
+from ..permutations import MultiMatching
 
 __all__ = [
     "GraphCollectionProblem",
@@ -51,6 +52,7 @@ class PairwiseProblem:
 class GraphCollectionProblem:
     """Graphs and their ground-truth ``labels[g]`` into a universe of inliers (-1 = outlier).
 
+    ``ground_truth`` is the same ground truth as a :class:`~transync.permutations.MultiMatching`;
     ``truth(i, j)`` gives the true pairwise assignment between graphs ``i`` and ``j``.
     """
 
@@ -58,15 +60,30 @@ class GraphCollectionProblem:
     labels: list
     n_universe: int
     params: dict = field(default_factory=dict)
+    ground_truth: MultiMatching = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "ground_truth", MultiMatching(self.labels, self.n_universe))
 
     def truth(self, i: int, j: int) -> np.ndarray:
-        li, lj = self.labels[i], self.labels[j]
-        where = np.full(self.n_universe, -1, dtype=np.int64)
-        where[lj[lj >= 0]] = np.flatnonzero(lj >= 0)
-        out = np.full(li.shape[0], -1, dtype=np.int64)
-        ok = li >= 0
-        out[ok] = where[li[ok]]
-        return out
+        """The true assignment from graph ``i`` to graph ``j`` (``-1`` for outliers)."""
+        return self.ground_truth.pairwise(i, j)
+
+
+_MAX_ENTRIES = 2 * 10**8     # dense (n, n) arrays generated, summed over graphs
+
+
+def _check_size(n_graphs: int, n_nodes: int) -> None:
+    if n_graphs * n_nodes * n_nodes > _MAX_ENTRIES:
+        raise ValueError(f"{n_graphs} graph(s) of {n_nodes} nodes (inliers + outliers) would need "
+                         f"{n_graphs * n_nodes * n_nodes:.3g} dense adjacency entries (more than "
+                         f"{_MAX_ENTRIES:.0e}); use fewer nodes or graphs")
+
+
+def _check_bool(value, name: str) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"`{name}` must be a bool, got {type(value).__name__} {value!r}")
+    return bool(value)
 
 
 def _sym_uniform(rng, n):
@@ -108,6 +125,8 @@ def make_pairwise_problem(n_inliers: int = 20, n_outliers: int = 0, deformation:
     n_out = check_int(n_outliers, "n_outliers", minimum=0)
     sigma = check_positive(deformation, "deformation", allow_zero=True)
     rho = check_probability(density, "density")
+    shuffle = _check_bool(shuffle, "shuffle")
+    _check_size(2, n_in + n_out)
     rng = as_generator(rng)
     n = n_in + n_out
     base = _sym_uniform(rng, n_in)
@@ -150,6 +169,9 @@ def make_point_matching_problem(n_inliers: int = 20, n_outliers: int = 0,
     n_in = check_int(n_inliers, "n_inliers", minimum=1)
     n_out = check_int(n_outliers, "n_outliers", minimum=0)
     sigma = check_positive(deformation, "deformation", allow_zero=True)
+    rotate = _check_bool(rotate, "rotate")
+    shuffle = _check_bool(shuffle, "shuffle")
+    _check_size(2, n_in + n_out)
     rng = as_generator(rng)
     P = rng.random((n_in, 2))
     theta = rng.uniform(0, 2 * np.pi) if rotate else 0.0
@@ -186,6 +208,8 @@ def make_graph_collection(n_graphs: int = 8, n_inliers: int = 10, n_outliers: in
     sigma = check_positive(deformation, "deformation", allow_zero=True)
     rho = check_probability(density, "density")
     p_flip = check_probability(flip, "flip")
+    shuffle = _check_bool(shuffle, "shuffle")
+    _check_size(N, n_in + n_out)
     rng = as_generator(rng)
     n = n_in + n_out
     base = _sym_uniform(rng, n_in)

@@ -1,4 +1,14 @@
-"""Where the real data sets live: ``$TRANSYNC_DATA``, else ``../shared/data`` beside the repository."""
+"""Where the real data sets live.
+
+Resolution order (the first that exists wins):
+
+1. the environment variable ``TRANSYNC_DATA`` -- when set it must name an existing folder
+   (a variable that points nowhere is an error, never a silent fallback);
+2. ``../shared/data`` relative to the current working directory, then relative to the source
+   checkout this package runs from (only when it runs from a checkout, not an installed copy);
+3. the per-user cache folder: ``$XDG_CACHE_HOME/transync``, default ``~/.cache/transync``
+   (``%LOCALAPPDATA%\\transync`` on Windows).
+"""
 
 from __future__ import annotations
 
@@ -7,30 +17,65 @@ from pathlib import Path
 
 __all__ = ["data_home"]
 
-_REPO_ROOT = Path(__file__).resolve().parents[3]
+_PACKAGE_ROOT = Path(__file__).resolve().parents[3]
 
 
-def _default_home() -> Path:
-    return (_REPO_ROOT / ".." / "shared" / "data").resolve()
+def _checkout_root() -> Path | None:
+    """The repository root when this package runs from a source checkout (``src/`` layout)."""
+    root = _PACKAGE_ROOT
+    if (root / "pyproject.toml").is_file() and (root / "src" / "transync").is_dir():
+        return root
+    return None
+
+
+def _cache_home() -> Path:
+    if os.name == "nt" and os.environ.get("LOCALAPPDATA"):  # pragma: no cover - Windows
+        return Path(os.environ["LOCALAPPDATA"]) / "transync"
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    base = Path(xdg).expanduser() if xdg and Path(xdg).is_absolute() else Path.home() / ".cache"
+    return base / "transync"
+
+
+def _candidates() -> list[Path]:
+    """The fallback folders, in order (``TRANSYNC_DATA`` excluded)."""
+    out = [Path.cwd() / ".." / "shared" / "data"]
+    root = _checkout_root()
+    if root is not None:
+        out.append(root / ".." / "shared" / "data")
+    out.append(_cache_home())
+    seen, unique = set(), []
+    for c in out:
+        c = c.resolve()
+        if c not in seen:
+            seen.add(c)
+            unique.append(c)
+    return unique
 
 
 def data_home(required: bool = True, *, subfolder: str | None = None) -> Path | None:
     """The folder of real data sets (never copied into the repository).
 
-    Looks at the environment variable ``TRANSYNC_DATA`` first, then at ``../shared/data`` next to
-    the repository root.
+    Looks at the environment variable ``TRANSYNC_DATA`` first; when it is not set, at
+    ``../shared/data`` relative to the working directory and to the source checkout, then at
+    the per-user cache folder (``$XDG_CACHE_HOME/transync``, default ``~/.cache/transync``).
 
     Parameters
     ----------
     required : bool, default=True
-        Raise ``FileNotFoundError`` naming both places when no folder is found (otherwise return
-        ``None``).
+        Raise ``FileNotFoundError`` naming every place looked at when no folder is found
+        (otherwise return ``None``).
     subfolder : str, default=None
         Return this folder inside the data home instead (it must exist when ``required``).
 
     Returns
     -------
     pathlib.Path or None
+
+    Raises
+    ------
+    FileNotFoundError, NotADirectoryError
+        ``TRANSYNC_DATA`` is set but names no folder (whatever ``required``), or nothing was
+        found and ``required`` is true.
 
     Examples
     --------
@@ -39,17 +84,26 @@ def data_home(required: bool = True, *, subfolder: str | None = None) -> Path | 
     True
     """
     env = os.environ.get("TRANSYNC_DATA")
-    candidates = [Path(env).expanduser()] if env else []
-    candidates.append(_default_home())
-    home = next((c for c in candidates if c.is_dir()), None)
+    if env:
+        home = Path(env).expanduser()
+        if not home.exists():
+            raise FileNotFoundError(f"TRANSYNC_DATA={env!r} does not exist; set it to the folder "
+                                    "holding the real data sets, or unset it")
+        if not home.is_dir():
+            raise NotADirectoryError(f"TRANSYNC_DATA={env!r} is not a folder; set it to the "
+                                     "folder holding the real data sets, or unset it")
+        looked = [home]
+    else:
+        looked = _candidates()
+        home = next((c for c in looked if c.is_dir()), None)
     if home is not None and subfolder is not None:
         home = home / subfolder
         if not home.is_dir():
-            home = None
+            looked, home = [home], None
     if home is None and required:
-        where = f"TRANSYNC_DATA={env!r}" if env else "TRANSYNC_DATA (not set)"
         what = f"the data folder{'' if subfolder is None else f' {subfolder!r}'}"
-        raise FileNotFoundError(f"cannot find {what}: looked at {where} and at "
-                                f"{_default_home()}; set TRANSYNC_DATA to the folder holding "
-                                "the real data sets")
+        where = ", ".join(str(p) for p in looked)
+        raise FileNotFoundError(f"cannot find {what}: looked at {where}"
+                                + ("" if env else " (TRANSYNC_DATA not set)")
+                                + "; set TRANSYNC_DATA to the folder holding the real data sets")
     return home

@@ -6,25 +6,31 @@ Formats:
   ``H1to2p .. H1toNp`` with a 3x3 matrix mapping pixels of image 1 into image k.
 * HPatches sequences: ``1.ppm .. 6.ppm`` and text files ``H_1_2 .. H_1_6`` (image 1 into k).
 * graf 1->3 (``oxford-graf/``): ``graf1.png``, ``graf3.png`` and ``H1to3p.xml``
-  (OpenCV FileStorage, maps graf1 into graf3).
+  (OpenCV FileStorage, maps graf1 into graf3); the Oxford text file ``H1to3p`` is read when the
+  XML file is absent.
 * AdelaideRMF (``adelaidermf/*.mat``): ``data`` 6xN (x1, y1, 1, x2, y2, 1), ``label``
   (0 = outlier, k = plane k), ``img1``, ``img2``.
 
 Every sequence loader returns a :class:`HomographySequence` whose ``homographies[k]`` maps pixels of
 view ``k`` into view 0 (the convention of :func:`transync.estimate_plane_homographies` with
-``reference=0``), determinant 1.
+``reference=0``), determinant 1. Images of one sequence may differ in size.
+
+Every error on a malformed file is a ``ValueError`` (``FileNotFoundError`` for a missing file or
+folder) whose message names the file, and the line or field where the format has one.
+OpenCV is imported only when an image is decoded.
 """
 
 from __future__ import annotations
 
 import re
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
+from ..geometry import normalize_determinant
 from ._home import data_home
 
 __all__ = [
@@ -38,6 +44,8 @@ __all__ = [
 ]
 
 _EXTS = (".ppm", ".png", ".jpg", ".jpeg", ".pgm", ".bmp", ".tif", ".tiff")
+# a homography whose singular values span more than this is refused as singular
+_MAX_CONDITION = 1e12
 
 
 @dataclass(frozen=True)
@@ -63,51 +71,177 @@ class HomographySequence:
         return len(self.images)
 
 
-def _normalize(H):
-    H = np.asarray(H, dtype=float)
-    return H / np.cbrt(np.linalg.det(H))
+def _check_homography(H: np.ndarray, where: str) -> np.ndarray:
+    """Refuse non-finite or singular 3x3 matrices read from ``where``."""
+    if not np.all(np.isfinite(H)):
+        raise ValueError(f"{where}: expected a finite 3x3 homography, got NaN or infinite entries")
+    s = np.linalg.svd(H, compute_uv=False)
+    if s[0] == 0 or s[-1] <= s[0] / _MAX_CONDITION:
+        raise ValueError(f"{where}: expected an invertible 3x3 homography, got a singular matrix "
+                         f"(singular values {s[0]:.3g} .. {s[-1]:.3g})")
+    return H
 
 
 def _read_matrix_text(path) -> np.ndarray:
-    vals = [float(v) for v in re.split(r"[\s,;]+", Path(path).read_text().strip()) if v]
-    if len(vals) != 9:
-        raise ValueError(f"{path}: expected a 3x3 matrix (9 numbers), got {len(vals)} numbers")
-    return np.array(vals).reshape(3, 3)
+    """A 3x3 matrix written as three lines of three numbers (blank lines ignored)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"`{path}`: ground-truth homography file not found")
+    try:
+        text = path.read_text(encoding="utf-8-sig", errors="strict")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"`{path}`: cannot read the homography as text ({exc})") from None
+    rows = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        tokens = [t for t in re.split(r"[\s,;]+", line.strip()) if t]
+        if not tokens:
+            continue
+        try:
+            values = [float(t) for t in tokens]
+        except ValueError:
+            raise ValueError(f"`{path}`, line {lineno}: expected 3 numbers, "
+                             f"got {line.strip()!r:.80}") from None
+        if len(values) != 3:
+            raise ValueError(f"`{path}`, line {lineno}: expected 3 numbers, got {len(values)} "
+                             f"({line.strip()!r:.80})")
+        if not all(np.isfinite(values)):
+            raise ValueError(f"`{path}`, line {lineno}: expected finite numbers, "
+                             f"got {line.strip()!r:.80}")
+        rows.append(values)
+    if len(rows) != 3:
+        raise ValueError(f"`{path}`: expected a 3x3 matrix (3 lines of 3 numbers), "
+                         f"got {len(rows)} non-empty lines")
+    return _check_homography(np.array(rows), f"`{path}`")
+
+
+def _read_matrix_xml(path) -> np.ndarray:
+    """The first ``opencv-matrix`` of an OpenCV FileStorage XML file, as a 3x3 array."""
+    path = Path(path)
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        line, col = exc.position
+        raise ValueError(f"`{path}`, line {line}, column {col}: malformed XML "
+                         f"({str(exc).split(':')[0]})") from None
+    except OSError as exc:
+        raise ValueError(f"`{path}`: cannot read the file ({exc})") from None
+    node = next((el for el in root.iter() if el.get("type_id") == "opencv-matrix"), None)
+    if node is None:
+        raise ValueError(f"`{path}`: expected an element with type_id=\"opencv-matrix\", "
+                         "found none")
+    fields = {}
+    for name in ("rows", "cols", "data"):
+        child = node.find(name)
+        if child is None or child.text is None or not child.text.strip():
+            raise ValueError(f"`{path}`, field <{node.tag}><{name}>: missing or empty")
+        fields[name] = child.text.strip()
+    try:
+        rows, cols = int(fields["rows"]), int(fields["cols"])
+    except ValueError:
+        raise ValueError(f"`{path}`, fields <rows>/<cols>: expected integers, got "
+                         f"{fields['rows']!r:.20} and {fields['cols']!r:.20}") from None
+    if (rows, cols) != (3, 3):
+        raise ValueError(f"`{path}`, fields <rows>/<cols>: expected a 3x3 matrix, "
+                         f"got {rows}x{cols}")
+    try:
+        values = [float(t) for t in fields["data"].split()]
+    except ValueError:
+        raise ValueError(f"`{path}`, field <data>: expected 9 numbers, "
+                         f"got {fields['data']!r:.80}") from None
+    if len(values) != 9:
+        raise ValueError(f"`{path}`, field <data>: expected 9 numbers, got {len(values)}")
+    return _check_homography(np.array(values).reshape(3, 3), f"`{path}`, field <data>")
 
 
 def _read_image(path) -> np.ndarray:
-    arr = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if arr is None:
-        raise ValueError(f"cannot read image file {str(path)!r}")
+    """Decode an image file into a uint8 (or uint16) grey or RGB array."""
+    import cv2
+
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise ValueError(f"`{path}`: cannot read the image file ({exc})") from None
+    arr = None
+    if raw:
+        try:
+            arr = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_UNCHANGED)
+        except cv2.error:
+            arr = None
+    if arr is None or arr.size == 0:
+        why = "empty file" if not raw else f"{len(raw)} bytes, unknown or corrupt format"
+        raise ValueError(f"`{path}`: cannot decode the image file ({why})")
     if arr.ndim == 3:
-        arr = cv2.cvtColor(arr[..., :3], cv2.COLOR_BGR2RGB)
+        channels = arr.shape[2]
+        if channels <= 2:                 # grey (+ alpha)
+            arr = arr[..., 0]
+        else:                             # BGR(A) -> RGB
+            arr = arr[..., 2::-1]
+        arr = np.ascontiguousarray(arr)
     return arr
 
 
 def _find_image(folder: Path, stem: str) -> Path:
     for ext in _EXTS:
-        p = folder / f"{stem}{ext}"
-        if p.is_file():
-            return p
-    raise FileNotFoundError(f"no image {stem}.* ({', '.join(_EXTS)}) in {folder}")
+        for p in (folder / f"{stem}{ext}", folder / f"{stem}{ext.upper()}"):
+            if p.is_file():
+                return p
+    raise FileNotFoundError(f"`{folder}`: no image {stem}.* ({', '.join(_EXTS)})")
 
 
-def _sequence(folder, stems, h_files) -> HomographySequence:
+def _check_folder(folder) -> Path:
+    if isinstance(folder, bool) or not isinstance(folder, (str, Path)) and not hasattr(
+            folder, "__fspath__"):
+        raise TypeError(f"`folder` must be a path, got {type(folder).__name__} {folder!r:.40}")
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"`folder` must be an existing directory, got {str(folder)!r}")
-    paths = [_find_image(folder, s) for s in stems]
+    return folder
+
+
+def _image_files(folder: Path, pattern: str) -> dict:
+    """``{k: path}`` for the image files whose name matches ``pattern`` (group 1 = index ``k``),
+    sorted by ``k``; when one index has several files (``img1.ppm``, ``img1.png``) the first
+    extension of ``_EXTS`` wins."""
+    found: dict = {}
+    for p in folder.iterdir():
+        m = re.fullmatch(pattern, p.name)
+        if m and p.suffix.lower() in _EXTS and p.is_file():
+            found.setdefault(int(m.group(1)), []).append(p)
+    return {k: min(ps, key=lambda p: (_EXTS.index(p.suffix.lower()), p.name))
+            for k, ps in sorted(found.items())}
+
+
+def _sequence(folder: Path, files: dict, h_name) -> HomographySequence:
+    paths = list(files.values())
     images = [_read_image(p) for p in paths]
     Hs = [np.eye(3)]
-    for hf in h_files:
-        H1k = _read_matrix_text(folder / hf)     # image 1 -> image k
-        Hs.append(_normalize(np.linalg.inv(H1k)))
+    for k in list(files)[1:]:
+        H1k = _read_matrix_text(folder / h_name(k))     # image 1 -> image k
+        Hs.append(normalize_determinant(np.linalg.inv(H1k)))
     return HomographySequence(images=images, homographies=np.stack(Hs),
                               names=[p.name for p in paths], info={"folder": str(folder)})
 
 
 def load_oxford_sequence(folder) -> HomographySequence:
     """Oxford affine-covariant sequence (``img1.ppm ..``, ``H1to2p ..``).
+
+    Parameters
+    ----------
+    folder : path
+        Folder holding ``img1.*``, ``img2.*``, ... and ``H1to2p``, ``H1to3p``, ...
+
+    Returns
+    -------
+    HomographySequence
+
+    Raises
+    ------
+    FileNotFoundError
+        The folder, ``img1.*`` or a ground-truth file is missing.
+    ValueError
+        A file is malformed (named with its line), an image cannot be decoded, or a homography
+        is not finite or singular.
 
     Examples
     --------
@@ -120,37 +254,45 @@ def load_oxford_sequence(folder) -> HomographySequence:
     >>> seq.n_views, float(seq.homographies[1][0, 2])
     (2, -2.0)
     """
-    folder = Path(folder)
-    ks = sorted(int(m.group(1)) for p in folder.glob("img*")
-                if (m := re.fullmatch(r"img(\d+)\.\w+", p.name)))
-    if not ks or ks[0] != 1:
-        raise FileNotFoundError(f"no Oxford sequence (img1.*, img2.*, ...) in {folder}")
-    return _sequence(folder, [f"img{k}" for k in ks], [f"H1to{k}p" for k in ks[1:]])
+    folder = _check_folder(folder)
+    files = _image_files(folder, r"img(\d+)\.\w+")
+    if 1 not in files:
+        raise FileNotFoundError(f"`{folder}`: no Oxford sequence (img1.*, img2.*, ...) found")
+    return _sequence(folder, files, lambda k: f"H1to{k}p")
 
 
 def load_hpatches_sequence(folder) -> HomographySequence:
-    """HPatches full-image sequence (``1.ppm .. 6.ppm``, ``H_1_2 .. H_1_6``)."""
-    folder = Path(folder)
-    ks = sorted(int(m.group(1)) for p in folder.iterdir()
-                if (m := re.fullmatch(r"(\d+)\.\w+", p.name))) if folder.is_dir() else []
-    if not ks or ks[0] != 1:
-        raise FileNotFoundError(f"no HPatches sequence (1.ppm, 2.ppm, ...) in {folder}")
-    return _sequence(folder, [str(k) for k in ks], [f"H_1_{k}" for k in ks[1:]])
+    """HPatches full-image sequence (``1.ppm .. 6.ppm``, ``H_1_2 .. H_1_6``).
+
+    Parameters, returns and errors as :func:`load_oxford_sequence`.
+    """
+    folder = _check_folder(folder)
+    files = _image_files(folder, r"(\d+)\.\w+")
+    if 1 not in files:
+        raise FileNotFoundError(f"`{folder}`: no HPatches sequence (1.ppm, 2.ppm, ...) found")
+    return _sequence(folder, files, lambda k: f"H_1_{k}")
 
 
 def load_graf(folder=None) -> HomographySequence:
-    """Oxford graf images 1 and 3 with the ground truth ``H1to3p.xml`` (data home by default)."""
-    folder = Path(folder) if folder is not None else data_home(subfolder="oxford-graf")
-    fs = cv2.FileStorage(str(folder / "H1to3p.xml"), cv2.FILE_STORAGE_READ)
-    if not fs.isOpened():
-        raise FileNotFoundError(f"cannot read {folder / 'H1to3p.xml'}")
-    node = fs.getFirstTopLevelNode()
-    H13 = node.mat()
-    fs.release()
-    images = [_read_image(folder / "graf1.png"), _read_image(folder / "graf3.png")]
+    """Oxford graf images 1 and 3 with the ground truth ``H1to3p.xml`` (data home by default).
+
+    The ground truth is read from ``H1to3p.xml`` (OpenCV FileStorage) or, when that file is
+    absent, from the Oxford text file ``H1to3p``. Errors as :func:`load_oxford_sequence`.
+    """
+    folder = _check_folder(folder) if folder is not None else data_home(subfolder="oxford-graf")
+    xml, text = folder / "H1to3p.xml", folder / "H1to3p"
+    if xml.is_file():
+        H13 = _read_matrix_xml(xml)
+    elif text.is_file():
+        H13 = _read_matrix_text(text)
+    else:
+        raise FileNotFoundError(f"`{folder}`: no ground truth H1to3p.xml or H1to3p")
+    paths = [_find_image(folder, "graf1"), _find_image(folder, "graf3")]
+    images = [_read_image(p) for p in paths]
     return HomographySequence(images=images,
-                              homographies=np.stack([np.eye(3), _normalize(np.linalg.inv(H13))]),
-                              names=["graf1.png", "graf3.png"], info={"folder": str(folder)})
+                              homographies=np.stack([np.eye(3),
+                                                     normalize_determinant(np.linalg.inv(H13))]),
+                              names=[p.name for p in paths], info={"folder": str(folder)})
 
 
 @dataclass(frozen=True)
@@ -166,25 +308,96 @@ class AdelaideRMFPair:
 
     @property
     def n_planes(self) -> int:
-        return int(self.labels.max())
+        return int(self.labels.max()) if self.labels.size else 0
+
+
+def _adelaide_folder(folder) -> Path:
+    return _check_folder(folder) if folder is not None else data_home(subfolder="adelaidermf")
 
 
 def list_adelaidermf(folder=None) -> list:
-    """Names of the AdelaideRMF sequences available (``.mat`` files)."""
-    folder = Path(folder) if folder is not None else data_home(subfolder="adelaidermf")
-    return sorted(p.stem for p in folder.glob("*.mat"))
+    """Names of the AdelaideRMF sequences available (``.mat`` files; empty list if none)."""
+    folder = _adelaide_folder(folder)
+    return sorted(p.stem for p in folder.glob("*.mat") if p.is_file())
+
+
+def _mat_field(m: dict, key: str, path: Path) -> np.ndarray:
+    if key not in m:
+        found = sorted(k for k in m if not k.startswith("__"))
+        raise ValueError(f"`{path}`: field {key!r} missing (expected data, label, img1, img2; "
+                         f"found {', '.join(found) or 'none'})")
+    return np.asarray(m[key])
+
+
+def _mat_image(m: dict, key: str, path: Path) -> np.ndarray:
+    img = _mat_field(m, key, path)
+    if img.dtype.kind not in "uif" or img.ndim not in (2, 3) or min(img.shape[:2], default=0) < 1 \
+            or (img.ndim == 3 and img.shape[2] not in (1, 3, 4)):
+        raise ValueError(f"`{path}`, field {key!r}: expected an image (H, W) or (H, W, 3), "
+                         f"got shape {img.shape} and dtype {img.dtype}")
+    return img
 
 
 def load_adelaidermf(name, folder=None) -> AdelaideRMFPair:
-    """Load one AdelaideRMF pair (``scipy.io.loadmat``)."""
+    """Load one AdelaideRMF pair (``scipy.io.loadmat``).
+
+    Parameters
+    ----------
+    name : str
+        Sequence name, the ``.mat`` file's stem (see :func:`list_adelaidermf`).
+    folder : path, default=None
+        Folder of the ``.mat`` files (the data home's ``adelaidermf`` by default).
+
+    Returns
+    -------
+    AdelaideRMFPair
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        The file cannot be read as MATLAB data, or a field is missing or malformed (``data``
+        6xN and finite with non-zero homogeneous rows, ``label`` N non-negative integers,
+        ``img1``/``img2`` images); the message names the file and the field.
+    """
     from scipy.io import loadmat
 
-    folder = Path(folder) if folder is not None else data_home(subfolder="adelaidermf")
+    if not isinstance(name, str) or not name or Path(name).name != name:
+        raise ValueError(f"`name` must be a sequence name (a file stem without folder), "
+                         f"got {name!r:.60}")
+    folder = _adelaide_folder(folder)
     path = folder / f"{name}.mat"
     if not path.is_file():
         raise FileNotFoundError(f"`name`: no AdelaideRMF file {path}")
-    m = loadmat(str(path))
-    data = np.asarray(m["data"], dtype=float)
-    labels = np.asarray(m["label"]).ravel().astype(int)
+    try:
+        m = loadmat(str(path))
+    except Exception as exc:  # scipy raises OSError, ValueError, TypeError... on broken files
+        raise ValueError(f"`{path}`: cannot read as a MATLAB .mat file "
+                         f"({type(exc).__name__}: {exc})") from None
+    data = _mat_field(m, "data", path)
+    if data.dtype.kind not in "uif" or data.ndim != 2 or data.shape[0] != 6:
+        raise ValueError(f"`{path}`, field 'data': expected a 6xN array (x1, y1, 1, x2, y2, 1), "
+                         f"got shape {data.shape} and dtype {data.dtype}")
+    data = data.astype(float)
+    if not np.all(np.isfinite(data)):
+        raise ValueError(f"`{path}`, field 'data': expected finite values, got NaN or infinite "
+                         "entries")
+    if np.any(data[2] == 0) or np.any(data[5] == 0):
+        raise ValueError(f"`{path}`, field 'data': homogeneous rows 3 and 6 must be non-zero")
+    n = data.shape[1]
+    raw = _mat_field(m, "label", path)
+    labels = raw.ravel()
+    if raw.dtype.kind not in "uif" or labels.size != n:
+        raise ValueError(f"`{path}`, field 'label': expected {n} labels (one per column of "
+                         f"'data'), got shape {raw.shape} and dtype {raw.dtype}")
+    if labels.dtype.kind == "f" and not np.all(np.isfinite(labels) & (labels == np.round(labels))):
+        raise ValueError(f"`{path}`, field 'label': expected integer labels, got non-integer "
+                         "values")
+    labels = labels.astype(np.int64)
+    if labels.size and labels.min() < 0:
+        raise ValueError(f"`{path}`, field 'label': expected labels >= 0 (0 = outlier), "
+                         f"got minimum {int(labels.min())}")
+    img1, img2 = _mat_image(m, "img1", path), _mat_image(m, "img2", path)
     return AdelaideRMFPair(name=name, x1=(data[:2] / data[2]).T, x2=(data[3:5] / data[5]).T,
-                           labels=labels, img1=np.asarray(m["img1"]), img2=np.asarray(m["img2"]))
+                           labels=labels, img1=img1, img2=img2)

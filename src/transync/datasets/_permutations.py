@@ -15,8 +15,11 @@ from typing import Any
 import numpy as np
 
 from .._validation import as_generator, check_int, check_probability
+from ..permutations import MultiMatching
 
 __all__ = ["PermutationCollection", "make_permutation_collection"]
+
+_MAX_ENTRIES = 2 * 10**8       # generated assignment entries (about 1.6 GB as int64)
 
 
 @dataclass(frozen=True)
@@ -40,6 +43,9 @@ class PermutationCollection:
         Symmetric mask of the observed pairs that were replaced by random maps.
     info : dict
         The generation parameters.
+    ground_truth : MultiMatching
+        The ground truth as a multi-matching (built from ``labels`` and ``n_universe``);
+        ``true_pairwise`` and ``accuracy`` delegate to it.
     """
 
     pairwise: Mapping[tuple[int, int], np.ndarray]
@@ -49,6 +55,10 @@ class PermutationCollection:
     mask: np.ndarray
     corrupted: np.ndarray
     info: Mapping[str, Any] = field(default_factory=dict)
+    ground_truth: MultiMatching = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "ground_truth", MultiMatching(self.labels, self.n_universe))
 
     @property
     def n_objects(self) -> int:
@@ -56,18 +66,19 @@ class PermutationCollection:
 
     def true_pairwise(self, i: int, j: int) -> np.ndarray:
         """The ground-truth assignment from object ``i`` to object ``j``."""
-        inv = np.full(self.n_universe, -1, dtype=np.int64)
-        inv[self.labels[j]] = np.arange(self.labels[j].size)
-        return inv[self.labels[i]]
+        return self.ground_truth.pairwise(i, j)
 
-    def accuracy(self, labels: Sequence[np.ndarray], *, pairs=None) -> float:
-        """Fraction of ground-truth correspondences recovered by a multi-matching ``labels``.
+    def accuracy(self, labels, *, pairs=None) -> float:
+        """Fraction of ground-truth correspondences recovered by a multi-matching.
 
         A correspondence is a node ``u`` of ``i`` and a node ``v`` of ``j`` (``i != j``) with the
-        same true universe id; it is recovered when the predicted labels also put ``u`` and
-        ``v`` together. Evaluated over all pairs ``i < j`` (or the ``(P, 2)`` array ``pairs``).
+        same true universe id; it is recovered when the prediction also puts ``u`` and ``v``
+        together. ``labels`` is a sequence of label arrays, a :class:`MultiMatching`, a result
+        carrying one (``.matching``) or a dict of pairwise maps; see
+        :meth:`MultiMatching.accuracy`. Evaluated over all pairs ``i < j`` (or the ``(P, 2)``
+        array ``pairs``).
         """
-        return _labels_accuracy(labels, self.labels, pairs=pairs)
+        return self.ground_truth.accuracy(labels, pairs=pairs)
 
 
 def _pad_labels(labels: Sequence[np.ndarray]) -> np.ndarray:
@@ -76,42 +87,6 @@ def _pad_labels(labels: Sequence[np.ndarray]) -> np.ndarray:
     for g, lab in enumerate(labels):
         out[g, : len(lab)] = lab
     return out
-
-
-def _inverse_table(padded: np.ndarray, d: int) -> np.ndarray:
-    """``inv[g, a]`` = node of ``g`` with label ``a``; column ``d`` (= index -1) stays -1."""
-    n_obj, n_max = padded.shape
-    inv = np.full((n_obj, d + 1), -1, dtype=np.int64)
-    g, u = np.nonzero(padded >= 0)
-    inv[g, padded[g, u]] = u
-    return inv
-
-
-def _labels_accuracy(pred, truth, *, pairs=None) -> float:
-    truth_p = _pad_labels(truth)
-    pred_p = _pad_labels(pred)
-    if pred_p.shape != truth_p.shape:
-        raise ValueError(f"`labels` must hold {truth_p.shape[0]} objects of the true sizes, got "
-                         f"{pred_p.shape[0]} objects")
-    n = truth_p.shape[0]
-    if pairs is None:
-        pairs = np.column_stack(np.triu_indices(n, 1))
-    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    d_t = int(truth_p.max(initial=-1)) + 1
-    d_p = int(pred_p.max(initial=-1)) + 1
-    tinv = _inverse_table(truth_p, d_t)
-    pinv = _inverse_table(pred_p, d_p)
-    hit = 0
-    tot = 0
-    for start in range(0, pairs.shape[0], 20000):
-        chunk = pairs[start:start + 20000]
-        i, j = chunk[:, 0], chunk[:, 1]
-        true_v = tinv[j[:, None], truth_p[i]]      # -1 for padding / unseen
-        pred_v = pinv[j[:, None], pred_p[i]]
-        ok = true_v >= 0
-        tot += int(ok.sum())
-        hit += int((ok & (pred_v == true_v)).sum())
-    return float(hit / tot) if tot else 1.0
 
 
 def make_permutation_collection(n_objects: int, n_nodes: int, *, corruption: float = 0.0,
@@ -138,7 +113,7 @@ def make_permutation_collection(n_objects: int, n_nodes: int, *, corruption: flo
     corruption, visibility, observed : float in [0, 1]
         Fraction of corrupted pairs, node keep probability, pair observation probability.
     n_universe : int, optional
-        Universe size ``d >= n_nodes``; default ``n_nodes``.
+        Universe size ``n_nodes <= d <= n_objects * n_nodes``; default ``n_nodes``.
     ensure_connected : bool, default=True
         Always observe a random Hamiltonian path, so the observation graph is connected.
     rng : None, int or numpy.random.Generator
@@ -164,6 +139,17 @@ def make_permutation_collection(n_objects: int, n_nodes: int, *, corruption: flo
     d = n_nodes if n_universe is None else check_int(n_universe, "n_universe", minimum=1)
     if d < n_nodes:
         raise ValueError(f"`n_universe` must be >= n_nodes={n_nodes}, got {d}")
+    if d > n_objects * n_nodes:
+        raise ValueError(f"`n_universe` must be <= n_objects * n_nodes = {n_objects * n_nodes} "
+                         f"(more slots than nodes are never used), got {d}")
+    entries = n_objects * (n_objects - 1) // 2 * n_nodes
+    if entries > _MAX_ENTRIES:
+        raise ValueError(f"`n_objects`={n_objects} and `n_nodes`={n_nodes} would generate "
+                         f"{entries:.3g} assignment entries (more than {_MAX_ENTRIES:.0e}); "
+                         "use fewer objects or nodes")
+    if not isinstance(ensure_connected, (bool, np.bool_)):
+        raise TypeError(f"`ensure_connected` must be a bool, got "
+                        f"{type(ensure_connected).__name__} {ensure_connected!r}")
     gen = as_generator(rng)
 
     # node sets and orders
@@ -195,8 +181,8 @@ def make_permutation_collection(n_objects: int, n_nodes: int, *, corruption: flo
     pairs = np.column_stack([iu[obs], ju[obs]]).astype(np.int64)
     n_pairs = pairs.shape[0]
 
-    inv = _inverse_table(padded, d)
-    maps = inv[pairs[:, 1][:, None], padded[pairs[:, 0]]]         # (P, n_max), -1 at padding
+    truth = MultiMatching(labels, d)
+    maps = truth.pairwise_array(pairs).copy()                     # (P, n_max), -1 at padding
     n_bad = int(round(corruption * n_pairs))
     bad = np.zeros(n_pairs, dtype=bool)
     if n_bad:

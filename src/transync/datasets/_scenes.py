@@ -13,10 +13,10 @@ import functools
 from dataclasses import dataclass, field
 from typing import Any
 
-import cv2
 import numpy as np
 
 from .._validation import as_generator, check_choice, check_int, check_positive, check_probability
+from ..geometry import image_corners, normalize_determinant
 
 __all__ = ["PlanarScene", "make_planar_scene"]
 
@@ -68,6 +68,8 @@ class PlanarScene:
 
 @functools.lru_cache(maxsize=None)
 def _source(name: str) -> np.ndarray:
+    import cv2
+
     import skimage.data
 
     img = getattr(skimage.data, name)()
@@ -83,6 +85,8 @@ def _patch_pool(size: int) -> tuple:
     Every crop is normalized to mean 128 and standard deviation 45. Crops never overlap, so a
     texture built from distinct crops never shows the same content twice (no false matches).
     """
+    import cv2
+
     out = []
     for name in _SOURCES:
         src = _source(name)
@@ -124,6 +128,8 @@ class _PatchDealer:
     def next(self, out_size, scale=None):
         """A crop resized to ``out_size``; with ``scale`` (output px per source px), only the
         central part of the crop that gives that magnification is used."""
+        import cv2
+
         p = self.pool[self.order[self.k % len(self.order)]]
         if scale is not None:
             ow, oh = (out_size, out_size) if np.isscalar(out_size) else out_size
@@ -144,6 +150,8 @@ class _PatchDealer:
 
 def _noise_patch(size, rng):
     """Multi-scale random texture (unique by construction), mean 128 and deviation 45."""
+    import cv2
+
     p = np.zeros((size, size), np.float32)
     for sigma in (1.0, 2.0, 4.0, 8.0):
         p += cv2.GaussianBlur(rng.normal(0, 1, (size, size)).astype(np.float32), (0, 0), sigma) * sigma
@@ -155,6 +163,8 @@ def _texture(size_px, cell, visible, near, dealer, rng):
     (no seams, no periodic tiling), plus fine unique noise. ``visible`` and ``near`` are boolean
     cell grids; cells seen only from far (``visible & ~near``) get the crops left over, then
     multi-scale noise once the pool of distinct crops is used up."""
+    import cv2
+
     n = visible.shape[0]
     m = int(round(1.5 * cell))                       # window (patch) size
     pad = m
@@ -199,10 +209,6 @@ def _plane_homography(K, R, C, height, S):
     t = -R @ C
     M = np.column_stack([R[:, 0], R[:, 1], height * R[:, 2] + t])
     return K @ M @ S
-
-
-def _normalize(H):
-    return H / np.cbrt(np.linalg.det(H))
 
 
 def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate", max_angle=None,
@@ -259,11 +265,30 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
     f = 1.1 * w
     K = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1.0]])
     px_per_unit = f * 0.9          # texture resolution close to the image's at distance 1
-    corners = np.array([[0, 0, 1], [w - 1, 0, 1], [w - 1, h - 1, 1], [0, h - 1, 1]], float).T
+    corners = np.column_stack([image_corners((w, h)), np.ones(4)]).T   # homogeneous, (3, 4)
+    Rs, Cs, reach = _cameras(n, K, corners, reference, np.deg2rad(preset["max_angle"]), rng)
+    extent = 2.0 * reach + 0.2     # the plane texture covers every view
+    tex_px = int(extent * px_per_unit)
+    s = extent / tex_px
+    S = np.array([[s, 0, -extent / 2], [0, s, -extent / 2], [0, 0, 1.0]])
+    texture, dealer, cell = _plane_texture(K, Rs, Cs, S, corners, tex_px, px_per_unit, rng)
+    Gr = _plane_homography(K, Rs[reference], Cs[reference], 0.0, S)
+    patches = _clutter(K, Rs[reference], Cs[reference], Gr, S, (w, h), preset["clutter"],
+                       px_per_unit, dealer, cell, rng)
+    images, clean, masks, Hs, fractions = _render(texture, patches, K, Rs, Cs, S, Gr, (w, h),
+                                                  noise, rng)
+    return PlanarScene(images=images, homographies=np.stack(Hs), masks=np.stack(masks),
+                       reference=reference, image_size=(w, h), clean_images=clean,
+                       info={"K": K, "R": np.stack(Rs), "C": np.stack(Cs),
+                             "n_clutter": len(patches), "clutter_fraction": np.array(fractions),
+                             "difficulty": difficulty, **preset})
 
-    # cameras
-    Ks, Rs, Cs = [], [], []
-    max_ang = np.deg2rad(preset["max_angle"])
+
+def _cameras(n, K, corners, reference, max_ang, rng):
+    """Cameras looking at the plane: the reference fronto-parallel at distance 1, the others
+    tilted by up to ``max_ang``; returns ``(Rs, Cs, reach)`` with ``reach`` the largest plane
+    coordinate any view sees."""
+    Rs, Cs = [], []
     reach = 0.0
     for i in range(n):
         for _attempt in range(200):
@@ -289,23 +314,25 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
         else:
             raise ValueError("`max_angle` too large: no camera sees a bounded part of the plane")
         reach = max(reach, r_i)
-        Ks.append(K)
         Rs.append(R)
         Cs.append(C)
-    extent = 2.0 * reach + 0.2     # the plane texture covers every view
-    tex_px = int(extent * px_per_unit)
-    s = extent / tex_px
-    S = np.array([[s, 0, -extent / 2], [0, s, -extent / 2], [0, 0, 1.0]])
-    # only the cells of the texture that some view sees get content: fewer cells, so the pool
-    # of distinct source crops stays large enough for crops to never repeat
+    return Rs, Cs, reach
+
+
+def _plane_texture(K, Rs, Cs, S, corners, tex_px, px_per_unit, rng):
+    """The plane texture: only the cells that some view sees get content (fewer cells, so the
+    pool of distinct source crops stays large enough for crops never to repeat). Returns
+    ``(texture, dealer, cell)``; the dealer goes on dealing crops to the clutter."""
+    import cv2
+
     cell = max(48, int(0.16 * px_per_unit))
     n_cells = int(np.ceil(tex_px / cell))
     visible = np.zeros((n_cells, n_cells), np.uint8)
     mag = np.zeros((n_cells, n_cells))        # largest image px per texture px over the views
     cc = (np.stack(np.meshgrid(np.arange(n_cells), np.arange(n_cells)), -1).reshape(-1, 2) + 0.5)
     cc = np.column_stack([cc * cell, np.ones(len(cc))]).T
-    for i in range(n):
-        G = _plane_homography(Ks[i], Rs[i], Cs[i], 0.0, S)
+    for R, C in zip(Rs, Cs):
+        G = _plane_homography(K, R, C, 0.0, S)
         foot = np.linalg.solve(G, corners)
         foot = (foot[:2] / foot[2]).T / cell
         cv2.fillConvexPoly(visible, np.round(foot * 16).astype(np.int32), 1, cv2.LINE_8, 4)
@@ -316,15 +343,20 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
     visible = cv2.dilate(visible, np.ones((3, 3), np.uint8)) > 0
     near = visible & (mag >= 0.55)
     dealer = _PatchDealer(_source_patch_size(int(near.sum()) + 60), rng)
-    texture = _texture(tex_px, cell, visible, near, dealer, rng)
+    return _texture(tex_px, cell, visible, near, dealer, rng), dealer, cell
 
-    # clutter: many small floating textured rectangles in front of the plane, placed over the
-    # reference view (small, so that no single object rivals the plane in the number of matches)
-    Gr = _plane_homography(K, Rs[reference], Cs[reference], 0.0, S)
+
+def _clutter(K, R, C, Gr, S, size, target, px_per_unit, dealer, cell, rng):
+    """Many small floating textured rectangles in front of the plane, placed over the reference
+    view until they cover about ``target`` of it (small, so that no single object rivals the
+    plane in the number of matches); sorted by height."""
+    import cv2
+
+    w, h = size
     patches = []
     covered = np.zeros((h, w), dtype=bool)
     attempts = 0
-    while covered.mean() < preset["clutter"] and attempts < 400:
+    while covered.mean() < target and attempts < 400:
         attempts += 1
         ph = rng.uniform(0.06, 0.2)
         size = rng.uniform(0.07, 0.16) * np.array([1.0, rng.uniform(0.6, 1.6)])
@@ -337,11 +369,11 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
                    int(round(ptex_px * size[1] / size.max())))
         sp = size.max() / ptex_px
         Sp = np.array([[sp, 0, X[0] - size[0] / 2], [0, sp, X[1] - size[1] / 2], [0, 0, 1.0]])
-        Gp = _plane_homography(K, Rs[reference], Cs[reference], ph, Sp)
+        Gp = _plane_homography(K, R, C, ph, Sp)
         cov = cv2.warpPerspective(np.ones((phh, pw), np.uint8), Gp, (w, h),
                                   flags=cv2.INTER_NEAREST) > 0
         gain = (cov & ~covered).mean()
-        if gain < 0.002 or covered.mean() + gain > preset["clutter"] + 0.02:
+        if gain < 0.002 or covered.mean() + gain > target + 0.02:
             continue
         covered |= cov
         # same magnification of the source as the plane texture: clutter is not sharper
@@ -349,15 +381,23 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
         ptex = ptex.astype(np.float32)
         patches.append({"height": ph, "S": Sp, "texture": ptex})
     patches.sort(key=lambda p: p["height"])
+    return patches
 
+
+def _render(texture, patches, K, Rs, Cs, S, Gr, size, noise, rng):
+    """Every view: the plane, then the clutter over it (far to near), gain, bias and noise.
+    Returns ``(images, clean, masks, homographies, clutter_fractions)``."""
+    import cv2
+
+    w, h = size
     images, clean, masks, Hs, fractions = [], [], [], [], []
-    for i in range(n):
-        G = _plane_homography(Ks[i], Rs[i], Cs[i], 0.0, S)
+    for R, C in zip(Rs, Cs):
+        G = _plane_homography(K, R, C, 0.0, S)
         img = cv2.warpPerspective(texture, G, (w, h), flags=cv2.INTER_LINEAR,
                                   borderMode=cv2.BORDER_REFLECT).astype(np.float32)
         plane = np.ones((h, w), dtype=bool)
         for p in patches:
-            Gp = _plane_homography(Ks[i], Rs[i], Cs[i], p["height"], p["S"])
+            Gp = _plane_homography(K, R, C, p["height"], p["S"])
             pt = p["texture"]
             warped = cv2.warpPerspective(pt, Gp, (w, h), flags=cv2.INTER_LINEAR)
             alpha = cv2.warpPerspective(np.ones(pt.shape, np.float32), Gp, (w, h),
@@ -367,13 +407,10 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
         clean.append(np.clip(img, 0, 255).astype(np.uint8))
         gain = rng.uniform(0.85, 1.15)
         bias = rng.uniform(-12, 12)
-        noisy = img * gain + bias + rng.normal(0, noise, size=img.shape) if noise else img * gain + bias
+        noisy = (img * gain + bias + rng.normal(0, noise, size=img.shape) if noise
+                 else img * gain + bias)
         images.append(np.clip(np.round(noisy), 0, 255).astype(np.uint8))
         masks.append(plane)
-        Hs.append(_normalize(Gr @ np.linalg.inv(G)))
+        Hs.append(normalize_determinant(Gr @ np.linalg.inv(G)))
         fractions.append(1.0 - plane.mean())
-    return PlanarScene(images=images, homographies=np.stack(Hs), masks=np.stack(masks),
-                       reference=reference, image_size=(w, h), clean_images=clean,
-                       info={"K": K, "R": np.stack(Rs), "C": np.stack(Cs),
-                             "n_clutter": len(patches), "clutter_fraction": np.array(fractions),
-                             "difficulty": difficulty, **preset})
+    return images, clean, masks, Hs, fractions

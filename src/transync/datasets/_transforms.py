@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import as_generator, check_choice, check_int, check_positive, check_probability
+from ..geometry import image_corners, normalize_determinant, transfer_points
 
 __all__ = ["TransformProblem", "make_noisy_homographies", "make_noisy_linear_maps"]
 
@@ -68,7 +69,7 @@ def _random_group_element(d, group, rng, spread=1.0):
     if group == "SL":
         if np.linalg.det(A) < 0:
             A[:, 0] *= -1
-        A = A / np.linalg.det(A) ** (1.0 / d)
+        A = normalize_determinant(A)
     return A
 
 
@@ -125,16 +126,11 @@ def make_noisy_linear_maps(n_objects=10, dim=3, *, group="GL", noise=0.05, outli
                 u, _, vt = np.linalg.svd(Tij)
                 Tij = u @ np.diag([1.0] * (d - 1) + [np.linalg.det(u @ vt)]) @ vt
             elif group == "SL":
-                det = np.linalg.det(Tij)
-                Tij = Tij / (np.sign(det) * abs(det) ** (1.0 / d))
+                Tij = normalize_determinant(Tij)
         observed[i, j] = Tij
         observed[j, i] = np.linalg.inv(Tij)
     return TransformProblem(observed=observed, mask=mask, truth=truth, outliers=outliers,
                             info={"group": group, "noise": noise})
-
-
-def _corners(w, h):
-    return np.array([[0.0, 0.0], [w - 1.0, 0.0], [w - 1.0, h - 1.0], [0.0, h - 1.0]])
 
 
 def _homography_from_points(src, dst):
@@ -149,12 +145,6 @@ def _homography_from_points(src, dst):
     return np.append(h, 1.0).reshape(3, 3)
 
 
-def _apply(H, pts):
-    p = pts @ H[:2, :2].T + H[:2, 2]
-    z = pts @ H[2, :2] + H[2, 2]
-    return p / z[:, None]
-
-
 def random_view_homography(image_size, rng, *, max_angle=25.0, scale_range=(0.85, 1.15),
                            shift=0.08, perspective=0.08):
     """A homography taking pixels of a random view into the reference view (``image_size``).
@@ -164,7 +154,7 @@ def random_view_homography(image_size, rng, *, max_angle=25.0, scale_range=(0.85
     corners to these points.
     """
     w, h = image_size
-    c = _corners(w, h)
+    c = image_corners((w, h))
     center = np.array([(w - 1) / 2, (h - 1) / 2])
     ang = np.deg2rad(rng.uniform(-max_angle, max_angle))
     s = rng.uniform(*scale_range)
@@ -223,11 +213,11 @@ def make_noisy_homographies(n_views=10, *, image_size=(640, 480), noise=0.5, out
     outliers = _pick_outlier_pairs(mask, outlier_fraction, rng)
     pairs = np.argwhere(np.triu(mask, 1))
     inv = np.linalg.inv(truth)
-    c = _corners(w, h)
+    c = image_corners((w, h))
     observed = np.full((n, n, 3, 3), np.nan)
     for i, j in pairs:
         Tij = inv[i] @ truth[j]
-        dst = _apply(Tij, c)
+        dst = transfer_points(Tij, c)
         if outliers[i, j]:
             mag = rng.uniform(40, 150, size=(4, 1))
             ang = rng.uniform(0, 2 * np.pi, size=(4, 1))

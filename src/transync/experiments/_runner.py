@@ -6,15 +6,22 @@ parameters, the methods to compare) and a ``trial(config, rng) -> dict`` functio
 * derives every trial's random generator from ``(experiment, sweep, value, trial, seed)`` — not
   from the method, so all methods of a trial see the same generated problem;
 * skips trials already in ``DIR/results.sqlite`` (rerunning resumes) and commits each trial in its
-  own transaction as soon as it finishes (a killed run loses at most the trials in flight);
-* runs serially or on a process pool (``workers``), with a tqdm progress bar;
+  own transaction as soon as it finishes (a killed run loses at most the trials in flight); the
+  configuration key covers everything that changes a trial's result, the ``seed`` included;
+* keeps ``results.sqlite`` self-contained: a rollback journal (no ``-wal`` file), so the file
+  alone holds every committed trial, after a normal exit as after ``kill -9``;
+* holds an exclusive lock on ``DIR`` for the whole run (a second run on the same folder is
+  refused with :class:`~transync.exceptions.ExperimentStoreError`), and reports a corrupted
+  store with its path and a salvage hint instead of touching it;
+* runs serially or on a process pool (``workers``) whose processes ignore Ctrl-C (the parent
+  stops them) and die with their parent, with a tqdm progress bar;
 * summarizes mean and standard error per (sweep, value, method, metric), writes
   ``summary.csv``/``summary.md`` and plots one panel per sweep and metric.
 
 Examples
 --------
 >>> import tempfile
->>> from transync.experiments._runner import Experiment, Sweep, run_experiment
+>>> from transync.experiments import Experiment, Sweep, run_experiment
 >>> exp = Experiment(name="toy", trial=_toy_trial, trials=3, sweeps=[
 ...     Sweep(name="noise", variable="noise", values=[0.0, 0.5], methods=["a", "b"],
 ...           metrics=("error",))])
@@ -27,10 +34,15 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import math
+import os
+import signal
 import sqlite3
+import sys
+import threading
 import time
 import traceback
 import warnings
@@ -42,6 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from .._validation import check_int
+from ..exceptions import ExperimentStoreError
 
 __all__ = ["Experiment", "ExperimentReport", "ExperimentStore", "Sweep", "run_experiment",
            "summarize"]
@@ -94,8 +107,10 @@ class ExperimentReport:
     extra_files: tuple = ()
 
 
-def _config_key(sweep: str, config: Mapping) -> str:
-    blob = json.dumps({"sweep": sweep, **config}, sort_keys=True, default=str)
+def _config_key(sweep: str, config: Mapping, seed: int) -> str:
+    """Hash of everything that changes a trial's result besides its index: sweep, config, seed."""
+    blob = json.dumps({"sweep": sweep, "config": dict(config), "seed": int(seed)},
+                      sort_keys=True, default=str)
     return hashlib.sha1(blob.encode()).hexdigest()[:16]
 
 
@@ -104,44 +119,231 @@ def _trial_seed(experiment: str, sweep: str, value, trial: int, seed: int) -> in
     return int.from_bytes(hashlib.sha256(blob).digest()[:8], "little")
 
 
+_SALVAGE = ("it was left untouched; to salvage its rows run `sqlite3 {path} .recover > "
+            "salvage.sql`, or move it away to start afresh")
+
+
 class ExperimentStore:
-    """SQLite store of finished trials, keyed by (experiment, configuration hash, trial index)."""
+    """SQLite store of finished trials, keyed by (experiment, configuration hash, trial index).
+
+    The database uses a rollback journal with ``synchronous=FULL``: every committed trial is in
+    ``results.sqlite`` itself (no ``-wal`` file to copy along), at the price of one ``fsync`` per
+    trial. A file that is not a readable SQLite database raises
+    :class:`~transync.exceptions.ExperimentStoreError` naming it; it is never overwritten.
+    """
 
     def __init__(self, path):
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._con = sqlite3.connect(str(self.path))
-        self._con.execute("PRAGMA journal_mode=WAL")
-        self._con.execute("""CREATE TABLE IF NOT EXISTS trials (
-            experiment TEXT NOT NULL, config_hash TEXT NOT NULL, trial INTEGER NOT NULL,
-            sweep TEXT NOT NULL, config TEXT NOT NULL, metrics TEXT NOT NULL,
-            error TEXT, seconds REAL NOT NULL, finished REAL NOT NULL,
-            PRIMARY KEY (experiment, config_hash, trial))""")
-        self._con.commit()
+        _prepare_folder(self.path.parent)
+        self._con = None
+        with self._guard():
+            self._con = sqlite3.connect(str(self.path), timeout=30)
+            # a store written by an older version in WAL mode is checkpointed into the main file
+            self._con.execute("PRAGMA journal_mode=TRUNCATE")
+            self._con.execute("PRAGMA synchronous=FULL")
+            check = self._con.execute("PRAGMA quick_check").fetchone()[0]
+            if check != "ok":
+                raise sqlite3.DatabaseError(f"integrity check failed: {check}")
+            self._con.execute("""CREATE TABLE IF NOT EXISTS trials (
+                experiment TEXT NOT NULL, config_hash TEXT NOT NULL, trial INTEGER NOT NULL,
+                sweep TEXT NOT NULL, config TEXT NOT NULL, metrics TEXT NOT NULL,
+                error TEXT, seconds REAL NOT NULL, finished REAL NOT NULL,
+                PRIMARY KEY (experiment, config_hash, trial))""")
+            self._con.commit()
+
+    @contextlib.contextmanager
+    def _guard(self):
+        """Turn SQLite errors into :class:`ExperimentStoreError` naming the file."""
+        try:
+            yield
+        except sqlite3.DatabaseError as exc:
+            if self._con is not None:
+                self._con.close()
+                self._con = None
+            msg = str(exc)
+            if isinstance(exc, sqlite3.OperationalError) and (
+                    "unable to open" in msg or "readonly" in msg or "read-only" in msg):
+                raise ExperimentStoreError(
+                    f"cannot write the experiment store {self.path} ({msg}): the folder "
+                    f"{self.path.parent} or the file is not writable") from exc
+            if isinstance(exc, sqlite3.OperationalError) and "locked" in msg:
+                raise ExperimentStoreError(
+                    f"the experiment store {self.path} is locked by another process ({msg})"
+                ) from exc
+            raise ExperimentStoreError(
+                f"{self.path} is not a readable experiment store ({msg}); "
+                + _SALVAGE.format(path=self.path)) from exc
 
     def done(self, experiment: str) -> set[tuple[str, int]]:
-        rows = self._con.execute("SELECT config_hash, trial FROM trials WHERE experiment = ?",
-                                 (experiment,))
-        return {(h, int(t)) for h, t in rows}
+        with self._guard():
+            rows = self._con.execute(
+                "SELECT config_hash, trial FROM trials WHERE experiment = ?", (experiment,))
+            return {(h, int(t)) for h, t in rows}
 
     def add(self, experiment: str, key: str, trial: int, sweep: str, config: Mapping,
             metrics: Mapping, error: str | None, seconds: float) -> None:
-        with self._con:  # one transaction per trial
+        with self._guard(), self._con:  # one transaction per trial
             self._con.execute(
                 "INSERT OR REPLACE INTO trials VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (experiment, key, trial, sweep, json.dumps(dict(config), default=str),
                  json.dumps({k: float(v) for k, v in metrics.items()}), error, seconds,
                  time.time()))
 
-    def records(self, experiment: str) -> list[dict]:
-        rows = self._con.execute(
-            "SELECT sweep, config, trial, metrics, error, seconds FROM trials "
-            "WHERE experiment = ? ORDER BY sweep, config_hash, trial", (experiment,))
-        return [dict(sweep=s, config=json.loads(c), trial=t, metrics=json.loads(m), error=e,
-                     seconds=sec) for s, c, t, m, e, sec in rows]
+    def records(self, experiment: str, keys=None) -> list[dict]:
+        """Stored trials of ``experiment``; only those whose configuration hash is in ``keys``
+        when given (a run reports the trials of its own configurations and seed)."""
+        with self._guard():
+            rows = self._con.execute(
+                "SELECT sweep, config, trial, metrics, error, seconds, config_hash FROM trials "
+                "WHERE experiment = ? ORDER BY sweep, config_hash, trial", (experiment,))
+            return [dict(sweep=s, config=json.loads(c), trial=t, metrics=json.loads(m),
+                         error=e, seconds=sec) for s, c, t, m, e, sec, h in rows
+                    if keys is None or h in keys]
 
     def close(self):
-        self._con.close()
+        if self._con is not None:
+            with contextlib.suppress(sqlite3.Error):
+                self._con.execute("PRAGMA journal_mode=DELETE")   # remove the empty journal
+            self._con.close()
+            self._con = None
+
+
+def _prepare_folder(folder: Path) -> None:
+    """Create ``folder`` if needed and check that it can be written, naming it otherwise."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except FileExistsError as exc:
+        raise ExperimentStoreError(f"the output folder {folder} exists and is not a folder") \
+            from exc
+    except OSError as exc:
+        raise ExperimentStoreError(f"cannot create the output folder {folder}: "
+                                   f"{exc.strerror or exc}") from exc
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ExperimentStoreError(f"the output folder {folder} is not writable; choose another "
+                                   "output folder")
+
+
+_HELD_LOCKS: set[str] = set()      # folders locked by this process (POSIX locks do not conflict
+                                   # within one process)
+
+
+class _FolderLock:
+    """Exclusive lock on an output folder for the length of a run (``lockf``; ``msvcrt``).
+
+    A second run on the same folder, from another process or this one, fails at once with
+    :class:`ExperimentStoreError` instead of computing the same trials twice. The lock belongs
+    to the process (worker processes forked later do not hold it), so it is released the moment
+    the run ends or is killed. The lock file is removed when the run ends.
+    """
+
+    def __init__(self, folder: Path):
+        self.path = folder / "results.sqlite.lock"
+        self._fh = None
+
+    def _busy(self, holder) -> ExperimentStoreError:
+        return ExperimentStoreError(
+            f"another run (pid {holder}) is using the output folder {self.path.parent}; wait "
+            "for it to finish, or choose another output folder")
+
+    def __enter__(self):
+        key = os.path.realpath(self.path)
+        if key in _HELD_LOCKS:
+            raise self._busy(os.getpid())
+        for _attempt in range(5):
+            try:
+                fh = open(self.path, "a+")
+            except OSError as exc:
+                raise ExperimentStoreError(f"cannot create the lock file {self.path}: "
+                                           f"{exc.strerror or exc}; is the output folder "
+                                           "writable?") from exc
+            if not _try_lock(fh):
+                fh.seek(0)
+                holder = fh.read().strip() or "unknown"
+                fh.close()
+                raise self._busy(holder)
+            try:  # the file we locked must still be the one at self.path (see __exit__)
+                same = os.path.samestat(os.fstat(fh.fileno()), os.stat(self.path))
+            except OSError:
+                same = False
+            if same:
+                fh.seek(0)
+                fh.truncate()
+                fh.write(str(os.getpid()))
+                fh.flush()
+                self._fh = fh
+                self._key = key
+                _HELD_LOCKS.add(key)
+                return self
+            fh.close()
+        raise ExperimentStoreError(f"cannot lock the output folder {self.path.parent}")
+
+    def __exit__(self, *exc):
+        if self._fh is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(self.path)       # while still held: no one can lock a stale file
+            self._fh.close()               # closing releases the lock
+            self._fh = None
+            _HELD_LOCKS.discard(self._key)
+        return False
+
+
+def _try_lock(fh) -> bool:
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - Windows
+        import msvcrt
+
+        try:
+            fh.seek(0)
+            msvcrt.locking(fh.fileno(), msvcrt.LK_NBLCK, 1)
+            return True
+        except OSError:
+            return False
+    try:  # a POSIX record lock: owned by this process, not inherited by forked workers
+        fcntl.lockf(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return True
+    except OSError:
+        return False
+
+
+def _worker_init(parent_pid: int) -> None:
+    """Pool initializer: ignore Ctrl-C (the parent stops the pool) and die with the parent.
+
+    On Linux ``prctl(PR_SET_PDEATHSIG, SIGKILL)``; everywhere a daemon thread that exits the
+    worker once the parent is gone (its parent process id changes).
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, signal.SIGKILL, 0, 0, 0)       # PR_SET_PDEATHSIG = 1
+        except (OSError, AttributeError):  # pragma: no cover - no libc
+            pass
+    ppid = os.getppid()
+    if ppid != parent_pid and os.name == "posix" and ppid == 1:  # parent died already
+        os._exit(1)
+
+    def watch():
+        while True:
+            time.sleep(0.5)
+            if os.getppid() != ppid:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="transync-parent-watch", daemon=True).start()
+
+
+def _stop_pool(pool) -> None:
+    """Cancel queued trials and terminate the workers (they would finish their trial first)."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        with contextlib.suppress(Exception):
+            p.terminate()
+    for p in procs:
+        with contextlib.suppress(Exception):
+            p.join(timeout=5)
 
 
 def _run_one(trial_fn, config, seed):
@@ -178,60 +380,45 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
     workers : int, default=1
         Processes; 1 runs in this process.
     seed : int, default=0
-        Changes every trial's random problem.
+        Changes every trial's random problem; part of the configuration key, so trials stored
+        under another seed are neither skipped nor reported.
     progress : bool, default=True
         Show a tqdm progress bar.
     plot : bool, default=True
         Write the figure (and run ``experiment.finish``, whose files are listed in
         ``extra_files``).
+
+    Raises
+    ------
+    ValueError, TypeError
+        ``trials``, ``workers`` or ``seed`` not an integer in range.
+    ExperimentStoreError
+        ``out_dir`` cannot be created or written, another run holds it, or its
+        ``results.sqlite`` is corrupted (reported with a salvage hint, never overwritten).
+    KeyboardInterrupt
+        Re-raised after the pool is stopped and the store closed; every finished trial is
+        stored and rerunning resumes.
     """
     n_trials = check_int(trials if trials is not None else experiment.trials, "trials", minimum=1)
     workers = check_int(workers, "workers", minimum=1)
+    seed = check_int(seed, "seed")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    store = ExperimentStore(out / "results.sqlite")
+    created = not out.exists()
     t_start = time.perf_counter()
     try:
-        finished = store.done(experiment.name)
-        todo = []
-        for sw in experiment.sweeps:
-            for value, _method, config in sw.configs():
-                key = _config_key(sw.name, config)
-                for t in range(n_trials):
-                    if (key, t) not in finished:
-                        todo.append((sw.name, key, t, config,
-                                     _trial_seed(experiment.name, sw.name, value, t, seed)))
-        n_failed = 0
-        bar = _progress(len(todo), experiment.name, progress)
-        if workers == 1 or len(todo) <= 1:
-            for sw_name, key, t, config, s in todo:
-                metrics, error, sec = _run_one(experiment.trial, config, s)
-                store.add(experiment.name, key, t, sw_name, config, metrics, error, sec)
-                n_failed += error is not None
-                bar.update(1)
-        else:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                pending = {}
-                it = iter(todo)
-                for item in it:
-                    pending[pool.submit(_run_one, experiment.trial, item[3], item[4])] = item
-                    if len(pending) >= 2 * workers:
-                        break
-                while pending:
-                    done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                    for fut in done:
-                        sw_name, key, t, config, _s = pending.pop(fut)
-                        metrics, error, sec = fut.result()
-                        store.add(experiment.name, key, t, sw_name, config, metrics, error, sec)
-                        n_failed += error is not None
-                        bar.update(1)
-                        nxt = next(it, None)
-                        if nxt is not None:
-                            pending[pool.submit(_run_one, experiment.trial, nxt[3], nxt[4])] = nxt
-        bar.close()
-        records = store.records(experiment.name)
-    finally:
-        store.close()
+        _prepare_folder(out)
+        with _FolderLock(out):
+            store = ExperimentStore(out / "results.sqlite")
+            try:
+                todo, keys = _plan(experiment, store, n_trials, seed)
+                n_failed = _execute(experiment, store, todo, workers, progress)
+                records = store.records(experiment.name, keys)
+            finally:
+                store.close()
+    except BaseException:
+        if created:  # a run that failed before storing anything leaves no empty folder behind
+            _remove_if_empty(out)
+        raise
     summary = summarize(experiment, records)
     _write_summary(summary, out)
     figure = None
@@ -244,6 +431,84 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
             extra = tuple(Path(p) for p in experiment.finish(records, summary, out))
     return ExperimentReport(experiment.name, records, summary, len(todo), n_failed, out, figure,
                             time.perf_counter() - t_start, extra)
+
+
+def _remove_if_empty(out: Path) -> None:
+    """Remove ``out`` (created by this run) when it holds no stored trial."""
+    db = out / "results.sqlite"
+    if db.exists():
+        try:
+            con = sqlite3.connect(str(db))
+            try:
+                n = con.execute("SELECT COUNT(*) FROM trials").fetchone()[0]
+            finally:
+                con.close()
+        except sqlite3.Error:
+            return
+        if n:
+            return
+        for name in ("results.sqlite", "results.sqlite-journal"):
+            with contextlib.suppress(OSError):
+                (out / name).unlink()
+    with contextlib.suppress(OSError):
+        out.rmdir()
+
+
+def _plan(experiment: Experiment, store: ExperimentStore, n_trials: int, seed: int):
+    """The trials still to run, and the configuration keys of this run."""
+    finished = store.done(experiment.name)
+    todo, keys = [], set()
+    for sw in experiment.sweeps:
+        for value, _method, config in sw.configs():
+            key = _config_key(sw.name, config, seed)
+            keys.add(key)
+            for t in range(n_trials):
+                if (key, t) not in finished:
+                    todo.append((sw.name, key, t, config,
+                                 _trial_seed(experiment.name, sw.name, value, t, seed)))
+    return todo, keys
+
+
+def _execute(experiment: Experiment, store: ExperimentStore, todo: list, workers: int,
+             progress: bool) -> int:
+    """Run ``todo`` serially or on a process pool, storing each trial as it finishes."""
+    n_failed = 0
+    bar = _progress(len(todo), experiment.name, progress)
+    try:
+        if workers == 1 or len(todo) <= 1:
+            for sw_name, key, t, config, s in todo:
+                metrics, error, sec = _run_one(experiment.trial, config, s)
+                store.add(experiment.name, key, t, sw_name, config, metrics, error, sec)
+                n_failed += error is not None
+                bar.update(1)
+            return n_failed
+        pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init,
+                                   initargs=(os.getpid(),))
+        try:
+            pending = {}
+            it = iter(todo)
+            for item in it:
+                pending[pool.submit(_run_one, experiment.trial, item[3], item[4])] = item
+                if len(pending) >= 2 * workers:
+                    break
+            while pending:
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    sw_name, key, t, config, _s = pending.pop(fut)
+                    metrics, error, sec = fut.result()
+                    store.add(experiment.name, key, t, sw_name, config, metrics, error, sec)
+                    n_failed += error is not None
+                    bar.update(1)
+                    nxt = next(it, None)
+                    if nxt is not None:
+                        pending[pool.submit(_run_one, experiment.trial, nxt[3], nxt[4])] = nxt
+        except BaseException:
+            _stop_pool(pool)
+            raise
+        pool.shutdown(wait=True)
+        return n_failed
+    finally:
+        bar.close()
 
 
 class _NoBar:
@@ -329,7 +594,8 @@ def _write_summary(rows: list[dict], out: Path) -> None:
                     hit = [r for r in sub if r["metric"] == metric and r["method"] == m
                            and json.dumps(r["value"], default=str) == v]
                     r = hit[0] if hit else None
-                    cells.append("—" if r is None or not r["n"] else f"{r['mean']:.4g} ± {r['se']:.2g}")
+                    cells.append("—" if r is None or not r["n"]
+                                 else f"{r['mean']:.4g} ± {r['se']:.2g}")
                 lines.append(f"| {value_label(json.loads(v))} | " + " | ".join(cells) + " |")
     (out / "summary.md").write_text("\n".join(lines).lstrip() + "\n")
 

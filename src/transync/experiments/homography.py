@@ -41,15 +41,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ..datasets._scenes import make_planar_scene
-from ..homography._evaluate import (
+from ..datasets import make_planar_scene
+from ..geometry import image_corners
+from ..homography import (
+    PairwiseHomographies,
     chained_homographies,
+    estimate_plane_homographies,
     evaluate_alignment,
     to_reference_homographies,
 )
 from ..metrics import segmentation_scores
-from ..homography._pipeline import estimate_plane_homographies
-from ..homography._sparse import PairwiseHomographies
 from ..synchronization import synchronize_homographies
 from ._runner import Experiment, Sweep, mean_se
 
@@ -72,8 +73,7 @@ def _perturb(H, sigma, size, rng):
     """``H`` followed by the homography moving the 4 image corners by N(0, sigma^2) pixels."""
     import cv2
 
-    w, h = size
-    c = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], np.float32)
+    c = image_corners(size).astype(np.float32)
     d = (c + rng.normal(0, sigma, c.shape)).astype(np.float32)
     return cv2.getPerspectiveTransform(c, d) @ H
 
@@ -119,48 +119,58 @@ def _round_scores(rounds, masks_true, n_rounds=ROUNDS) -> dict:
     return out
 
 
-def trial(config: dict, rng: np.random.Generator) -> dict:
-    """One rendered scene, one method."""
-    scene = _make_scene(config, rng)
-    method = config["method"]
+def _estimate(method, scene, config, rng, record):
+    """The estimate of one method on one scene: ``(H, masks, result)`` (``masks`` and the
+    pipeline's ``result`` only for ``sync_dense``)."""
+    imgs, features = scene.images, config["features"]
     sigma = config.get("init_error")
-    imgs = scene.images
-    t0 = time.perf_counter()
-    masks = None
-    res = None
-    rounds = []
-    record = lambda it, H, m: rounds.append(m)
     if sigma is not None:
         pw = _noisy_pairs(scene, float(sigma), np.random.default_rng(rng.integers(2**31)))
         if method == "ransac_to_reference":
-            H = np.stack([np.eye(3)] + [pw.H[0, i] for i in range(1, scene.n_views)])
-        elif method == "chained":
-            return {}
-        elif method == "sync":
-            H = synchronize_homographies(pw.H, mask=pw.mask, reference=0, robust=True,
-                                         image_size=scene.image_size).maps
-        else:
-            res = estimate_plane_homographies(imgs, pairs=pw, n_features=config["features"],
-                                              max_iter=ROUNDS, callback=record)
-    elif method == "ransac_to_reference":
-        H = to_reference_homographies(imgs, n_features=config["features"])
-    elif method == "chained":
-        H = chained_homographies(imgs, n_features=config["features"])
-    elif method == "sync":
-        H = estimate_plane_homographies(imgs, dense=False, segment=False,
-                                        n_features=config["features"]).homographies
-    else:
-        res = estimate_plane_homographies(imgs, n_features=config["features"], max_iter=ROUNDS,
-                                          callback=record)
-    if res is not None:
-        H, masks = res.homographies, res.masks
+            return np.stack([np.eye(3)] + [pw.H[0, i] for i in range(1, scene.n_views)]), None, None
+        if method == "sync":
+            return synchronize_homographies(pw.H, mask=pw.mask, reference=0, robust=True,
+                                            image_size=scene.image_size).maps, None, None
+        res = estimate_plane_homographies(imgs, pairs=pw, n_features=features, max_iter=ROUNDS,
+                                          callback=record, rng=rng)
+        return res.homographies, res.masks, res
+    if method == "ransac_to_reference":
+        return to_reference_homographies(imgs, n_features=features, rng=rng), None, None
+    if method == "chained":
+        return chained_homographies(imgs, n_features=features, rng=rng), None, None
+    if method == "sync":
+        return estimate_plane_homographies(imgs, dense=False, segment=False, n_features=features,
+                                           rng=rng).homographies, None, None
+    res = estimate_plane_homographies(imgs, n_features=features, max_iter=ROUNDS, callback=record,
+                                      rng=rng)
+    return res.homographies, res.masks, res
+
+
+_KEEP = ("mean_error", "max_error", "acc_1px", "brenner_ratio", "precision", "recall", "f1")
+
+
+def trial(config: dict, rng: np.random.Generator) -> dict:
+    """One rendered scene, one method (``config["method"]``, one of :data:`METHODS`).
+
+    ``seconds`` times the estimation only (not the rendering or the evaluation), the same way
+    for every method. With ``config["all_metrics"]`` (used by ``benchmarks/homography.py``)
+    every measure of :func:`~transync.homography.evaluate_alignment` is returned, pairwise
+    errors included.
+    """
+    scene = _make_scene(config, rng)
+    method = config["method"]
+    if method == "chained" and config.get("init_error") is not None:
+        return {}
+    full = bool(config.get("all_metrics", False))
+    rounds = []
+    t0 = time.perf_counter()
+    H, masks, res = _estimate(method, scene, config, rng, lambda it, H, m: rounds.append(m))
     seconds = time.perf_counter() - t0
-    out = evaluate_alignment(imgs, H, scene.homographies, masks_true=scene.masks,
-                             masks_est=masks)
-    keep = ("mean_error", "max_error", "acc_1px", "brenner_ratio", "precision", "recall", "f1")
-    metrics = {**{k: out[k] for k in keep if k in out}, "seconds": seconds}
+    out = evaluate_alignment(scene.images, H, scene.homographies, masks_true=scene.masks,
+                             masks_est=masks, pairwise=full)
+    metrics = {**(out if full else {k: out[k] for k in _KEEP if k in out}), "seconds": seconds}
     if res is not None:
-        sparse = evaluate_alignment(imgs, res.sparse_homographies, scene.homographies,
+        sparse = evaluate_alignment(scene.images, res.sparse_homographies, scene.homographies,
                                     masks_true=scene.masks)
         metrics.update({f"sparse_{k}": sparse[k]
                         for k in ("mean_error", "max_error", "brenner_ratio")})
@@ -353,7 +363,7 @@ def _plot_segmentation_example(base, path) -> Path:
     scene = _make_scene(config, np.random.default_rng(0))
     rounds = []
     res = estimate_plane_homographies(scene.images, n_features=config["features"],
-                                      max_iter=ROUNDS,
+                                      max_iter=ROUNDS, rng=0,
                                       callback=lambda it, H, m: rounds.append(m))
     # the view most covered by clutter among the last half (tilted views)
     n = scene.n_views

@@ -26,18 +26,6 @@ from ._runner import Experiment, Sweep
 METHODS = ("none", "spectral", "orthogonal", "matcheig")
 
 
-def _pairwise_accuracy(get, data) -> float:
-    hit = tot = 0
-    for i in range(data.n_objects):
-        for j in range(i + 1, data.n_objects):
-            t = data.true_pairwise(i, j)
-            a = get(i, j)
-            ok = t >= 0
-            tot += int(ok.sum())
-            hit += int((a[ok] == t[ok]).sum()) if a is not None else 0
-    return hit / tot if tot else 1.0
-
-
 def trial(config: dict, rng: np.random.Generator) -> dict:
     """One generated collection, one method: accuracy, output cycle error and time."""
     data = make_permutation_collection(
@@ -49,18 +37,19 @@ def trial(config: dict, rng: np.random.Generator) -> dict:
     if method == "none":
         seconds = 0.0
         out = dict(data.pairwise)
-        acc = _pairwise_accuracy(lambda i, j: out.get((i, j)), data)
+        acc = data.ground_truth.accuracy(out)
     else:
         res = synchronize_permutations(data.pairwise, method=method,
                                        n_universe=config.get("n_universe"),
                                        rng=int(rng.integers(2**31)))
         seconds = time.perf_counter() - t0
         if res.cycle_consistent:
-            acc = data.accuracy(res.labels)
+            acc = data.ground_truth.accuracy(res.matching)
             out = None
         else:
-            acc = _pairwise_accuracy(res.pairwise, data)
-            out = res.pairwise_dict() if data.n_objects <= 60 else None
+            maps = res.pairwise_dict()
+            acc = data.ground_truth.accuracy(maps)
+            out = maps if data.n_objects <= 60 else None
     if out is None:
         cyc = 0.0
     else:

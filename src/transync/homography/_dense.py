@@ -5,6 +5,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from .._validation import check_array, check_int, check_positive
+from ..geometry import normalize_determinant, translation
+
 __all__ = ["mean_warped_image", "refine_homography_ecc", "warp_to_reference"]
 
 
@@ -29,10 +32,25 @@ def refine_homography_ecc(template, image, H_init, *, mask=None, template_mask=N
     ok : bool
         Whether every level converged without an OpenCV error.
     """
-    tpl = np.asarray(template, dtype=np.float32)
-    img = np.asarray(image, dtype=np.float32)
-    m = None if mask is None else (np.asarray(mask, dtype=np.uint8) * 255)
-    tm = None if template_mask is None else np.asarray(template_mask, dtype=bool)
+    tpl = check_array(template, "template", ndim=2, dtype=np.float32)
+    img = check_array(image, "image", ndim=2, dtype=np.float32)
+    H_init = check_array(H_init, "H_init", ndim=2)
+    if H_init.shape != (3, 3):
+        raise ValueError(f"`H_init` must have shape (3, 3), got {H_init.shape}")
+    levels = check_int(levels, "levels", minimum=1, maximum=8)
+    max_iter = check_int(max_iter, "max_iter", minimum=1)
+    eps = check_positive(eps, "eps")
+    m = tm = None
+    if mask is not None:
+        m = check_array(mask, "mask", ndim=2, dtype=bool)
+        if m.shape != img.shape:
+            raise ValueError(f"`mask` must have the shape of `image` {img.shape}, got {m.shape}")
+        m = m.astype(np.uint8) * 255
+    if template_mask is not None:
+        tm = check_array(template_mask, "template_mask", ndim=2, dtype=bool)
+        if tm.shape != tpl.shape:
+            raise ValueError(f"`template_mask` must have the shape of `template` {tpl.shape}, "
+                             f"got {tm.shape}")
     # ECC warp: template coordinates -> image coordinates = inv(H)
     W = np.linalg.inv(H_init)
     W = W / W[2, 2]
@@ -62,13 +80,12 @@ def refine_homography_ecc(template, image, H_init, *, mask=None, template_mask=N
             ok = False
             continue
         W = _scale(Wl.astype(np.float64), 1.0 / s)
-    H = np.linalg.inv(W)
-    return H / np.cbrt(np.linalg.det(H)), ok
+    return normalize_determinant(np.linalg.inv(W)), ok
 
 
 def warp_to_reference(image, H, size, *, offset=(0, 0), interpolation=cv2.INTER_LINEAR):
     """Warp ``image`` into a reference canvas of ``size`` (w, h) whose origin sits at ``offset``."""
-    T = np.array([[1.0, 0, offset[0]], [0, 1.0, offset[1]], [0, 0, 1.0]])
+    T = translation(*offset)
     return cv2.warpPerspective(image, T @ H, tuple(int(v) for v in size), flags=interpolation,
                                borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 

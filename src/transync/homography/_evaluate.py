@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
+from ..exceptions import UnlinkedViewsWarning
+from ..geometry import normalize_determinant
 from ._dense import mean_warped_image
 from ..metrics import brenner_focus, corner_error, pairwise_corner_error, segmentation_scores
-from ._sparse import estimate_pairwise_homographies, to_gray
+from .._validation import check_int
+from ._sparse import estimate_pairwise_homographies, load_images, to_gray
 
 __all__ = ["chained_homographies", "evaluate_alignment", "to_reference_homographies"]
 
@@ -14,22 +19,38 @@ __all__ = ["chained_homographies", "evaluate_alignment", "to_reference_homograph
 def to_reference_homographies(images, *, reference=0, n_features=2000, features=None, **kw):
     """OpenCV baseline: every view matched to the reference (SIFT + ratio + RANSAC + LM).
 
-    Views whose pair fails get NaN.
+    Views whose pair fails get NaN, with an :class:`~transync.exceptions.UnlinkedViewsWarning`.
+    ``**kw`` goes to :func:`estimate_pairwise_homographies` (``rng``, ``method``...).
     """
+    images = load_images(images)
     n = len(images)
+    reference = check_int(reference, "reference", minimum=0, maximum=max(n - 1, 0))
     pw = estimate_pairwise_homographies(images, pairs=[(reference, i) for i in range(n)
                                                        if i != reference],
                                         n_features=n_features, features=features, **kw)
     H = np.stack([np.eye(3) if i == reference else pw.H[reference, i] for i in range(n)])
-    ok = np.all(np.isfinite(H), axis=(1, 2))
-    H[ok] /= np.cbrt(np.linalg.det(H[ok]))[:, None, None]
+    return _finish(H, "to_reference_homographies", pw)
+
+
+def _finish(H, name, pw):
+    """Determinant-normalized estimates; views without one are NaN, with an
+    :class:`UnlinkedViewsWarning` naming them and the failed pairs."""
+    H = normalize_determinant(H)
+    bad = np.flatnonzero(~np.all(np.isfinite(H), axis=(1, 2)))
+    if bad.size:
+        why = "; ".join(f"({i}, {j}): {r}" for i, j, r in pw.failed[:5])
+        warnings.warn(f"{name}: views {bad.tolist()} have no estimate (NaN homographies); "
+                      f"failed pairs: {why or 'none'}", UnlinkedViewsWarning, stacklevel=3)
     return H
 
 
 def chained_homographies(images, *, reference=0, n_features=2000, features=None, **kw):
     """OpenCV baseline: consecutive views matched and chained to the reference
-    (``H_i = H_{i-1} H_{i-1,i}`` outward from the reference); a failed link breaks the chain."""
+    (``H_i = H_{i-1} H_{i-1,i}`` outward from the reference); a failed link breaks the chain:
+    the views beyond it get NaN, with an :class:`~transync.exceptions.UnlinkedViewsWarning`."""
+    images = load_images(images)
     n = len(images)
+    reference = check_int(reference, "reference", minimum=0, maximum=max(n - 1, 0))
     pairs = [(i, i + 1) for i in range(n - 1)]
     pw = estimate_pairwise_homographies(images, pairs=pairs, n_features=n_features,
                                         features=features, **kw)
@@ -39,9 +60,7 @@ def chained_homographies(images, *, reference=0, n_features=2000, features=None,
         H[i] = H[i - 1] @ pw.H[i - 1, i]
     for i in range(reference - 1, -1, -1):
         H[i] = H[i + 1] @ pw.H[i + 1, i]
-    ok = np.all(np.isfinite(H), axis=(1, 2))
-    H[ok] /= np.cbrt(np.linalg.det(H[ok]))[:, None, None]
-    return H
+    return _finish(H, "chained_homographies", pw)
 
 
 def evaluate_alignment(images, H_est, H_true, *, masks_true, reference=0, masks_est=None,

@@ -2,9 +2,9 @@
 
 The same machinery as the multi-view pipeline's sparse step: ``cv2.findHomography`` (RANSAC with
 its Levenberg-Marquardt polish) followed by the inlier tightening of
-:func:`transync.homography._sparse._refine_inliers`; the inliers of each plane are removed and the
-next plane is extracted from what is left, until a plane gathers fewer than ``min_inliers``
-points.
+:func:`estimate_pairwise_homographies` (``refine=True``); the inliers of each plane are
+removed and the next plane is extracted from what is left, until a plane gathers fewer than
+``min_inliers`` points.
 """
 
 from __future__ import annotations
@@ -12,11 +12,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-import cv2
 import numpy as np
 
-from .._validation import check_int, check_positive
-from ._sparse import _METHODS, _refine_inliers
+from .._validation import as_generator, check_array, check_choice, check_int, check_positive
+from ..geometry import transfer_points
+from ._sparse import _METHODS, _robust_fit
 
 __all__ = ["MultiPlaneResult", "extract_planes", "misclassification_error"]
 
@@ -40,16 +40,14 @@ class MultiPlaneResult:
 
 
 def _transfer_error(H, x1, x2):
-    p = np.column_stack([x1, np.ones(len(x1))]) @ H.T
-    q = np.column_stack([x2, np.ones(len(x2))]) @ np.linalg.inv(H).T
-    with np.errstate(divide="ignore", invalid="ignore"):
-        e1 = np.linalg.norm(p[:, :2] / p[:, 2:3] - x2, axis=1)
-        e2 = np.linalg.norm(q[:, :2] / q[:, 2:3] - x1, axis=1)
+    with np.errstate(invalid="ignore"):
+        e1 = np.linalg.norm(transfer_points(H, x1) - x2, axis=1)
+        e2 = np.linalg.norm(transfer_points(np.linalg.inv(H), x2) - x1, axis=1)
     return np.nan_to_num(0.5 * (e1 + e2), nan=np.inf)
 
 
 def extract_planes(x1, x2, *, threshold=5.0, min_inliers=10, max_planes=None, method="ransac",
-                   max_iter=5000, rng=0) -> MultiPlaneResult:
+                   max_iter=5000, rng=None) -> MultiPlaneResult:
     """Sequential extraction of plane homographies from point correspondences.
 
     Parameters
@@ -57,9 +55,8 @@ def extract_planes(x1, x2, *, threshold=5.0, min_inliers=10, max_planes=None, me
     x1, x2 : ndarray (n, 2)
         Corresponding points (pixels) in view 1 and view 2.
     threshold : float or None, default=5.0
-        Inlier threshold in pixels (5 px: mean misclassification error 11.3 % over the 12
-        AdelaideRMF pairs); ``None``: 1 % of the larger extent spanned by the points, at least
-        3 px (13.1 %).
+        Inlier threshold in pixels; ``None``: 1 % of the larger extent spanned by the points, at
+        least 3 px (measurements on AdelaideRMF: ``docs/homography.md``).
     min_inliers : int, default=10
         Stop when the next plane has fewer inliers.
     max_planes : int, default=None
@@ -67,8 +64,9 @@ def extract_planes(x1, x2, *, threshold=5.0, min_inliers=10, max_planes=None, me
     method : str, default="ransac"
         Robust estimator (as in :func:`estimate_pairwise_homographies`).
     max_iter : int, default=5000
-    rng : int, default=0
-        Seed of OpenCV's random generator (RANSAC sampling).
+    rng : None, int or Generator, default=None
+        Orders the remaining correspondences before every robust fit, and with them RANSAC's
+        samples (OpenCV's global random state is never used).
 
     Returns
     -------
@@ -79,12 +77,12 @@ def extract_planes(x1, x2, *, threshold=5.0, min_inliers=10, max_planes=None, me
     >>> rng = np.random.default_rng(0)
     >>> a = rng.uniform(0, 100, (60, 2)); b = rng.uniform(0, 100, (40, 2))
     >>> x1 = np.vstack([a, b]); x2 = np.vstack([a + 5.0, b @ np.diag([1.2, 0.9])])
-    >>> res = extract_planes(x1, x2, threshold=1.0)
+    >>> res = extract_planes(x1, x2, threshold=1.0, rng=0)
     >>> len(res.homographies), int((res.labels == 1).sum()), int((res.labels == 2).sum())
     (2, 60, 40)
     """
-    x1 = np.asarray(x1, dtype=np.float64)
-    x2 = np.asarray(x2, dtype=np.float64)
+    x1 = check_array(x1, "x1", ndim=2)
+    x2 = check_array(x2, "x2", ndim=2)
     if x1.ndim != 2 or x1.shape[1] != 2 or x1.shape != x2.shape:
         raise ValueError(f"`x1` and `x2` must both have shape (n, 2), got {x1.shape} and "
                          f"{x2.shape}")
@@ -93,7 +91,11 @@ def extract_planes(x1, x2, *, threshold=5.0, min_inliers=10, max_planes=None, me
         span = float(np.ptp(np.vstack([x1, x2]), axis=0).max()) if len(x1) else 0.0
         threshold = max(3.0, 0.01 * span)
     threshold = check_positive(threshold, "threshold")
-    cv2.setRNGSeed(int(rng))
+    method = check_choice(method, "method", tuple(_METHODS))
+    max_iter = check_int(max_iter, "max_iter", minimum=1)
+    if max_planes is not None:
+        max_planes = check_int(max_planes, "max_planes", minimum=1)
+    gen = as_generator(rng)
     labels = np.zeros(len(x1), dtype=int)
     Hs = []
     left = np.ones(len(x1), bool)
@@ -101,16 +103,9 @@ def extract_planes(x1, x2, *, threshold=5.0, min_inliers=10, max_planes=None, me
         idx = np.flatnonzero(left)
         src = x1[idx].astype(np.float32)
         dst = x2[idx].astype(np.float32)
-        try:
-            H, inl = cv2.findHomography(src, dst, _METHODS[method], threshold,
-                                        maxIters=max_iter, confidence=0.999)
-        except cv2.error:
+        H, _, _ = _robust_fit(src, dst, method, threshold, max_iter, 0.999, True, gen)
+        if H is None:
             break
-        if H is None or inl is None:
-            break
-        inl = inl.ravel().astype(bool)
-        if inl.sum() >= 8:
-            H, _ = _refine_inliers(src, dst, H, inl, threshold)
         err = _transfer_error(H, x1[idx], x2[idx])
         inl = err <= threshold
         if inl.sum() < min_inliers:
@@ -135,8 +130,18 @@ def misclassification_error(pred, truth) -> float:
     """
     from scipy.optimize import linear_sum_assignment
 
-    p = np.asarray(pred, dtype=int).ravel()
-    t = np.asarray(truth, dtype=int).ravel()
+    p = check_array(pred, "pred", dtype=None).ravel()
+    t = check_array(truth, "truth", dtype=None).ravel()
+    for name, a in (("pred", p), ("truth", t)):
+        if a.dtype.kind not in "uibf":
+            raise TypeError(f"`{name}` must hold integer labels, got dtype {a.dtype}")
+        if a.size and not np.all(a == np.round(a)):
+            raise ValueError(f"`{name}` must hold integer labels, got non-integer values")
+        if a.size and a.min() < 0:
+            raise ValueError(f"`{name}` must hold labels >= 0 (0 = outlier), got {a.min()}")
+    # compact labels (0 stays 0): the contingency table is as small as the labels used
+    p = np.unique(np.concatenate([[0], p]), return_inverse=True)[1][1:]
+    t = np.unique(np.concatenate([[0], t]), return_inverse=True)[1][1:]
     if p.shape != t.shape:
         raise ValueError(f"`pred` and `truth` must have the same length, got {p.size} and {t.size}")
     if p.size == 0:

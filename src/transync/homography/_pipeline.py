@@ -1,7 +1,17 @@
-"""Front door: multi-view plane homographies with synchronization, dense refinement, segmentation."""
+"""Front door: multi-view plane homographies with synchronization, dense refinement, segmentation.
+
+:func:`estimate_plane_homographies` is a short driver over named stages: features
+(:func:`_features`), sparse pairs (:func:`_sparse_pairs`), synchronization (:func:`_synchronize`),
+the rectified second sparse pass (:func:`_rectified_pass`), then rounds of segmentation
+(:func:`_segment_round`) and dense refinement (:func:`_dense_round`). The options of the dense
+stage are one frozen :class:`DenseOptions`. Measurements behind the defaults:
+``docs/homography.md``.
+"""
 
 from __future__ import annotations
 
+import dataclasses
+import logging
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -10,11 +20,13 @@ from typing import Any
 import numpy as np
 
 from .._validation import as_generator, check_choice, check_int, check_positive
-from ..exceptions import ConvergenceWarning
+from ..exceptions import DegenerateInputError, UnlinkedViewsWarning
+from ..geometry import image_corners, normalize_determinant, transfer_points, translation
 from ..synchronization import synchronize_homographies
 from ._dense import mean_warped_image, refine_homography_ecc
 from ._segmentation import segment_plane
 from ._sparse import (
+    _METHODS,
     PairwiseHomographies,
     estimate_pairwise_homographies,
     estimate_rectified_pairwise,
@@ -23,7 +35,92 @@ from ._sparse import (
     to_gray,
 )
 
-__all__ = ["PlaneAlignmentResult", "estimate_plane_homographies", "view_graph_pairs"]
+__all__ = ["DenseOptions", "PlaneAlignmentResult", "estimate_plane_homographies",
+           "view_graph_pairs"]
+
+logger = logging.getLogger("transync.homography")
+
+#: Largest canvas margin (fraction of the reference frame on every side): the canvas of the
+#: segmentation and of the mean image is at most 5 x 5 reference frames.
+MAX_CANVAS_MARGIN = 2.0
+
+
+def _check_flag(value, name):
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"`{name}` must be True or False, got {type(value).__name__} {value!r}")
+    return bool(value)
+
+
+@dataclass(frozen=True)
+class DenseOptions:
+    """Options of the dense stage of :func:`estimate_plane_homographies` (rounds of plane
+    segmentation, masked ECC of every view and re-synchronization). Each field is also accepted
+    as a keyword of :func:`estimate_plane_homographies`. Measurements: ``docs/homography.md``.
+
+    Attributes
+    ----------
+    max_iter : int, default=3
+        Rounds of segmentation + dense refinement (0: none).
+    tol : float, default=0.02
+        Stop when the largest mean corner change of a round is below this (pixels).
+    levels : int, default=2
+        ECC pyramid levels of the first round (later rounds: full resolution only), 1 to 8.
+    max_step : float, default=10.0
+        A dense update moving a view's corners by more than this (pixels) is a divergence and
+        is discarded.
+    dense_target : {"auto", "mean", "reference"}, default="auto"
+        Template of the ECC: the mean warped image or the reference view; "auto" takes the
+        mean image from 4 views on.
+    dense_weight : float, default=1.0
+        Weight of a view's dense estimate in the re-synchronization relative to the sum of the
+        inlier counts of that view's sparse pairs (1: equal say). Raise it for coarse
+        pairwise inputs passed through ``pairs``.
+    canvas_margin : float, default=0.5
+        The canvas of the segmentation and of the mean warped image extends the reference
+        frame by this fraction on every side (0 to :data:`MAX_CANVAS_MARGIN`).
+    dense_check : bool, default=True
+        Accept a view's ECC update only if the median distance between its sparse inlier
+        matches and their partners stays within ``1 + sparse_tolerance`` times that of the
+        synchronized sparse solution.
+    sparse_tolerance : float, default=0.25
+
+    Examples
+    --------
+    >>> opts = DenseOptions(max_iter=1)
+    >>> opts.max_iter, opts.levels
+    (1, 2)
+    """
+
+    max_iter: int = 3
+    tol: float = 0.02
+    levels: int = 2
+    max_step: float = 10.0
+    dense_target: str = "auto"
+    dense_weight: float = 1.0
+    canvas_margin: float = 0.5
+    dense_check: bool = True
+    sparse_tolerance: float = 0.25
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        set_(self, "max_iter", check_int(self.max_iter, "max_iter", minimum=0))
+        set_(self, "tol", check_positive(self.tol, "tol", allow_zero=True))
+        set_(self, "levels", check_int(self.levels, "levels", minimum=1, maximum=8))
+        set_(self, "max_step", check_positive(self.max_step, "max_step"))
+        set_(self, "dense_target", check_choice(self.dense_target, "dense_target",
+                                                ("auto", "mean", "reference")))
+        set_(self, "dense_weight", check_positive(self.dense_weight, "dense_weight"))
+        margin = check_positive(self.canvas_margin, "canvas_margin", allow_zero=True)
+        if margin > MAX_CANVAS_MARGIN:
+            raise ValueError(f"`canvas_margin` must lie in [0, {MAX_CANVAS_MARGIN:g}] "
+                             f"(fraction of the reference frame), got {margin!r}")
+        set_(self, "canvas_margin", margin)
+        set_(self, "dense_check", _check_flag(self.dense_check, "dense_check"))
+        set_(self, "sparse_tolerance", check_positive(self.sparse_tolerance, "sparse_tolerance",
+                                                      allow_zero=True))
+
+
+_DENSE_FIELDS = tuple(f.name for f in dataclasses.fields(DenseOptions))
 
 
 @dataclass(frozen=True)
@@ -54,7 +151,7 @@ class PlaneAlignmentResult:
         pixels, ``mask_change``: fraction of pixels whose plane label the round's segmentation
         flipped, against all-plane in the first round; ``plane_fraction``, per-view dense
         outcomes, stage times); ``seconds``: timing per stage; ``sync``: the sparse
-        :class:`LinearMapSyncResult`.
+        :class:`LinearMapSyncResult`; ``options``: the :class:`DenseOptions` used.
     """
 
     homographies: np.ndarray
@@ -70,12 +167,10 @@ class PlaneAlignmentResult:
 
 
 def _corner_change(A, B, sizes):
-    out = []
-    for Ha, Hb, (w, h) in zip(A, B, sizes):
-        c = np.array([[0, 0, 1], [w - 1, 0, 1], [w - 1, h - 1, 1], [0, h - 1, 1]], float).T
-        pa, pb = Ha @ c, Hb @ c
-        out.append(np.linalg.norm(pa[:2] / pa[2] - pb[:2] / pb[2], axis=0).mean())
-    return np.asarray(out)
+    return np.asarray([np.linalg.norm(transfer_points(Ha, c) - transfer_points(Hb, c),
+                                      axis=1).mean()
+                       for Ha, Hb, c in ((a, b, image_corners(s)) for a, b, s in
+                                         zip(A, B, sizes))])
 
 
 def _resynchronize(H, H_dense, pw, idx, reference, sizes, dense_target, *, robust=True,
@@ -129,19 +224,17 @@ def _crop_to_footprint(Tc, H, size, tpl, tmask, pad=16):
     corners plus ``pad`` pixels, clipped to the canvas (the whole canvas when that box is
     degenerate). Returns ``(C @ Tc, tpl[crop], tmask[crop])`` with ``C`` the crop translation.
     """
-    w, h = size
-    c = np.array([[0, 0, 1], [w - 1, 0, 1], [w - 1, h - 1, 1], [0, h - 1, 1]], float).T
-    q = (Tc @ H) @ c
-    if not np.all(q[2] > 0):
+    M = Tc @ H
+    c = image_corners(size)
+    if not np.all(c @ M[2, :2] + M[2, 2] > 0):
         return Tc, tpl, tmask
-    x, y = q[0] / q[2], q[1] / q[2]
+    x, y = transfer_points(M, c).T
     Hc, Wc = tpl.shape[:2]
     x0, x1 = (int(np.clip(v, 0, Wc)) for v in (np.floor(x.min()) - pad, np.ceil(x.max()) + pad))
     y0, y1 = (int(np.clip(v, 0, Hc)) for v in (np.floor(y.min()) - pad, np.ceil(y.max()) + pad))
     if x1 - x0 < 32 or y1 - y0 < 32:
         return Tc, tpl, tmask
-    C = np.array([[1.0, 0, -x0], [0, 1.0, -y0], [0, 0, 1.0]])
-    return C @ Tc, tpl[y0:y1, x0:x1], tmask[y0:y1, x0:x1]
+    return translation(-x0, -y0) @ Tc, tpl[y0:y1, x0:x1], tmask[y0:y1, x0:x1]
 
 
 def _sparse_correspondences(pw, H_warp=None, T=None):
@@ -155,15 +248,10 @@ def _sparse_correspondences(pw, H_warp=None, T=None):
         a = np.asarray(dst, float)[inl]
         b = np.asarray(src, float)[inl]
         if H_warp is not None:
-            a = _apply(np.linalg.inv(T @ H_warp[i]), a)
-            b = _apply(np.linalg.inv(T @ H_warp[j]), b)
+            a = transfer_points(np.linalg.inv(T @ H_warp[i]), a)
+            b = transfer_points(np.linalg.inv(T @ H_warp[j]), b)
         out[(i, j)] = (a, b)
     return out
-
-
-def _apply(H, x):
-    p = np.column_stack([x, np.ones(len(x))]) @ H.T
-    return p[:, :2] / p[:, 2:3]
 
 
 def _sparse_residual(i, Hi, H, corr):
@@ -172,12 +260,15 @@ def _sparse_residual(i, Hi, H, corr):
     r = []
     for (a, b), (xa, xb) in corr.items():
         if a == i and np.all(np.isfinite(H[b])):
-            r.append(np.linalg.norm(_apply(Hi, xa) - _apply(H[b], xb), axis=1))
+            r.append(np.linalg.norm(transfer_points(Hi, xa) - transfer_points(H[b], xb),
+                                    axis=1))
         elif b == i and np.all(np.isfinite(H[a])):
-            r.append(np.linalg.norm(_apply(Hi, xb) - _apply(H[a], xa), axis=1))
+            r.append(np.linalg.norm(transfer_points(Hi, xb) - transfer_points(H[a], xa),
+                                    axis=1))
     return float(np.median(np.concatenate(r))) if r else float("nan")
 
 
+#: ``pairs="auto"`` matches every pair of views up to this many views, a view graph beyond.
 EXHAUSTIVE_UP_TO = 40
 
 
@@ -189,8 +280,7 @@ def view_graph_pairs(H_to_ref, sizes, *, reference, k=3):
     for i in range(n):
         if np.all(np.isfinite(H_to_ref[i])):
             w, h = sizes[i]
-            p = H_to_ref[i] @ np.array([(w - 1) / 2, (h - 1) / 2, 1.0])
-            centers[i] = p[:2] / p[2]
+            centers[i] = transfer_points(H_to_ref[i], [[(w - 1) / 2, (h - 1) / 2]])[0]
     pairs = set()
     for i in range(n):
         if i == reference:
@@ -208,336 +298,387 @@ def view_graph_pairs(H_to_ref, sizes, *, reference, k=3):
     return sorted(pairs)
 
 
+# ------------------------------------------------------------------------------------ stages
+def _features(gray, n_features):
+    """Stage 1: SIFT features of every view."""
+    return [sift_features(g, n_features=n_features) for g in gray]
+
+
+def _sparse_pairs(gray, sizes, feats, pairs, *, reference, n_neighbors, rng, **kw):
+    """Stage 2: sparse pairwise homographies along the view graph (``pairs``)."""
+    n = len(gray)
+    kw = dict(kw, features=feats, rng=rng)
+    if isinstance(pairs, PairwiseHomographies):
+        return pairs
+    if not isinstance(pairs, str):
+        return estimate_pairwise_homographies(gray, pairs=pairs, **kw)
+    if pairs == "all" or n <= max(n_neighbors + 2, EXHAUSTIVE_UP_TO):
+        return estimate_pairwise_homographies(gray, **kw)
+    g_first, g_extra = rng.spawn(2)
+    first = [(reference, i) for i in range(n) if i != reference]
+    pw0 = estimate_pairwise_homographies(gray, pairs=first, **dict(kw, rng=g_first))
+    approx = np.stack([np.eye(3) if i == reference else pw0.H[reference, i] for i in range(n)])
+    extra = [p for p in view_graph_pairs(approx, sizes, reference=reference, k=n_neighbors)
+             if reference not in p]
+    pw1 = estimate_pairwise_homographies(gray, pairs=extra, **dict(kw, rng=g_extra))
+    H = np.where(pw0.mask[..., None, None], pw0.H, pw1.H)
+    return PairwiseHomographies(H=H, mask=pw0.mask | pw1.mask, weights=pw0.weights + pw1.weights,
+                                failed=pw0.failed + pw1.failed,
+                                matches={**pw0.matches, **pw1.matches},
+                                info={"n_keypoints": pw0.info["n_keypoints"]})
+
+
+def _synchronize(pw, sizes, reference, robust):
+    """Stage 3: robust SL(3) synchronization of the pairs, weighted by their inlier counts."""
+    return synchronize_homographies(pw.H, mask=pw.mask, weights=pw.weights, reference=reference,
+                                    robust=robust, image_size=np.array(sizes, float),
+                                    disconnected="component")
+
+
+def _rectified_pass(gray, pw, sync, *, reference, robust, n_features, method, rng):
+    """Stage 4: second sparse pass between the views warped into the reference frame.
+
+    The corrections ``C_i`` are synchronized in the canvas (reference) frame, where every
+    residual is measured with the same geometry (no extrapolation to the corners of strongly
+    tilted views): ``H'_ij ~ inv(C_i) C_j``, ``H_i <- inv(T) C_i T H_i``. Returns
+    ``(maps, pairwise, sync_rectified)``, or ``None`` when the pass links fewer views.
+    """
+    ok0 = np.all(np.isfinite(sync.maps), axis=(1, 2))
+    edges = [(int(i), int(j)) for i, j in zip(*np.nonzero(np.triu(pw.mask, 1)))
+             if ok0[i] and ok0[j]]
+    pw_r = estimate_rectified_pairwise(gray, sync.maps, edges, reference=reference,
+                                       n_features=n_features, method=method, rng=rng)
+    if not pw_r.mask.any():
+        return None
+    Tc, csize = pw_r.info["canvas"]
+    sync_r = synchronize_homographies(pw_r.info["H_warped"], mask=pw_r.mask,
+                                      weights=pw_r.weights, reference=reference, robust=robust,
+                                      image_size=csize, disconnected="component")
+    ok_r = np.all(np.isfinite(sync_r.maps), axis=(1, 2))
+    if ok_r.sum() < ok0.sum():
+        return None
+    maps = np.full_like(sync.maps, np.nan)
+    for i in np.flatnonzero(ok_r):
+        maps[i] = normalize_determinant(np.linalg.inv(Tc) @ sync_r.maps[i] @ Tc @ sync.maps[i])
+    return maps, pw_r, sync_r
+
+
+def _segment_round(gray, H, idx, masks, *, r_sub, margin, rng):
+    """Stage 5a: plane masks of the linked views (``idx``), updated in place; returns the
+    fraction of pixels whose label flipped."""
+    sub = segment_plane([gray[i] for i in idx], H[idx], reference=r_sub, margin=margin, rng=rng)
+    flipped = sum(int(np.count_nonzero(masks[i] != sub[k])) for k, i in enumerate(idx))
+    total = sum(masks[i].size for i in idx)
+    for k, i in enumerate(idx):
+        masks[i] = sub[k]
+    return flipped / total
+
+
+def _template(gray, H, idx, masks, sizes, *, reference, r_sub, target, margin):
+    """The dense step's template: the mean warped image on the canvas, or the reference view.
+    Returns ``(Tc, template, template_mask)`` with ``Tc`` the reference-to-canvas offset."""
+    if target == "reference":
+        return np.eye(3), gray[reference].astype(np.float32), masks[reference]
+    wr, hr = sizes[reference]
+    ox, oy = int(round(margin * wr)), int(round(margin * hr))
+    tpl, cnt = mean_warped_image([gray[i] for i in idx], H[idx], size=(wr + 2 * ox, hr + 2 * oy),
+                                 offset=(ox, oy), masks=[masks[i] for i in idx], reference=r_sub)
+    return translation(ox, oy), np.nan_to_num(tpl), cnt > 0
+
+
+def _dense_view(i, gray, H, H_sparse, masks, sizes, tpl_data, corr, *, first, target,
+                opts: DenseOptions):
+    """Masked coarse-to-fine ECC of view ``i`` against the template, with the safeguards:
+    returns ``(H_i, record)``; ``record["status"]``: accepted / rejected_sparse / diverged."""
+    Tc, tpl, tmask = tpl_data
+    Ti, tpl_i, tmask_i = Tc, tpl, tmask
+    if target == "mean":
+        # ECC costs per template pixel: crop the canvas to the view's footprint (pixels outside
+        # it are invalid for this view anyway)
+        Ti, tpl_i, tmask_i = _crop_to_footprint(Tc, H[i], sizes[i], tpl, tmask)
+    # the first round starts from the sparse estimate (pyramid); later rounds start within a
+    # fraction of a pixel and run at full resolution only
+    Hi, ok_i = refine_homography_ecc(tpl_i, gray[i], Ti @ H[i], mask=masks[i],
+                                     template_mask=tmask_i, levels=opts.levels if first else 1,
+                                     max_iter=40 if first else 15, eps=1e-4)
+    Hi = np.linalg.inv(Ti) @ Hi
+    rec = {"step": float(_corner_change(Hi[None], H[i][None], [sizes[i]])[0])}
+    if not (ok_i and np.all(np.isfinite(Hi)) and rec["step"] <= opts.max_step):
+        rec["status"] = "diverged"
+    elif opts.dense_check:
+        # safeguard: the update must stay consistent with the sparse inliers
+        rec["sparse_before"] = _sparse_residual(i, H_sparse[i], H_sparse, corr)
+        rec["sparse_after"] = _sparse_residual(i, Hi, H, corr)
+        ok = rec["sparse_after"] <= (1.0 + opts.sparse_tolerance) * rec["sparse_before"]
+        rec["status"] = "accepted" if ok else "rejected_sparse"
+    else:
+        rec["status"] = "accepted"
+    return Hi, rec
+
+
+def _dense_round(gray, H, H_sparse, idx, masks, sizes, pw, corr, *, reference, first, target,
+                 robust, opts: DenseOptions):
+    """Stage 5b: ECC of every linked view, then re-synchronization of the accepted dense
+    estimates together with the sparse pairs. Returns ``(H_new, resync, views, rejected)``."""
+    r_sub = int(np.flatnonzero(idx == reference)[0])
+    tpl_data = _template(gray, H, idx, masks, sizes, reference=reference, r_sub=r_sub,
+                         target=target, margin=opts.canvas_margin)
+    H_dense, views, rejected = {}, {}, []
+    for i in idx:
+        if target == "reference" and i == reference:
+            continue
+        Hi, rec = _dense_view(i, gray, H, H_sparse, masks, sizes, tpl_data, corr, first=first,
+                              target=target, opts=opts)
+        views[int(i)] = rec
+        if rec["status"] == "accepted":
+            H_dense[i] = Hi
+        else:
+            rejected.append(int(i))
+    H_new, rs = _resynchronize(H, H_dense, pw, idx, reference, sizes, target, robust=robust,
+                               dense_weight=opts.dense_weight)
+    return H_new, rs, views, rejected
+
+
+# ------------------------------------------------------------------------------------ driver
+def _dense_options(dense, options) -> tuple[bool, DenseOptions]:
+    unknown = sorted(set(options) - set(_DENSE_FIELDS))
+    if unknown:
+        raise TypeError(f"estimate_plane_homographies() got unexpected keyword arguments "
+                        f"{unknown}; dense options accepted as keywords: {list(_DENSE_FIELDS)}")
+    if isinstance(dense, DenseOptions):
+        return True, dataclasses.replace(dense, **options)
+    return _check_flag(dense, "dense"), DenseOptions(**options)
+
+
+def _check_pairs_input(pairs, n):
+    if isinstance(pairs, PairwiseHomographies):
+        if pairs.H.shape != (n, n, 3, 3) or np.shape(pairs.mask) != (n, n):
+            raise ValueError(f"`pairs` holds pairwise homographies of shape {pairs.H.shape}, "
+                             f"expected ({n}, {n}, 3, 3)")
+    elif isinstance(pairs, str):
+        check_choice(pairs, "pairs", ("auto", "all"))
+    elif pairs is None or not hasattr(pairs, "__iter__"):
+        raise TypeError(f"`pairs` must be 'auto', 'all', a list of (i, j) or a "
+                        f"PairwiseHomographies, got {type(pairs).__name__}")
+    return pairs
+
+
+def _require_pairs(pw, n):
+    if not np.any(pw.mask):
+        kp = pw.info.get("n_keypoints")
+        why = "; ".join(f"({i}, {j}): {r}" for i, j, r in pw.failed[:6])
+        raise DegenerateInputError(
+            f"`images`: no pair of the {n} views could be matched (no homography between any "
+            f"two views; keypoints per view: {kp}; failed pairs: {why or 'none'}). The images "
+            "must show a common textured plane.")
+
+
+def _log_round(it, change, seconds):
+    logger.info("round %d: max corner change %.4f px (%.1f s)", it, change, seconds)
+
+
 def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True,
                                 pairs="auto", n_neighbors=3, method="ransac", threshold=3.0,
-                                n_features=2000, robust=True, dense_target="auto",
-                                max_iter=3, tol=0.02, levels=2, max_step=10.0, rectify=True,
-                                dense_weight=1.0, canvas_margin=0.5, dense_check=True,
-                                sparse_tolerance=0.25, rng=0, callback=None,
-                                verbose=False) -> PlaneAlignmentResult:
+                                n_features=2000, robust=True, rectify=True, rng=None,
+                                callback=None, verbose=False,
+                                **dense_options) -> PlaneAlignmentResult:
     """Homographies of the dominant plane across views, with plane masks.
 
-    Steps: SIFT + ratio test + RANSAC on all pairs of views (beyond 40 views: each view to the
-    reference and to its ``n_neighbors`` nearest views; see ``pairs``), robust SL(3)
-    synchronization weighted by inlier counts,
-    then alternating (a) plane segmentation from the views warped into the reference and
-    (b) masked coarse-to-fine ECC of every view against the mean warped image (or the
-    reference) followed by re-synchronization, until the homographies move less than ``tol``
-    pixels.
-
-    Re-synchronization: the dense estimates are edges between every view and an extra node,
-    the frame of the mean warped image (or the reference view itself); they are synchronized
-    with robust SL(3) synchronization together with the sparse RANSAC pairs (each view's
-    dense edge weighted ``dense_weight`` times the sum of its sparse pairs' inlier counts),
-    with the gauge fixed on the reference view. Views whose dense update diverged keep their
-    sparse edges only, so they stay consistent with their neighbours instead of being left at
-    their previous estimate.
+    Stages: SIFT features; sparse pairwise homographies (ratio test + RANSAC) along the view
+    graph; robust SL(3) synchronization weighted by inlier counts; a second sparse pass between
+    the views warped into the reference frame (``rectify``); then rounds of (a) plane
+    segmentation from the views warped into the reference and (b) masked coarse-to-fine ECC of
+    every view against the mean warped image (or the reference), each update checked against
+    the sparse inliers, followed by re-synchronization of the dense and sparse edges; until
+    the homographies move less than ``tol`` pixels. Measurements behind the defaults:
+    ``docs/homography.md``. Progress is logged to the ``transync.homography`` logger.
 
     Parameters
     ----------
     images : list of arrays (grey or RGB) or file paths
+        At least 2 images, each at least 16 x 16 pixels, finite.
     reference : int, default=0
-    dense : bool, default=True
-        Run the dense refinement. On generated 640x480 scenes (``transync experiment
-        homography``, views sweep, 5 scenes each) it lowered the mean corner error of the
-        synchronized sparse estimate from 0.030 to 0.027 px with 5 views, 0.028 to 0.021 with
-        10, 0.025 to 0.016 with 20 and 0.033 to 0.020 with 30 (worst view: 0.041 to 0.045,
-        0.049 to 0.044, 0.044 to 0.028, 0.054 to 0.035).
+    dense : bool or DenseOptions, default=True
+        Run the dense refinement (with these options).
     segment : bool, default=True
     pairs : "auto", "all", list of (i, j) or PairwiseHomographies, default="auto"
         The view graph, or precomputed pairwise estimates (then no matching is done). "auto"
         matches all pairs up to ``EXHAUSTIVE_UP_TO = 40`` views and, beyond, every view to the
-        reference and to its ``n_neighbors`` nearest views (footprint centres under the
-        to-reference estimates). The exhaustive graph is the robust one: on a hard generated
-        scene (seed 3) two strongly tilted views matched a clutter facet better than the plane
-        in all their pairs to the reference and to their (mislocated) nearest views; a view graph
-        built on those wrong estimates never linked them to their true neighbours, and they
-        ended 80 px off. With all pairs the robust synchronization outvotes those matches. With
-        30 views (moderate scenes) the view graph left one view 10.3 px off on one of five
-        scenes, all pairs 0.10 px; the sparse stage took 15 s instead of 7 (40 views: 26 s
-        instead of 9.5), growing with the number of pairs.
+        reference and to its ``n_neighbors`` nearest views.
     n_neighbors : int, default=3
     method : str, default="ransac"
         Robust estimator of :func:`estimate_pairwise_homographies` (USAC variants allowed).
     threshold : float, default=3.0
     n_features : int, default=2000
+        SIFT features per view.
     robust : bool, default=True
         Robust synchronization (IRLS + rejection).
-    dense_target : {"auto", "mean", "reference"}, default="auto"
-        Template of the dense step: the mean warped image (no reference bias) or the reference
-        view; "auto" takes the mean image from 4 views on (with 2 or 3 views the mean image is
-        pulled half-way by every update and converges slowly).
-    max_iter : int, default=3
-        Rounds of segmentation + dense refinement.
-    tol : float, default=0.02
-        Stop when the largest mean corner change is below this (pixels).
-    levels : int, default=2
-        ECC pyramid levels of the first dense round (later rounds: full resolution only).
     rectify : bool, default=True
-        Second sparse pass: SIFT on the views warped into the reference frame with the first
-        synchronized estimate, matching along the same view graph, synchronization again
-        (:func:`estimate_rectified_pairwise`); it removes most of the keypoint localization
-        error caused by perspective distortion between strongly tilted views.
-    dense_weight : float, default=1.0
-        Weight of a view's dense estimate in the re-synchronization, relative to the sum of
-        the inlier counts of that view's sparse pairs: at 1 the photometric and the feature
-        evidence of every view have an equal say, whatever the number of views. (A fixed
-        weight, 100 times the largest inlier count, over-trusted the dense estimates of few
-        views, whose mean-image template is poor: with 5 views it doubled the sparse error;
-        measured on 5-, 10- and 20-view scenes, the best fixed weight grew with the number of
-        views like the per-view sparse sum does.) The sparse side is trusted through its
-        weights: pairwise homographies passed in through ``pairs`` with uniform weights but
-        errors of 0.5-8 px (the experiment's ``init_error`` sweep) are only halved again by the
-        dense step at 1 (0.30 to 0.15 px, 5.2 to 3.1 px), where the earlier fixed weight let
-        the dense step dominate (0.039 and 1.2 px); for such coarse inputs raise it.
-    rng : None, int or Generator, default=0
-        Seeds OpenCV's global random generator (RANSAC sampling) so that runs are repeatable.
-    canvas_margin : float, default=0.5
-        The canvas of the segmentation and of the mean warped image (the dense step's
-        template) extends the reference frame by this fraction on every side. Parts of a view
-        outside it get no segmentation and no dense constraint, so the homography is
-        extrapolated there: on hard generated scenes (views up to 45 degrees) 0.2 left the
-        dense mean corner error at 0.072 px on one scene, 0.5 gives 0.058 (0.8: 0.061, slower).
-        Each view's ECC runs on the canvas cropped to its footprint.
-    max_step : float, default=10.0
-        A dense update that moves a view's corners by more than this (pixels) is treated as a
-        divergence and discarded (the view keeps its synchronized estimate).
-    dense_check : bool, default=True
-        Safeguard of the dense step: a view's ECC update is accepted only if it stays
-        consistent with the sparse inliers, i.e. the median distance (reference pixels) between
-        the view's sparse inlier matches and their partners does not exceed
-        ``(1 + sparse_tolerance)`` times that of the synchronized sparse solution; rejected
-        views keep their sparse edges only in the re-synchronization. Per-view outcome
-        (``status``: accepted / rejected_sparse / diverged, ``step``, ``sparse_before``,
-        ``sparse_after``) in ``info["history"][k]["dense_views"]``. (A photometric check on
-        held-out pixels was tried instead: with the mean-image template it is biased towards
-        the current estimate and its decisions were noise.)
-    sparse_tolerance : float, default=0.25
-        Relative growth of that median sparse distance the check tolerates.
+        Second sparse pass (:func:`estimate_rectified_pairwise`) on the views warped into the
+        reference frame with the first synchronized estimate.
+    rng : None, int or Generator, default=None
+        Every stochastic stage (pairwise RANSAC, rectified RANSAC, segmentation) draws from its
+        own child generator; the same seed gives the same result. OpenCV's global random
+        state is never used.
     callback : callable, optional
-        Called after every round of segmentation + dense refinement as
-        ``callback(iteration, homographies, masks)``: ``homographies`` (N, 3, 3) after the
-        round's update, ``masks`` the plane masks computed at the start of the round (so the
-        first call carries the segmentation obtained with the sparse estimate). Both are
-        copies. Used by ``transync experiment homography`` for precision/recall per iteration
-        (thesis Fig. 5.5).
+        Called after every round as ``callback(iteration, homographies, masks)``:
+        ``homographies`` (N, 3, 3) after the round's update, ``masks`` the plane masks computed
+        at the start of the round (copies).
     verbose : bool, default=False
-        Print the corner change of every round.
+        Show a progress bar (tqdm) over the rounds.
+    **dense_options
+        Fields of :class:`DenseOptions` (``max_iter``, ``tol``, ``levels``, ``max_step``,
+        ``dense_target``, ``dense_weight``, ``canvas_margin``, ``dense_check``,
+        ``sparse_tolerance``) override those of ``dense``.
 
     Returns
     -------
     PlaneAlignmentResult
+
+    Raises
+    ------
+    DegenerateInputError
+        When no pair of views can be matched.
+
+    Warns
+    -----
+    UnlinkedViewsWarning
+        When some views cannot be linked to the reference (their homographies are NaN).
 
     Examples
     --------
     >>> from transync.datasets import make_planar_scene
     >>> from transync.homography import corner_error
     >>> scene = make_planar_scene(4, image_size=(240, 180), difficulty="easy", rng=0)
-    >>> res = estimate_plane_homographies(scene.images, n_features=800, max_iter=1)
+    >>> res = estimate_plane_homographies(scene.images, n_features=800, max_iter=1, rng=0)
     >>> err = corner_error(res.homographies, scene.homographies, image_size=(240, 180))
     >>> bool(err.max() < 0.5), res.masks[1].shape
     (True, (180, 240))
     """
     t_start = time.perf_counter()
-    import cv2
-
-    gen = as_generator(rng)
-    cv2.setRNGSeed(int(gen.integers(2**31 - 1)))
+    use_dense, opts = _dense_options(dense, dense_options)
+    segment, rectify, robust = (_check_flag(v, k) for k, v in
+                                (("segment", segment), ("rectify", rectify), ("robust", robust)))
+    sparse_kw = {"method": check_choice(method, "method", tuple(_METHODS)),
+                 "threshold": check_positive(threshold, "threshold"),
+                 "n_features": check_int(n_features, "n_features", minimum=1, maximum=10**6),
+                 "n_neighbors": check_int(n_neighbors, "n_neighbors", minimum=1)}
+    if callback is not None and not callable(callback):
+        raise TypeError(f"`callback` must be callable or None, got {type(callback).__name__}")
+    g_pairs, g_rect, g_seg = as_generator(rng).spawn(3)
     imgs = load_images(images)
     n = len(imgs)
     if n < 2:
         raise ValueError(f"`images` must hold at least 2 images, got {n}")
     reference = check_int(reference, "reference", minimum=0, maximum=n - 1)
-    dense_target = check_choice(dense_target, "dense_target", ("auto", "mean", "reference"))
-    if dense_target == "auto":
-        dense_target = "mean" if n >= 4 else "reference"
-    max_iter = check_int(max_iter, "max_iter", minimum=0)
-    tol = check_positive(tol, "tol", allow_zero=True)
-    sparse_tolerance = check_positive(sparse_tolerance, "sparse_tolerance", allow_zero=True)
-    if callback is not None and not callable(callback):
-        raise TypeError(f"`callback` must be callable or None, got {type(callback).__name__}")
+    pairs = _check_pairs_input(pairs, n)
     gray = [to_gray(im) for im in imgs]
     sizes = [(g.shape[1], g.shape[0]) for g in gray]
     timing = {}
+    pw, sync, maps, corr, sync_rect = _sparse_stage(gray, sizes, pairs, reference=reference,
+                                                    robust=robust, rectify=rectify,
+                                                    rngs=(g_pairs, g_rect), timing=timing,
+                                                    **sparse_kw)
+    ok = np.all(np.isfinite(maps), axis=(1, 2))
+    if not ok.all():
+        warnings.warn(f"views {np.flatnonzero(~ok).tolist()} could not be linked to the "
+                      "reference (no chain of matched pairs) and are left out: their "
+                      "homographies are NaN", UnlinkedViewsWarning, stacklevel=2)
+    target = opts.dense_target
+    if target == "auto":
+        target = "mean" if n >= 4 else "reference"
+    H, masks, state = _refine_rounds(gray, sizes, maps, pw, corr, np.flatnonzero(ok),
+                                     reference=reference, dense=use_dense, segment=segment,
+                                     target=target, robust=robust, opts=opts, rng=g_seg,
+                                     callback=callback, verbose=verbose)
+    idx = np.flatnonzero(ok)
+    mean, _ = mean_warped_image([gray[i] for i in idx], H[idx], size=sizes[reference],
+                                masks=[masks[i] for i in idx],
+                                reference=int(np.flatnonzero(idx == reference)[0]))
+    timing["total"] = time.perf_counter() - t_start
+    return PlaneAlignmentResult(homographies=H, masks=masks, mean_image=mean, reference=reference,
+                                sparse_homographies=maps, pairwise=pw, objective=state["change"],
+                                n_iter=state["n_iter"], converged=state["converged"],
+                                info={"history": state["history"], "seconds": timing,
+                                      "sync": sync, "sync_rectified": sync_rect, "options": opts,
+                                      "excluded": np.flatnonzero(~ok)})
+
+
+def _sparse_stage(gray, sizes, pairs, *, reference, robust, rectify, rngs, timing, method,
+                  threshold, n_features, n_neighbors):
+    """Stages 1-4: features, sparse pairs, synchronization, rectified pass. Returns
+    ``(pairwise, sync, maps, correspondences, sync_rectified)``; fills ``timing``."""
+    n = len(gray)
     t0 = time.perf_counter()
-    feats = [sift_features(g, n_features=n_features) for g in gray]
+    precomputed = isinstance(pairs, PairwiseHomographies)
+    feats = None if precomputed else _features(gray, n_features)
     timing["features"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    kw = dict(method=method, threshold=threshold, features=feats, rng=gen)
-    if isinstance(pairs, PairwiseHomographies):
-        if pairs.H.shape != (n, n, 3, 3):
-            raise ValueError(f"`pairs` holds pairwise homographies of shape {pairs.H.shape}, "
-                             f"expected ({n}, {n}, 3, 3)")
-        pw = pairs
-    elif isinstance(pairs, str):
-        check_choice(pairs, "pairs", ("auto", "all"))
-        if pairs == "all" or n <= max(n_neighbors + 2, EXHAUSTIVE_UP_TO):
-            pw = estimate_pairwise_homographies(gray, **kw)
-        else:
-            first = [(reference, i) for i in range(n) if i != reference]
-            pw0 = estimate_pairwise_homographies(gray, pairs=first, **kw)
-            approx = np.stack([np.eye(3) if i == reference else pw0.H[reference, i]
-                               for i in range(n)])
-            extra = [p for p in view_graph_pairs(approx, sizes, reference=reference,
-                                                 k=n_neighbors)
-                     if reference not in p]
-            pw1 = estimate_pairwise_homographies(gray, pairs=extra, **kw)
-            H = np.where(pw0.mask[..., None, None], pw0.H, pw1.H)
-            pw = PairwiseHomographies(H=H, mask=pw0.mask | pw1.mask,
-                                      weights=pw0.weights + pw1.weights,
-                                      failed=pw0.failed + pw1.failed,
-                                      matches={**pw0.matches, **pw1.matches},
-                                      info={"n_keypoints": pw0.info["n_keypoints"]})
-    else:
-        pw = estimate_pairwise_homographies(gray, pairs=pairs, **kw)
+    pw = _sparse_pairs(gray, sizes, feats, pairs, reference=reference, n_neighbors=n_neighbors,
+                       rng=rngs[0], method=method, threshold=threshold)
+    _require_pairs(pw, n)
     timing["matching"] = time.perf_counter() - t0
+    logger.info("sparse pairs: %d of %d linked (%.1f s)", int(np.triu(pw.mask, 1).sum()),
+                n * (n - 1) // 2, timing["features"] + timing["matching"])
     t0 = time.perf_counter()
-    sync = synchronize_homographies(pw.H, mask=pw.mask, weights=pw.weights, reference=reference,
-                                    robust=robust, image_size=np.array(sizes, float),
-                                    disconnected="component")
-    maps = None
-    sync_info = {}
-    if rectify and not isinstance(pairs, PairwiseHomographies):
-        # second sparse pass between the views warped into the reference frame
-        ok0 = np.all(np.isfinite(sync.maps), axis=(1, 2))
-        edges = [(int(i), int(j)) for i, j in zip(*np.nonzero(np.triu(pw.mask, 1)))
-                 if ok0[i] and ok0[j]]
-        pw_r = estimate_rectified_pairwise(gray, sync.maps, edges, reference=reference,
-                                           n_features=n_features, method=method)
-        if pw_r.mask.any():
-            # synchronize the corrections C_i in the canvas (reference) frame, where every
-            # residual is measured with the same geometry (no extrapolation to the corners of
-            # strongly tilted views): H'_ij ~ inv(C_i) C_j, H_i <- inv(T) C_i T H_i
-            Tc, csize = pw_r.info["canvas"]
-            sync_r = synchronize_homographies(pw_r.info["H_warped"], mask=pw_r.mask,
-                                              weights=pw_r.weights, reference=reference,
-                                              robust=robust, image_size=csize,
-                                              disconnected="component")
-            ok_r = np.all(np.isfinite(sync_r.maps), axis=(1, 2))
-            if ok_r.sum() >= ok0.sum():
-                corr = _sparse_correspondences(pw_r, sync.maps, Tc)
-                maps = np.full_like(sync.maps, np.nan)
-                for i in np.flatnonzero(ok_r):
-                    Hi = np.linalg.inv(Tc) @ sync_r.maps[i] @ Tc @ sync.maps[i]
-                    maps[i] = Hi / np.cbrt(np.linalg.det(Hi))
-                sync_info["rectified"] = sync_r
-                pw = pw_r
-    if maps is None:
-        maps = sync.maps.copy()
-        corr = _sparse_correspondences(pw)
+    sync = _synchronize(pw, sizes, reference, robust)
+    maps, sync_rect = sync.maps.copy(), None
+    corr = _sparse_correspondences(pw)
+    if rectify and not precomputed:
+        rect = _rectified_pass(gray, pw, sync, reference=reference, robust=robust,
+                               n_features=n_features, method=method, rng=rngs[1])
+        if rect is not None:
+            corr = _sparse_correspondences(rect[1], sync.maps, rect[1].info["canvas"][0])
+            maps, pw, sync_rect = rect
     timing["sync"] = time.perf_counter() - t0
-    H = maps
-    H_sparse = H.copy()
-    ok = np.all(np.isfinite(H), axis=(1, 2))
-    if not ok.all():
-        warnings.warn(f"views {np.flatnonzero(~ok).tolist()} could not be linked to the reference "
-                      "and are left out", ConvergenceWarning, stacklevel=2)
-    idx = np.flatnonzero(ok)
+    return pw, sync, maps, corr, sync_rect
+
+
+def _refine_rounds(gray, sizes, H_sparse, pw, corr, idx, *, reference, dense, segment, target,
+                   robust, opts, rng, callback, verbose):
+    """Stage 5: rounds of segmentation and dense refinement of the linked views ``idx``.
+    Returns ``(H, masks, state)`` with ``state``: ``history``, ``change``, ``n_iter``,
+    ``converged``."""
     r_sub = int(np.flatnonzero(idx == reference)[0])
+    H = H_sparse.copy()
     masks = [np.ones(g.shape, bool) for g in gray]
     history = []
-    converged = True
-    change = 0.0
-    it = 0
-    resyncs = []
-    for it in range(1, max_iter + 1 if (dense or segment) else 1):
+    converged, change, it = True, 0.0, 0
+    rounds = range(1, (opts.max_iter if (dense or segment) else 0) + 1)
+    if verbose:
+        from tqdm.auto import tqdm
+
+        rounds = tqdm(rounds, desc="dense rounds", leave=False)
+    for it in rounds:
         t0 = time.perf_counter()
         mask_change = 0.0
         if segment:
-            sub = segment_plane([gray[i] for i in idx], H[idx], reference=r_sub,
-                                margin=canvas_margin)
-            flipped = sum(int(np.count_nonzero(masks[i] != sub[k])) for k, i in enumerate(idx))
-            mask_change = flipped / sum(masks[i].size for i in idx)
-            for k, i in enumerate(idx):
-                masks[i] = sub[k]
+            mask_change = _segment_round(gray, H, idx, masks, r_sub=r_sub,
+                                         margin=opts.canvas_margin, rng=rng)
         t_seg = time.perf_counter() - t0
         t0 = time.perf_counter()
-        H_new = H.copy()
-        rejected = []
-        views = {}
+        H_new, rejected, views = H.copy(), [], {}
         if dense:
-            Tc = np.eye(3)
-            if dense_target == "mean":
-                wr, hr = sizes[reference]
-                ox, oy = int(round(canvas_margin * wr)), int(round(canvas_margin * hr))
-                Tc[:2, 2] = ox, oy
-                tpl, cnt = mean_warped_image([gray[i] for i in idx], H[idx],
-                                             size=(wr + 2 * ox, hr + 2 * oy), offset=(ox, oy),
-                                             masks=[masks[i] for i in idx], reference=r_sub)
-                tmask = cnt > 0
-                tpl = np.nan_to_num(tpl)
-            else:
-                tpl = gray[reference].astype(np.float32)
-                tmask = masks[reference]
-            # the first round starts from the sparse estimate (pyramid); later rounds start
-            # within a fraction of a pixel and run at full resolution only
-            lv = levels if it == 1 else 1
-            H_dense = {}
-            for i in idx:
-                if dense_target == "reference" and i == reference:
-                    continue
-                Ti, tpl_i, tmask_i = Tc, tpl, tmask
-                if dense_target == "mean":
-                    # ECC costs per template pixel: crop the canvas to the view's footprint
-                    # (pixels outside it are invalid for this view anyway)
-                    Ti, tpl_i, tmask_i = _crop_to_footprint(Tc, H[i], sizes[i], tpl, tmask)
-                Hi, ok_i = refine_homography_ecc(tpl_i, gray[i], Ti @ H[i], mask=masks[i],
-                                                 template_mask=tmask_i, levels=lv,
-                                                 max_iter=40 if it == 1 else 15, eps=1e-4)
-                Hi = np.linalg.inv(Ti) @ Hi
-                step = float(_corner_change(Hi[None], H[i][None], [sizes[i]])[0])
-                rec = {"step": step}
-                if not (ok_i and np.all(np.isfinite(Hi)) and step <= max_step):
-                    rec["status"] = "diverged"
-                elif dense_check:
-                    # safeguard: the update must stay consistent with the sparse inliers
-                    rec["sparse_before"] = _sparse_residual(i, H_sparse[i], H_sparse, corr)
-                    rec["sparse_after"] = _sparse_residual(i, Hi, H, corr)
-                    if rec["sparse_after"] > (1.0 + sparse_tolerance) * rec["sparse_before"]:
-                        rec["status"] = "rejected_sparse"
-                    else:
-                        rec["status"] = "accepted"
-                else:
-                    rec["status"] = "accepted"
-                views[int(i)] = rec
-                if rec["status"] == "accepted":
-                    H_dense[i] = Hi
-                else:
-                    rejected.append(int(i))
-            # re-synchronization of the dense estimates together with the sparse pairs
-            H_new, rs = _resynchronize(H, H_dense, pw, idx, reference, sizes, dense_target,
-                                       robust=robust, dense_weight=dense_weight)
-            resyncs.append(rs)
+            H_new, _, views, rejected = _dense_round(
+                gray, H, H_sparse, idx, masks, sizes, pw, corr, reference=reference,
+                first=it == 1, target=target, robust=robust, opts=opts)
         t_dense = time.perf_counter() - t0
         change = float(_corner_change(H_new[idx], H[idx], [sizes[i] for i in idx]).max())
         history.append({"iteration": it, "max_corner_change": change, "seconds_segment": t_seg,
                         "seconds_dense": t_dense, "rejected_dense": rejected, "dense_views": views,
                         "plane_fraction": float(np.mean([m.mean() for m in masks])),
                         "mask_change": mask_change})
-        if verbose:
-            print(f"iteration {it}: max corner change {change:.4f} px")
+        _log_round(it, change, t_seg + t_dense)
         H = H_new
         if callback is not None:
             callback(it, H.copy(), [m.copy() for m in masks])
-        if not dense or change < tol:
+        if not dense or change < opts.tol:
             break
     else:
-        converged = not dense or change < tol
+        converged = not dense or change < opts.tol
     if dense and segment and change > 0.1:
         # masks of the last round were computed before its (sub-pixel) update; redo them only
         # when the homographies still moved noticeably
-        sub = segment_plane([gray[i] for i in idx], H[idx],
-                            reference=int(np.flatnonzero(idx == reference)[0]),
-                            margin=canvas_margin)
-        for k, i in enumerate(idx):
-            masks[i] = sub[k]
-    mean, _ = mean_warped_image([gray[i] for i in idx], H[idx], size=sizes[reference],
-                                masks=[masks[i] for i in idx],
-                                reference=int(np.flatnonzero(idx == reference)[0]))
-    timing["total"] = time.perf_counter() - t_start
-    return PlaneAlignmentResult(homographies=H, masks=masks, mean_image=mean, reference=reference,
-                                sparse_homographies=H_sparse, pairwise=pw, objective=change,
-                                n_iter=it, converged=converged,
-                                info={"history": history, "seconds": timing, "sync": sync,
-                                      "sync_rectified": sync_info.get("rectified"),
-                                      "excluded": np.flatnonzero(~ok)})
+        _segment_round(gray, H, idx, masks, r_sub=r_sub, margin=opts.canvas_margin, rng=rng)
+    return H, masks, {"history": history, "change": change, "n_iter": it,
+                      "converged": converged}

@@ -11,11 +11,43 @@ spatially, thresholded, cleaned morphologically and warped back into every view.
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
-__all__ = ["segment_plane"]
+from .._validation import as_generator, check_array, check_int, check_positive, check_probability
+from ..geometry import translation
+
+__all__ = ["PlaneSegmentation", "segment_plane", "segment_plane_evidence"]
+
+
+@dataclass(frozen=True)
+class PlaneSegmentation:
+    """Result of :func:`segment_plane_evidence`.
+
+    Attributes
+    ----------
+    masks : list of (h_i, w_i) bool arrays
+        Plane mask of every view (what :func:`segment_plane` returns).
+    canvas_masks : list of bool arrays
+        The masks in the canvas (reference frame plus margin).
+    median : ndarray
+        Consensus image of the photometrically normalized warped views, in the canvas.
+    count : ndarray of int
+        Number of views seeing each canvas pixel.
+    offset : (int, int)
+        Canvas position of the reference view's origin.
+    probability : ndarray (N, H, W)
+        Plane probability of every view and canvas pixel (before smoothing).
+    """
+
+    masks: list
+    canvas_masks: list
+    median: np.ndarray
+    count: np.ndarray
+    offset: tuple
+    probability: np.ndarray
 
 
 def _box(x, k):
@@ -29,8 +61,53 @@ def _canvas(size, margin):
 
 
 def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, smooth=4.0,
-                  min_views=3, threshold=0.35, rng=0, return_evidence=False):
+                  min_views=3, threshold=0.35, rng=None) -> list:
     """Per-view plane masks from the consensus of the views warped into the reference frame.
+
+    Parameters and method as in :func:`segment_plane_evidence`, which also returns the
+    evidence behind the masks.
+
+    Returns
+    -------
+    masks : list of (h_i, w_i) bool arrays
+    """
+    return segment_plane_evidence(images, homographies, reference=reference, window=window,
+                                  margin=margin, smooth=smooth, min_views=min_views,
+                                  threshold=threshold, rng=rng).masks
+
+
+def _check_inputs(images, homographies, reference, window, margin, smooth, min_views,
+                  threshold):
+    if isinstance(images, np.ndarray) and images.ndim == 2:
+        raise TypeError("`images` must be a list of (h, w) grey images, got one 2-D array")
+    imgs = [check_array(im, f"images[{k}]", ndim=2, dtype=np.float32)
+            for k, im in enumerate(images)]
+    n = len(imgs)
+    if n < 1:
+        raise ValueError("`images` must hold at least one image, got 0")
+    for k, im in enumerate(imgs):
+        if min(im.shape) < 8:
+            raise ValueError(f"`images[{k}]` must be at least 8 x 8 pixels, got shape {im.shape}")
+    H = check_array(homographies, "homographies", ndim=3)
+    if H.shape != (n, 3, 3):
+        raise ValueError(f"`homographies` must have shape ({n}, 3, 3) (one per image), "
+                         f"got {H.shape}")
+    opts = {"reference": check_int(reference, "reference", minimum=0, maximum=n - 1),
+            "window": check_int(window, "window", minimum=1, maximum=101),
+            "margin": check_positive(margin, "margin", allow_zero=True),
+            "smooth": check_positive(smooth, "smooth", allow_zero=True),
+            "min_views": check_int(min_views, "min_views", minimum=1),
+            "threshold": check_probability(threshold, "threshold")}
+    if opts["margin"] > 2:
+        raise ValueError(f"`margin` must lie in [0, 2], got {opts['margin']!r}")
+    return imgs, H, opts
+
+
+def segment_plane_evidence(images, homographies, *, reference=0, window=7, margin=0.2,
+                           smooth=4.0, min_views=3, threshold=0.35,
+                           rng=None) -> PlaneSegmentation:
+    """Per-view plane masks and their evidence, from the consensus of the views warped into
+    the reference frame.
 
     Parameters
     ----------
@@ -39,9 +116,9 @@ def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, sm
         ``homographies[i]`` maps pixels of view ``i`` into the reference view.
     reference : int, default=0
     window : int, default=7
-        Window of the local ZNCC.
+        Window of the local ZNCC (1 to 101 pixels).
     margin : float, default=0.2
-        The canvas extends the reference frame by this fraction on every side.
+        The canvas extends the reference frame by this fraction on every side (at most 2).
     smooth : float, default=4.0
         Gaussian sigma (pixels) applied to the plane probabilities before thresholding.
     min_views : int, default=3
@@ -50,20 +127,23 @@ def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, sm
     threshold : float, default=0.35
         Smoothed plane probability above which a pixel is labelled plane (below 0.5: the
         self-trained classifier is conservative on weakly textured plane pixels).
+    rng : None, int or Generator, default=None
+        Draws the training pixels of the classifier.
 
     Returns
     -------
-    masks : list of (h_i, w_i) bool arrays
-    evidence : dict (only with ``return_evidence``): ``canvas_masks``, ``median``, ``count``,
-        ``offset``, ``probability``.
+    PlaneSegmentation
     """
     from sklearn.linear_model import LogisticRegression
 
-    n = len(images)
-    imgs = [np.asarray(im, dtype=np.float32) for im in images]
+    imgs, homographies, o = _check_inputs(images, homographies, reference, window, margin,
+                                          smooth, min_views, threshold)
+    reference, window, margin, smooth = o["reference"], o["window"], o["margin"], o["smooth"]
+    min_views, threshold = o["min_views"], o["threshold"]
+    n = len(imgs)
     h0, w0 = imgs[reference].shape[:2]
     (W, Hc), (ox, oy) = _canvas((w0, h0), margin)
-    T = np.array([[1.0, 0, ox], [0, 1.0, oy], [0, 0, 1.0]])
+    T = translation(ox, oy)
     warped = np.empty((n, Hc, W), np.float32)
     valid = np.empty((n, Hc, W), bool)
     kern = np.ones((5, 5), np.uint8)
@@ -119,7 +199,7 @@ def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, sm
         else np.ones_like(sel)
     pos = sel & (((zs > 0.85) & (rs < 1.5 * r_scale)) | (~textured & (rs < 0.7 * r_scale)))
     neg = sel & (((zs < 0.3) & textured) | (rs > 5 * r_scale))
-    gen = np.random.default_rng(rng)
+    gen = as_generator(rng)
     prob = np.zeros(zs.shape, np.float32)
     if pos.sum() > 50 and neg.sum() > 50:
         ip = np.flatnonzero(pos.ravel())
@@ -159,7 +239,5 @@ def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, sm
                                    flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
                                    borderMode=cv2.BORDER_CONSTANT, borderValue=1)
         masks.append(back > 0)
-    if return_evidence:
-        return masks, {"canvas_masks": canvas_masks, "median": med, "count": count,
-                       "offset": (ox, oy), "probability": prob}
-    return masks
+    return PlaneSegmentation(masks=masks, canvas_masks=canvas_masks, median=med, count=count,
+                             offset=(ox, oy), probability=prob)

@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 
 from .._validation import as_generator, check_choice, check_int, check_positive
+from ..geometry import transfer_points, translation
 
 __all__ = [
     "PairwiseHomographies",
@@ -62,14 +63,46 @@ class PairwiseHomographies:
     info: dict[str, Any] = field(default_factory=dict)
 
 
+_MIN_SIZE = 16
+
+
+def _check_image(arr, k) -> np.ndarray:
+    """One image array: (H, W) or (H, W, C), real numeric, finite, at least 16 x 16 pixels."""
+    if arr.dtype.kind not in "uif" or arr.dtype == np.float16:
+        raise TypeError(f"`images[{k}]` must be an unsigned/integer or float image, "
+                        f"got dtype {arr.dtype}")
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (1, 3, 4)):
+        raise ValueError(f"`images[{k}]` must be a (H, W) or (H, W, C) image with C in "
+                         f"(1, 3, 4), got shape {arr.shape}")
+    if arr.size == 0:
+        raise ValueError(f"`images[{k}]` is empty (shape {arr.shape})")
+    if min(arr.shape[:2]) < _MIN_SIZE:
+        raise ValueError(f"`images[{k}]` must be at least {_MIN_SIZE} x {_MIN_SIZE} pixels, "
+                         f"got shape {arr.shape}")
+    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+        raise ValueError(f"`images[{k}]` must be finite, got NaN or infinite pixels")
+    if arr.dtype.kind == "i" and arr.min() < 0:
+        raise ValueError(f"`images[{k}]` must be non-negative, got minimum {int(arr.min())}")
+    return arr
+
+
 def load_images(images) -> list:
-    """Read file paths (``cv2.imread``) and pass arrays through; returns a list of arrays."""
+    """Read file paths (``cv2.imread``) and pass arrays through; returns a list of arrays.
+
+    Every image is checked: (H, W) or (H, W, C) with C in (1, 3, 4), integer or float pixels,
+    finite, at least 16 x 16 pixels.
+    """
     if isinstance(images, np.ndarray) and images.ndim in (3, 4) and images.dtype != object:
         if images.ndim == 3 and images.shape[-1] in (3, 4) and images.shape[0] > 4:
             raise ValueError("`images` must be a list of images; got a single (H, W, C) array")
         images = list(images)
     if isinstance(images, (str, os.PathLike)):
         raise TypeError("`images` must be a list of images or paths, got a single path")
+    try:
+        images = list(images)
+    except TypeError:
+        raise TypeError(f"`images` must be a list of images or paths, "
+                        f"got {type(images).__name__}") from None
     out = []
     for k, im in enumerate(images):
         if isinstance(im, (str, os.PathLike)):
@@ -78,15 +111,12 @@ def load_images(images) -> list:
                 raise ValueError(f"`images[{k}]`: cannot read image file {os.fspath(im)!r}")
             if arr.ndim == 3:
                 arr = cv2.cvtColor(arr[..., :3], cv2.COLOR_BGR2RGB)
-            out.append(arr)
         else:
+            if np.iscomplexobj(im) or isinstance(im, (str, bytes)) or im is None:
+                raise TypeError(f"`images[{k}]` must be an image array or a path, "
+                                f"got {type(im).__name__}")
             arr = np.asarray(im)
-            if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (1, 3, 4)):
-                raise ValueError(f"`images[{k}]` must be a (H, W) or (H, W, C) image, "
-                                 f"got shape {arr.shape}")
-            if arr.size == 0:
-                raise ValueError(f"`images[{k}]` is empty")
-            out.append(arr)
+        out.append(_check_image(arr, k))
     return out
 
 
@@ -117,6 +147,11 @@ def sift_features(gray, *, n_features=4000):
 
 
 def _ratio_matches(desc_i, desc_j, ratio, matcher):
+    """Lowe's ratio-test matches ``(index in i, index in j)`` of the descriptors of view j.
+
+    ``matcher`` is an exact (brute-force) matcher: the result does not depend on any random
+    state (FLANN's randomized trees draw from OpenCV's global generator).
+    """
     if len(desc_i) < 2 or len(desc_j) < 2:
         return np.zeros((0, 2), int)
     knn = matcher.knnMatch(desc_j, desc_i, k=2)
@@ -139,8 +174,7 @@ def _refine_inliers(src, dst, H, inl, threshold, n_rounds=3):
     src64 = src.astype(np.float64)
     dst64 = dst.astype(np.float64)
     for _ in range(n_rounds):
-        p = np.column_stack([src64, np.ones(len(src64))]) @ H.T
-        r = np.linalg.norm(p[:, :2] / p[:, 2:3] - dst64, axis=1)
+        r = np.linalg.norm(transfer_points(H, src64) - dst64, axis=1)
         sigma = 1.4826 * np.median(r[inl])
         new = r <= min(threshold, max(2.5 * sigma, 0.5))
         if new.sum() < 8:
@@ -160,10 +194,64 @@ def _all_pairs(n):
     return [(i, j) for i in range(n) for j in range(i + 1, n)]
 
 
+def _check_pairs(pairs, n) -> list:
+    if pairs is None:
+        return _all_pairs(n)
+    checked = []
+    for p in pairs:
+        try:
+            i, j = (int(v) for v in p)
+        except (TypeError, ValueError):
+            raise ValueError(f"`pairs` must hold pairs (i, j) of view indices, "
+                             f"got {p!r}") from None
+        if i == j or not (0 <= i < n and 0 <= j < n):
+            raise ValueError(f"`pairs` must hold pairs of distinct view indices in [0, {n}), "
+                             f"got {tuple(p)!r}")
+        checked.append((i, j))
+    return checked
+
+
+def _pair_seeds(rng, n_pairs) -> list:
+    """One independent generator per pair, drawn from ``rng`` (SPEC 7): the result of a pair
+    does not depend on which thread fits it or in which order."""
+    ss = np.random.SeedSequence(as_generator(rng).integers(2**63, size=4).tolist())
+    return [np.random.default_rng(c) for c in ss.spawn(n_pairs)]
+
+
+def _robust_fit(src, dst, method, threshold, max_iter, confidence, refine, gen):
+    """``cv2.findHomography`` on the correspondences in an order drawn from ``gen``.
+
+    OpenCV's robust estimators draw their samples from an internal generator with a fixed seed,
+    so the order of the points decides the samples: shuffling it with ``gen`` seeds RANSAC per
+    call, without touching OpenCV's global random state. Returns ``(H, inlier, why)``.
+    """
+    order = gen.permutation(len(src))
+    inv = np.empty_like(order)
+    inv[order] = np.arange(len(order))
+    try:
+        H, inl = cv2.findHomography(src[order], dst[order], _METHODS[method], threshold,
+                                    maxIters=max_iter, confidence=confidence)
+    except cv2.error as exc:  # degenerate configurations
+        return None, None, f"OpenCV error: {str(exc).strip()[:80]}"
+    if H is None or inl is None:
+        return None, None, "no homography found"
+    inl = inl.ravel().astype(bool)[inv]
+    if refine and inl.sum() >= 8:
+        H, inl = _refine_inliers(src, dst, H, inl, threshold)
+    return H, inl, None
+
+
+def _check_features(features, n):
+    if len(features) != n:
+        raise ValueError(f"`features` must hold one (pts, desc) pair per image ({n}), "
+                         f"got {len(features)}")
+    return features
+
+
 def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio=0.8,
                                    threshold=3.0, max_iter=2000, confidence=0.995,
                                    min_inliers=20, n_features=4000,
-                                   features=None, refine=True, rng=0) -> PairwiseHomographies:
+                                   features=None, refine=True, rng=None) -> PairwiseHomographies:
     """Pairwise homographies between views: SIFT, ratio test, robust fit (``cv2.findHomography``).
 
     Parameters
@@ -176,7 +264,7 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
         ``"lmeds"``, ``"rho"`` or a USAC variant: ``"usac_default"``, ``"usac_magsac"``,
         ``"usac_accurate"``, ``"usac_prosac"``, ``"usac_fast"``.
     ratio : float, default=0.8
-        Lowe's ratio test.
+        Lowe's ratio test, in (0, 1]. Nearest neighbours are exact (brute force).
     threshold : float, default=3.0
         Reprojection threshold in pixels.
     max_iter : int, default=2000
@@ -192,9 +280,10 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
         inlier residuals (at most ``threshold``, at least 0.5 px) and refit by least squares
         with Levenberg-Marquardt polish (a few rounds): points of nearby surfaces that RANSAC's
         fixed threshold admits no longer bias the homography.
-    rng : None, int or Generator, default=0
-        Seeds FLANN and RANSAC, pair by pair (pairs are fitted on up to 4 threads; results do
-        not depend on the number of threads). The default makes runs repeatable.
+    rng : None, int or Generator, default=None
+        Draws one generator per pair, which orders the pair's correspondences and with them
+        RANSAC's samples (OpenCV's global random state is never used). Pairs are fitted on up
+        to 4 threads; the same ``rng`` gives the same result whatever the number of threads.
 
     Returns
     -------
@@ -205,34 +294,27 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
     t0 = time.perf_counter()
     method = check_choice(method, "method", tuple(_METHODS))
     ratio = check_positive(ratio, "ratio")
+    if ratio > 1:
+        raise ValueError(f"`ratio` must lie in (0, 1], got {ratio!r}")
     threshold = check_positive(threshold, "threshold")
     max_iter = check_int(max_iter, "max_iter", minimum=1)
+    confidence = check_positive(confidence, "confidence")
+    if confidence >= 1:
+        raise ValueError(f"`confidence` must lie in (0, 1), got {confidence!r}")
     min_inliers = check_int(min_inliers, "min_inliers", minimum=4)
+    n_features = check_int(n_features, "n_features", minimum=1, maximum=10**6)
     imgs = load_images(images)
     n = len(imgs)
     if n < 2:
         raise ValueError(f"`images` must hold at least 2 images, got {n}")
-    if pairs is None:
-        pairs = _all_pairs(n)
-    else:
-        checked = []
-        for p in pairs:
-            i, j = (int(v) for v in p)
-            if i == j or not (0 <= i < n and 0 <= j < n):
-                raise ValueError(f"`pairs` must hold pairs of distinct view indices in [0, {n}), "
-                                 f"got {tuple(p)!r}")
-            checked.append((i, j))
-        pairs = checked
+    pairs = _check_pairs(pairs, n)
     if features is None:
-        gray = [to_gray(im) for im in imgs]
-        features = [sift_features(g, n_features=n_features) for g in gray]
-    seed = int(as_generator(rng).integers(2**31 - 1 - len(pairs)))
+        features = [sift_features(to_gray(im), n_features=n_features) for im in imgs]
+    features = _check_features(features, n)
+    gens = _pair_seeds(rng, len(pairs))
 
     def fit(k, i, j):
-        # one pair: ratio-test matches, robust fit; OpenCV's generator (FLANN's random trees,
-        # RANSAC) is per thread: seeded per pair, results do not depend on the threads
-        cv2.setRNGSeed(seed + k)
-        matcher = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 64})
+        matcher = cv2.BFMatcher(cv2.NORM_L2)
         pi, di = features[i]
         pj, dj = features[j]
         m = _ratio_matches(di, dj, ratio, matcher)
@@ -240,16 +322,10 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
             return None, f"{len(m)} ratio-test matches"
         src = pj[m[:, 1]]
         dst = pi[m[:, 0]]
-        try:
-            Hij, inl = cv2.findHomography(src, dst, _METHODS[method], threshold,
-                                          maxIters=max_iter, confidence=confidence)
-        except cv2.error as exc:  # degenerate configurations
-            return None, f"OpenCV error: {str(exc).strip()[:80]}"
-        if Hij is None or inl is None:
-            return None, "no homography found"
-        inl = inl.ravel().astype(bool)
-        if refine and inl.sum() >= 8:
-            Hij, inl = _refine_inliers(src, dst, Hij, inl, threshold)
+        Hij, inl, why = _robust_fit(src, dst, method, threshold, max_iter, confidence, refine,
+                                    gens[k])
+        if Hij is None:
+            return None, why
         return (Hij, dst, src, inl), None
 
     jobs = [(k, int(i), int(j)) for k, (i, j) in enumerate(pairs)]
@@ -284,9 +360,57 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
                                       "seconds": time.perf_counter() - t0})
 
 
+_EMPTY = (np.zeros((0, 2), np.float32), np.zeros((0, 128), np.float32))
+
+
+def _warped_features(gray, H_to_ref, T, size, n_features):
+    """SIFT features of every view warped into the canvas ``T`` (NaN estimate: no features)."""
+    kern = np.ones((7, 7), np.uint8)
+    feats = []
+    for g, Hi in zip(gray, H_to_ref):
+        if not np.all(np.isfinite(Hi)):
+            feats.append(_EMPTY)
+            continue
+        M = T @ Hi
+        wi = cv2.warpPerspective(g, M, size, flags=cv2.INTER_LINEAR)
+        valid = cv2.warpPerspective(np.full(g.shape, 255, np.uint8), M, size,
+                                    flags=cv2.INTER_NEAREST)
+        sift = cv2.SIFT_create(nfeatures=int(n_features))
+        kp, desc = sift.detectAndCompute(wi, cv2.erode(valid, kern))
+        if desc is None or not kp:
+            feats.append(_EMPTY)
+        else:
+            feats.append((np.array([k.pt for k in kp], dtype=np.float32), desc))
+    return feats
+
+
+def _guided_matches(tree, pi, di, pj, dj, radius, ratio):
+    """Guided matching: the warped views are already aligned to about a pixel, so the
+    candidates of a keypoint of view j are the keypoints of view i within ``radius`` px;
+    Lowe's ratio test among them, one-to-one. Returns index arrays ``(mi, mj)``."""
+    k = min(6, len(pi))
+    dist, cand = tree.query(pj, k=k, distance_upper_bound=radius)
+    dist = dist.reshape(len(pj), k)
+    cand = cand.reshape(len(pj), k)
+    valid = np.isfinite(dist)
+    cand_c = np.where(valid, cand, 0)
+    dd = np.linalg.norm(di[cand_c] - dj[:, None, :], axis=2)
+    dd[~valid] = np.inf
+    order = np.argsort(dd, axis=1)
+    best = np.take_along_axis(dd, order[:, :1], 1)[:, 0]
+    second = (np.take_along_axis(dd, order[:, 1:2], 1)[:, 0] if k > 1
+              else np.full(len(pj), np.inf))
+    ok = np.isfinite(best) & ((best < ratio * second) | (~np.isfinite(second) & (best < 250.0)))
+    mi = cand_c[np.arange(len(pj)), order[:, 0]][ok]
+    mj = np.flatnonzero(ok)
+    _, first = np.unique(mi, return_index=True)
+    return mi[first], mj[first]
+
+
 def estimate_rectified_pairwise(images, H_to_ref, pairs, *, reference=0, margin=0.15,
                                 n_features=2000, threshold=1.5, radius=6.0, guided=True,
-                                **kw) -> PairwiseHomographies:
+                                method="ransac", ratio=0.8, min_inliers=20,
+                                rng=None) -> PairwiseHomographies:
     """Second sparse pass in the reference frame: pairwise homographies between the views
     warped into the reference frame with a current estimate ``H_to_ref``.
 
@@ -294,7 +418,8 @@ def estimate_rectified_pairwise(images, H_to_ref, pairs, *, reference=0, margin=
     detected under nearly the same geometry in both views and localized far more consistently
     than between strongly tilted views. The homographies between warped views (close to the
     identity) are mapped back: ``H_ij = inv(T H_i) H'_ij (T H_j)``, with ``T`` the canvas
-    offset; ``info["H_warped"]`` keeps the ``H'_ij`` and ``info["canvas"]`` ``(T, size)``. Pairs whose estimate is missing fall back to nothing (they are recorded as failed).
+    offset; ``info["H_warped"]`` keeps the ``H'_ij`` and ``info["canvas"]`` ``(T, size)``.
+    Pairs whose estimate is missing fall back to nothing (they are recorded as failed).
 
     Parameters
     ----------
@@ -304,41 +429,42 @@ def estimate_rectified_pairwise(images, H_to_ref, pairs, *, reference=0, margin=
     pairs : list of (i, j)
     reference : int, default=0
     margin : float, default=0.15
-        The canvas extends the reference frame by this fraction of its size on every side.
+        The canvas extends the reference frame by this fraction of its size on every side
+        (at most 2).
     guided : bool, default=True
-        Guided matching (fast) instead of a FLANN search over all keypoints.
+        Guided matching (fast) instead of a search over all keypoints.
     radius : float, default=6.0
         Guided matching: candidates of a keypoint are the keypoints of the other warped view
         within this distance (pixels); Lowe's ratio test among them.
-    n_features, threshold, **kw
-        As in :func:`estimate_pairwise_homographies` (``method``, ``ratio``, ``min_inliers``).
+    n_features, threshold, method, ratio, min_inliers, rng
+        As in :func:`estimate_pairwise_homographies`.
     """
-    gray = [to_gray(im) for im in images]
+    from scipy.spatial import cKDTree
+
+    gray = [to_gray(im) for im in load_images(images)]
     n = len(gray)
+    reference = check_int(reference, "reference", minimum=0, maximum=n - 1)
+    H_to_ref = np.asarray(H_to_ref, dtype=float)
+    if H_to_ref.shape != (n, 3, 3):
+        raise ValueError(f"`H_to_ref` must have shape ({n}, 3, 3), got {H_to_ref.shape}")
+    margin = check_positive(margin, "margin", allow_zero=True)
+    if margin > 2:
+        raise ValueError(f"`margin` must lie in [0, 2], got {margin!r}")
+    method = check_choice(method, "method", tuple(_METHODS))
+    radius = check_positive(radius, "radius")
+    threshold = check_positive(threshold, "threshold")
+    min_inliers = check_int(min_inliers, "min_inliers", minimum=4)
+    n_features = check_int(n_features, "n_features", minimum=1, maximum=10**6)
+    pairs = _check_pairs(pairs, n)
     h0, w0 = gray[reference].shape
     mx, my = int(round(margin * w0)), int(round(margin * h0))
-    T = np.array([[1.0, 0, mx], [0, 1.0, my], [0, 0, 1.0]])
+    T = translation(mx, my)
     size = (w0 + 2 * mx, h0 + 2 * my)
-    kern = np.ones((7, 7), np.uint8)
-    feats = []
-    for i in range(n):
-        if not np.all(np.isfinite(H_to_ref[i])):
-            feats.append((np.zeros((0, 2), np.float32), np.zeros((0, 128), np.float32)))
-            continue
-        M = T @ H_to_ref[i]
-        wi = cv2.warpPerspective(gray[i], M, size, flags=cv2.INTER_LINEAR)
-        valid = cv2.warpPerspective(np.full(gray[i].shape, 255, np.uint8), M, size,
-                                    flags=cv2.INTER_NEAREST)
-        sift = cv2.SIFT_create(nfeatures=int(n_features))
-        kp, desc = sift.detectAndCompute(wi, cv2.erode(valid, kern))
-        if desc is None or not kp:
-            feats.append((np.zeros((0, 2), np.float32), np.zeros((0, 128), np.float32)))
-        else:
-            feats.append((np.array([k.pt for k in kp], dtype=np.float32), desc))
+    feats = _warped_features(gray, H_to_ref, T, size, n_features)
     if not guided:
-        dummy = [np.zeros((2, 2), np.uint8)] * n
-        pw = estimate_pairwise_homographies(dummy, pairs=pairs, features=feats,
-                                            threshold=threshold, **kw)
+        pw = estimate_pairwise_homographies(gray, pairs=pairs, features=feats, method=method,
+                                            ratio=ratio, min_inliers=min_inliers,
+                                            threshold=threshold, rng=rng)
         H = np.full_like(pw.H, np.nan)
         for i, j in zip(*np.nonzero(pw.mask)):
             Hij = np.linalg.inv(T @ H_to_ref[i]) @ pw.H[i, j] @ (T @ H_to_ref[j])
@@ -347,58 +473,27 @@ def estimate_rectified_pairwise(images, H_to_ref, pairs, *, reference=0, margin=
                                     matches=pw.matches,
                                     info={**pw.info, "canvas_offset": (mx, my),
                                           "canvas": (T, size), "H_warped": pw.H})
-    from scipy.spatial import cKDTree
-
-    method = check_choice(kw.pop("method", "ransac"), "method", tuple(_METHODS))
-    min_inliers = int(kw.pop("min_inliers", 20))
-    ratio = float(kw.pop("ratio", 0.8))
     trees = [cKDTree(f[0]) if len(f[0]) else None for f in feats]
+    gens = _pair_seeds(rng, len(pairs))
     H = np.full((n, n, 3, 3), np.nan)
     H_w = np.full((n, n, 3, 3), np.nan)
     mask = np.zeros((n, n), dtype=bool)
     weights = np.zeros((n, n))
     failed, matches = [], {}
-    for i, j in pairs:
+    for k, (i, j) in enumerate(pairs):
         (pi, di), (pj, dj) = feats[i], feats[j]
         if trees[i] is None or len(pj) < 4:
             failed.append((i, j, "no keypoints in the reference frame"))
             continue
-        # guided matching: the warped views are already aligned to about a pixel, so the
-        # candidates of a keypoint are the keypoints of the other view within `radius` px
-        k = min(6, len(pi))
-        dist, cand = trees[i].query(pj, k=k, distance_upper_bound=radius)
-        dist = dist.reshape(len(pj), k)
-        cand = cand.reshape(len(pj), k)
-        valid = np.isfinite(dist)
-        cand_c = np.where(valid, cand, 0)
-        dd = np.linalg.norm(di[cand_c] - dj[:, None, :], axis=2)
-        dd[~valid] = np.inf
-        order = np.argsort(dd, axis=1)
-        best = np.take_along_axis(dd, order[:, :1], 1)[:, 0]
-        second = np.take_along_axis(dd, order[:, 1:2], 1)[:, 0] if k > 1 else np.full(len(pj),
-                                                                                        np.inf)
-        ok = np.isfinite(best) & ((best < ratio * second) | (~np.isfinite(second)
-                                                            & (best < 250.0)))
-        mi = cand_c[np.arange(len(pj)), order[:, 0]][ok]
-        mj = np.flatnonzero(ok)
-        _, first = np.unique(mi, return_index=True)
-        mi, mj = mi[first], mj[first]
+        mi, mj = _guided_matches(trees[i], pi, di, pj, dj, radius, ratio)
         if len(mi) < max(min_inliers, 4):
             failed.append((i, j, f"{len(mi)} guided matches"))
             continue
         src, dst = pj[mj], pi[mi]
-        try:
-            Hw, inl = cv2.findHomography(src, dst, _METHODS[method], threshold, maxIters=2000,
-                                         confidence=0.995)
-        except cv2.error as exc:
-            failed.append((i, j, f"OpenCV error: {str(exc).strip()[:80]}"))
+        Hw, inl, why = _robust_fit(src, dst, method, threshold, 2000, 0.995, True, gens[k])
+        if Hw is None:
+            failed.append((i, j, why))
             continue
-        if Hw is None or inl is None:
-            failed.append((i, j, "no homography found"))
-            continue
-        inl = inl.ravel().astype(bool)
-        if inl.sum() >= 8:
-            Hw, inl = _refine_inliers(src, dst, Hw, inl, threshold)
         if inl.sum() < min_inliers or abs(np.linalg.det(Hw)) < 1e-12:
             failed.append((i, j, f"{int(inl.sum())} inliers"))
             continue

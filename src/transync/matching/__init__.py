@@ -10,7 +10,7 @@ from ._affinity import (
     gaussian_edge_affinity,
     gaussian_node_affinity,
 )
-from ._front import METHODS, match_graphs
+from ._front import METHODS, match_graphs, solver_options
 from ._ga import GAStepper, ga
 from ._ipfp import IPFPStepper, ipfp
 from ._linear import hungarian, sinkhorn
@@ -45,4 +45,5 @@ __all__ = [
     "rrwm",
     "sinkhorn",
     "sm",
+    "solver_options",
 ]

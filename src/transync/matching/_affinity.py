@@ -41,6 +41,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._validation import check_array, check_choice, check_int, check_positive
+from ..exceptions import DegenerateInputError
 from ..graphs import Graph
 
 __all__ = [
@@ -119,6 +120,25 @@ def _unvec(x: np.ndarray, n1: int, n2: int) -> np.ndarray:
     return np.asarray(x).reshape((n1, n2), order="F")
 
 
+def _check_sizes(n1, n2) -> tuple[int, int]:
+    return check_int(n1, "n1", minimum=1), check_int(n2, "n2", minimum=1)
+
+
+def _check_values(values: np.ndarray, name: str) -> None:
+    """Finite and non-negative (``values`` already a real float array)."""
+    if not np.all(np.isfinite(values)):
+        bad = int(values.size - np.count_nonzero(np.isfinite(values)))
+        raise ValueError(f"`{name}` must be finite, got {bad} NaN or infinite entries")
+    if values.size and values.min() < 0:
+        raise ValueError(f"`{name}` must be non-negative, got minimum {values.min():.6g}")
+
+
+def _check_lawler_shape(K, n1: int, n2: int, name: str) -> None:
+    if K.shape != (n1 * n2, n1 * n2):
+        raise ValueError(f"`{name}` must have shape (n1*n2, n1*n2) = ({n1 * n2}, {n1 * n2}), "
+                         f"got {K.shape}")
+
+
 class _MatrixAffinity(Affinity):
     def __init__(self, K, n1: int, n2: int):
         self.K = K
@@ -138,7 +158,24 @@ class _MatrixAffinity(Affinity):
 
 
 class DenseAffinity(_MatrixAffinity):
-    """A dense ``K`` of shape ``(n1 n2, n1 n2)`` in pygmtools' column-major layout."""
+    """A dense ``K`` of shape ``(n1 n2, n1 n2)`` in pygmtools' column-major layout.
+
+    ``K`` must be real, finite and non-negative (it need not be symmetric: the solvers that need
+    symmetry use ``(K + K^T) / 2``, which has the same objective). ``name`` is the argument name
+    used in error messages.
+
+    >>> DenseAffinity(np.ones((4, 4)), 3, 3)
+    Traceback (most recent call last):
+    ...
+    ValueError: `K` must have shape (n1*n2, n1*n2) = (9, 9), got (4, 4)
+    """
+
+    def __init__(self, K, n1: int, n2: int, *, name: str = "K"):
+        n1, n2 = _check_sizes(n1, n2)
+        K = check_array(K, name, ndim=2)
+        _check_lawler_shape(K, n1, n2, name)
+        _check_values(K, name)
+        super().__init__(K, n1, n2)
 
     def diag(self):
         return _unvec(np.diag(self.K), self.n1, self.n2)
@@ -155,8 +192,16 @@ class DenseAffinity(_MatrixAffinity):
 class SparseAffinity(_MatrixAffinity):
     """A ``scipy.sparse`` ``K`` of shape ``(n1 n2, n1 n2)`` in pygmtools' layout."""
 
-    def __init__(self, K, n1: int, n2: int):
-        super().__init__(sp.csr_matrix(K, dtype=float), n1, n2)
+    def __init__(self, K, n1: int, n2: int, *, name: str = "K"):
+        n1, n2 = _check_sizes(n1, n2)
+        if not sp.issparse(K):
+            K = check_array(K, name, ndim=2)
+        elif np.iscomplexobj(K.data) or K.dtype.kind not in "biuf":
+            raise TypeError(f"`{name}` must be a real sparse matrix, got dtype {K.dtype}")
+        K = sp.csr_matrix(K, dtype=float)
+        _check_lawler_shape(K, n1, n2, name)
+        _check_values(K.data, name)
+        super().__init__(K, n1, n2)
 
     def diag(self):
         return _unvec(self.K.diagonal(), self.n1, self.n2)
@@ -171,6 +216,34 @@ class SparseAffinity(_MatrixAffinity):
         keep = ~conflict
         K2 = sp.csr_matrix((K.data[keep], (K.row[keep], K.col[keep])), shape=K.shape)
         return SparseAffinity(K2, self.n1, self.n2)
+
+
+def _check_node_term(node, n1: int, n2: int):
+    """``None`` or a finite non-negative ``(n1, n2)`` array (the diagonal of ``K``)."""
+    if node is None:
+        return None
+    node = check_array(node, "node", ndim=2)
+    if node.shape != (n1, n2):
+        raise ValueError(f"`node` must have shape (n1, n2) = ({n1}, {n2}), got {node.shape}")
+    _check_values(node, "node")
+    return node
+
+
+def _check_edge_list(edges, n: int, name: str) -> np.ndarray:
+    """An ``(m, 2)`` int array of node indices in ``[0, n)``."""
+    E = check_array(edges, name, dtype=None)
+    if E.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    if E.ndim != 2 or E.shape[1] != 2:
+        raise ValueError(f"`{name}` must have shape (m, 2), got {E.shape}")
+    if E.dtype.kind not in "iu":
+        if E.dtype.kind != "f" or not np.all(E == np.round(E)):
+            raise TypeError(f"`{name}` must hold integer node indices, got dtype {E.dtype}")
+    E = E.astype(np.int64)
+    if E.min() < 0 or E.max() >= n:
+        raise ValueError(f"`{name}` must hold node indices in [0, {n}), got range "
+                         f"[{E.min()}, {E.max()}]")
+    return E
 
 
 class FactorizedAffinity(Affinity):
@@ -188,33 +261,40 @@ class FactorizedAffinity(Affinity):
     """
 
     def __init__(self, node, edge, edges1, edges2, n1: int, n2: int):
-        self.n1, self.n2 = int(n1), int(n2)
-        self.node = None if node is None else np.asarray(node, dtype=float)
-        self.edges1 = np.asarray(edges1, dtype=np.int64).reshape(-1, 2)
-        self.edges2 = np.asarray(edges2, dtype=np.int64).reshape(-1, 2)
+        n1, n2 = _check_sizes(n1, n2)
+        self.n1, self.n2 = n1, n2
+        self.node = _check_node_term(node, n1, n2)
+        self.edges1 = _check_edge_list(edges1, n1, "edges1")
+        self.edges2 = _check_edge_list(edges2, n2, "edges2")
         m1, m2 = len(self.edges1), len(self.edges2)
-        self.edge = np.zeros((m1, m2)) if edge is None else np.asarray(edge, dtype=float)
+        if edge is None:
+            self.edge = np.zeros((m1, m2))
+        else:
+            self.edge = check_array(edge, "edge", ndim=2)
+            if self.edge.shape != (m1, m2):
+                raise ValueError(f"`edge` must have shape (m1, m2) = ({m1}, {m2}), the lengths of "
+                                 f"`edges1` and `edges2`, got {self.edge.shape}")
+            _check_values(self.edge, "edge")
         ones1, ones2 = np.ones(m1), np.ones(m2)
         self._S1 = sp.csr_matrix((ones1, (self.edges1[:, 0], np.arange(m1))), shape=(n1, m1))
         self._S2T = sp.csc_matrix((ones2, (np.arange(m2), self.edges2[:, 0])), shape=(m2, n2))
         self._T1 = sp.csr_matrix((ones1, (self.edges1[:, 1], np.arange(m1))), shape=(n1, m1))
         self._T2T = sp.csc_matrix((ones2, (np.arange(m2), self.edges2[:, 1])), shape=(m2, n2))
 
-    def matvec(self, X):
+    def _product(self, X, end: int, S1, S2T):
+        """``K vec(X)`` (``end=1``: gather at edge heads, scatter to tails) or ``K^T vec(X)``."""
         X = np.asarray(X, dtype=float)
-        W = self.edge * X[np.ix_(self.edges1[:, 1], self.edges2[:, 1])]
-        Y = np.asarray((self._S1 @ W) @ self._S2T) if W.size else np.zeros((self.n1, self.n2))
+        W = self.edge * X[np.ix_(self.edges1[:, end], self.edges2[:, end])]
+        Y = np.asarray((S1 @ W) @ S2T) if W.size else np.zeros((self.n1, self.n2))
         if self.node is not None:
             Y = Y + self.node * X
         return Y
 
+    def matvec(self, X):
+        return self._product(X, 1, self._S1, self._S2T)
+
     def rmatvec(self, X):
-        X = np.asarray(X, dtype=float)
-        W = self.edge * X[np.ix_(self.edges1[:, 0], self.edges2[:, 0])]
-        Y = np.asarray((self._T1 @ W) @ self._T2T) if W.size else np.zeros((self.n1, self.n2))
-        if self.node is not None:
-            Y = Y + self.node * X
-        return Y
+        return self._product(X, 0, self._T1, self._T2T)
 
     def diag(self):
         return np.zeros((self.n1, self.n2)) if self.node is None else self.node.copy()
@@ -242,11 +322,17 @@ class SeparableAffinity(Affinity):
     """
 
     def __init__(self, node, F, G, *, max_error: float = 0.0):
-        self.F = np.ascontiguousarray(F, dtype=float)
-        self.G = np.ascontiguousarray(G, dtype=float)
-        self.n1, self.n2 = self.F.shape[1], self.G.shape[1]
-        self.node = None if node is None else np.asarray(node, dtype=float)
-        self.max_error = float(max_error)
+        self.F = np.ascontiguousarray(check_array(F, "F", ndim=3))
+        self.G = np.ascontiguousarray(check_array(G, "G", ndim=3))
+        R, n1, n1b = self.F.shape
+        if R == 0 or n1 == 0 or n1 != n1b:
+            raise ValueError(f"`F` must have shape (R, n1, n1) with R, n1 >= 1, got {self.F.shape}")
+        if self.G.shape[0] != R or self.G.shape[1] == 0 or self.G.shape[1] != self.G.shape[2]:
+            raise ValueError(f"`G` must have shape (R, n2, n2) with R={R} (as `F`) and n2 >= 1, "
+                             f"got {self.G.shape}")
+        self.n1, self.n2 = n1, self.G.shape[1]
+        self.node = _check_node_term(node, self.n1, self.n2)
+        self.max_error = check_positive(max_error, "max_error", allow_zero=True)
         R = self.F.shape[0]
         # concatenated factors turn the R small products into two large GEMMs
         self._Gcat = np.ascontiguousarray(np.swapaxes(self.G, 1, 2).transpose(1, 0, 2)
@@ -309,34 +395,24 @@ def as_affinity(K, *, n1: int | None = None, n2: int | None = None, name: str = 
                              "were given")
         return K
     if n1 is None or n2 is None:
-        raise TypeError(f"`n1` and `n2` are required when `{name}` is a matrix")
-    n1 = check_int(n1, "n1", minimum=1)
-    n2 = check_int(n2, "n2", minimum=1)
+        raise TypeError(f"`n1` and `n2` are required when `{name}` is a matrix, got n1={n1!r}, "
+                        f"n2={n2!r}")
     if sp.issparse(K):
-        if K.shape != (n1 * n2, n1 * n2):
-            raise ValueError(f"`{name}` must have shape (n1*n2, n1*n2) = ({n1 * n2}, {n1 * n2}), "
-                             f"got {K.shape}")
-        data = K.tocsr().data
-        if not np.all(np.isfinite(data)):
-            raise ValueError(f"`{name}` must be finite, got NaN or infinite entries")
-        if data.size and data.min() < 0:
-            raise ValueError(f"`{name}` must be non-negative, got minimum {data.min():.6g}")
-        return SparseAffinity(K, n1, n2)
-    K = check_array(K, name, ndim=2)
-    if K.shape != (n1 * n2, n1 * n2):
-        raise ValueError(f"`{name}` must have shape (n1*n2, n1*n2) = ({n1 * n2}, {n1 * n2}), "
-                         f"got {K.shape}")
-    if K.size and K.min() < 0:
-        raise ValueError(f"`{name}` must be non-negative, got minimum {K.min():.6g}")
-    return DenseAffinity(K, n1, n2)
+        return SparseAffinity(K, n1, n2, name=name)
+    return DenseAffinity(K, n1, n2, name=name)
 
 
 def gaussian_node_affinity(g1: Graph, g2: Graph, *, sigma2: float = 1.0,
                            attribute: str = "features") -> np.ndarray:
     """Unary affinity ``exp(-||f1_i - f2_a||^2 / sigma2)`` of shape ``(n1, n2)``.
 
-    ``attribute`` is ``"features"`` (``node_features``) or ``"points"``.
+    ``attribute`` is ``"features"`` (``node_features``) or ``"points"``. Raises
+    :class:`~transync.exceptions.DegenerateInputError` when every entry underflows (``sigma2`` far
+    below the squared scale of the features); the message suggests a ``sigma2``.
     """
+    if not isinstance(g1, Graph) or not isinstance(g2, Graph):
+        raise TypeError(f"`g1` and `g2` must be Graph objects, got {type(g1).__name__} and "
+                        f"{type(g2).__name__}")
     check_choice(attribute, "attribute", ("features", "points"))
     sigma2 = check_positive(sigma2, "sigma2")
     f1 = g1.node_features if attribute == "features" else g1.points
@@ -347,19 +423,56 @@ def gaussian_node_affinity(g1: Graph, g2: Graph, *, sigma2: float = 1.0,
     if f1.shape[1] != f2.shape[1]:
         raise ValueError(f"node {attribute} dimensions differ: {f1.shape[1]} vs {f2.shape[1]}")
     d2 = ((f1[:, None, :] - f2[None, :, :]) ** 2).sum(-1)
+    _refuse_underflow(int(np.count_nonzero(d2 <= _UNDERFLOW * sigma2)), 1, sigma2,
+                      f"node {attribute}", float(np.median(np.abs(np.concatenate(
+                          [f1.ravel(), f2.ravel()])))),
+                      "gaussian_node_affinity (or pass `node_affinity`)")
     return np.exp(-d2 / sigma2)
 
 
-def _edge_attributes(g: Graph, attribute: str) -> list[np.ndarray]:
+# exp(-t) for t above this is below 1e-300: the Gaussian kernel has underflowed
+_UNDERFLOW = 690.0
+
+
+def _refuse_underflow(alive: int, needed: int, sigma2: float, what: str, scale: float,
+                      how: str) -> None:
+    """Raise when fewer than ``needed`` pairs keep a non-negligible ``exp(-d2 / sigma2)``.
+
+    A vanishing Gaussian affinity makes every solver return an arbitrary matching with objective
+    (about) 0 and ``converged=True``; the cause is a ``sigma2`` far below the squared scale of
+    the data (coordinates in pixels or metres with the unit-square default, say).
+    """
+    if alive >= needed:
+        return
+    suggestion = 0.6 * scale**2
+    raise DegenerateInputError(
+        f"`sigma2`={sigma2:g} is too small for {what} of magnitude ~{scale:.3g}: only {alive} "
+        f"pair(s) keep a Gaussian affinity exp(-d^2 / sigma2) above 1e-300 (at least {needed} "
+        f"needed), so any matching would score about 0. Set `sigma2` to the squared scale of the "
+        f"data (e.g. sigma2={suggestion:.3g}, as the default 0.15 is for a unit square) in {how}, "
+        f"or rescale the data")
+
+
+def _count_close(x_sorted: np.ndarray, y: np.ndarray, radius: float) -> int:
+    """Number of pairs ``(i, j)`` with ``|x_i - y_j| <= radius`` (binary search in sorted ``x``)."""
+    hi = np.searchsorted(x_sorted, y + radius, side="right")
+    lo = np.searchsorted(x_sorted, y - radius, side="left")
+    return int((hi - lo).sum())
+
+
+def _edge_attributes(g: Graph, attribute: str, name: str) -> list[np.ndarray]:
     if attribute == "weight":
         return [g.adjacency]
     if attribute == "features":
         if g.edge_features is None:
             raise ValueError("attribute='features' needs graphs with `edge_features`")
         return [g.edge_features]
-    if attribute == "length":
-        return [g.distances()]
-    return [g.distances(), g.angles()]
+    with np.errstate(over="ignore", invalid="ignore"):
+        D = g.distances()
+    if not np.all(np.isfinite(D)):
+        raise ValueError(f"the edge lengths of `{name}` overflow (points of magnitude up to "
+                         f"{np.abs(g.points).max():.3g}); rescale the points")
+    return [D] if attribute == "length" else [D, g.angles()]
 
 
 def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = 0.15,
@@ -393,11 +506,23 @@ def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = 0.15,
     Returns
     -------
     Affinity
+
+    Raises
+    ------
+    ValueError, TypeError
+        Arguments that are not graphs, unknown options, a mis-shaped or negative
+        ``node_affinity``, graphs without the requested attribute, points of different dimensions.
+    DegenerateInputError
+        ``sigma2`` so small for the scale of the attributes that fewer edge pairs than edges keep
+        an affinity above 1e-300 (points in pixels with the unit-square default, say): the
+        message suggests a ``sigma2``. Never a silent all-zero affinity.
     """
     if not isinstance(g1, Graph) or not isinstance(g2, Graph):
         raise TypeError(f"`g1` and `g2` must be Graph objects, got {type(g1).__name__} and "
                         f"{type(g2).__name__}")
     sigma2 = check_positive(sigma2, "sigma2")
+    angle_weight = check_positive(angle_weight, "angle_weight", allow_zero=True)
+    tol = check_positive(tol, "tol")
     if attribute is None:
         if g1.edge_features is not None and g2.edge_features is not None:
             attribute = "features"
@@ -407,6 +532,11 @@ def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = 0.15,
             attribute = "weight"
     check_choice(attribute, "attribute", ("length", "weight", "features", "length+angle"))
     check_choice(backend, "backend", ("auto", "separable", "factorized", "sparse", "dense"))
+    if attribute.startswith("length") and g1.points is not None and g2.points is not None:
+        d1, d2 = g1.points.shape[1], g2.points.shape[1]
+        if d1 != d2:
+            raise ValueError(f"`g1` and `g2` must have points of the same dimension for "
+                             f"attribute={attribute!r}, got {d1} and {d2}")
     n1, n2 = g1.n_nodes, g2.n_nodes
     if node_affinity is not None:
         node_affinity = check_array(node_affinity, "node_affinity", ndim=2)
@@ -416,9 +546,16 @@ def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = 0.15,
         if node_affinity.min() < 0:
             raise ValueError("`node_affinity` must be non-negative, "
                              f"got minimum {node_affinity.min():.6g}")
-    a1, a2 = _edge_attributes(g1, attribute), _edge_attributes(g2, attribute)
+    a1, a2 = _edge_attributes(g1, attribute, "g1"), _edge_attributes(g2, attribute, "g2")
     M1, M2 = g1.mask, g2.mask
     m1, m2 = int(M1.sum()), int(M2.sum())
+    if m1 and m2:
+        # each edge of the smaller graph needs a partner with a non-vanishing affinity
+        x, y = np.sort(a1[0][M1]), a2[0][M2]
+        _refuse_underflow(_count_close(x, y, np.sqrt(_UNDERFLOW * sigma2)), min(m1, m2), sigma2,
+                          f"edge attributes ({attribute!r})",
+                          float(np.median(np.abs(np.concatenate([x, y])))),
+                          "match_graphs or gaussian_edge_affinity")
     if backend == "auto":
         scalar = attribute != "length+angle"
         separable_cost = 16 * (n1 * n1 * n2 + n1 * n2 * n2)

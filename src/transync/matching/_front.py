@@ -15,8 +15,11 @@ True
 
 from __future__ import annotations
 
+import difflib
+import inspect
+
 from ..graphs import Graph
-from .._validation import check_choice
+from .._validation import check_choice, check_positive
 from ._affinity import as_affinity, gaussian_edge_affinity, gaussian_node_affinity
 from ._ga import ga
 from ._ipfp import ipfp
@@ -26,7 +29,7 @@ from ._result import MatchingResult
 from ._rrwm import rrwm
 from ._sm import sm
 
-__all__ = ["METHODS", "match_graphs"]
+__all__ = ["METHODS", "match_graphs", "solver_options"]
 
 METHODS = {
     "hungarian": hungarian,
@@ -38,6 +41,32 @@ METHODS = {
     "pf": pf,
 }
 _LINEAR = ("hungarian", "sinkhorn")
+
+
+def solver_options(method: str) -> tuple[str, ...]:
+    """Names of the options that ``match_graphs(..., method=method, **options)`` passes on.
+
+    Read from the solver's signature: its keyword-only parameters except ``n1`` and ``n2``, which
+    the front door sets from the graphs.
+
+    >>> solver_options("sm")
+    ('max_iter', 'tol')
+    """
+    check_choice(method, "method", tuple(METHODS))
+    params = inspect.signature(METHODS[method]).parameters.values()
+    return tuple(p.name for p in params
+                 if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name not in ("n1", "n2"))
+
+
+def _check_options(method: str, options: dict) -> None:
+    accepted = solver_options(method)
+    unknown = [name for name in options if name not in accepted]
+    if unknown:
+        hints = [difflib.get_close_matches(name, accepted, n=1) for name in unknown]
+        hint = "; ".join(f"did you mean {h[0]!r} for {u!r}?" for u, h in zip(unknown, hints) if h)
+        raise TypeError(f"match_graphs(method={method!r}) got unknown solver option(s) "
+                        f"{', '.join(repr(u) for u in unknown)}; {method} accepts "
+                        f"{', '.join(accepted) or 'no options'}" + (f" ({hint})" if hint else ""))
 
 
 def match_graphs(g1: Graph, g2: Graph, *, method: str = "rrwm", affinity=None,
@@ -62,7 +91,8 @@ def match_graphs(g1: Graph, g2: Graph, *, method: str = "rrwm", affinity=None,
         Unary term. Default for the linear methods when ``affinity`` is not given:
         :func:`gaussian_node_affinity` on the node features.
     **options
-        Passed to the solver (e.g. ``max_iter``, ``tol``); see each solver's parameters.
+        Passed to the solver (e.g. ``max_iter``, ``tol``); see each solver's parameters, or
+        :func:`solver_options`. Unknown names raise ``TypeError`` before anything is computed.
 
     Returns
     -------
@@ -71,10 +101,16 @@ def match_graphs(g1: Graph, g2: Graph, *, method: str = "rrwm", affinity=None,
     Raises
     ------
     ValueError, TypeError
-        Unknown method, graphs that are not :class:`~transync.graphs.Graph` objects, an
-        ``affinity`` whose size does not match ``n1 n2``, or a linear method without a unary term.
+        Unknown method or solver option, graphs that are not :class:`~transync.graphs.Graph`
+        objects, an ``affinity`` whose size does not match ``n1 n2``, or a linear method without a
+        unary term.
+    DegenerateInputError
+        The default Gaussian affinity underflows (``sigma2`` far below the squared scale of the
+        points); the message suggests a ``sigma2``.
     """
     check_choice(method, "method", tuple(METHODS))
+    _check_options(method, options)
+    sigma2 = check_positive(sigma2, "sigma2")
     if not isinstance(g1, Graph) or not isinstance(g2, Graph):
         raise TypeError(f"`g1` and `g2` must be Graph objects, got {type(g1).__name__} and "
                         f"{type(g2).__name__}")

@@ -20,6 +20,7 @@ import numpy as np
 from .._validation import check_int, check_positive
 from ._affinity import as_affinity
 from ._result import MatchingResult
+from ._sinkhorn import sinkhorn_normalize
 from ._stepwise import _BaseStepper, _run, _symmetric
 
 __all__ = ["GAStepper", "ga"]
@@ -28,21 +29,10 @@ _DEFAULTS = {"beta0": 0.5, "beta_max": 10.0, "beta_rate": 1.075, "max_inner": 4,
              "inner_tol": 0.5, "sinkhorn_max_iter": 30, "sinkhorn_tol": 0.05}
 
 
-def _slack_sinkhorn(M: np.ndarray, *, max_iter: int, tol: float):
-    """Alternate normalisation of the real rows and real columns of a slack-augmented matrix.
-
-    ``M`` has shape ``(n1 + 1, n2 + 1)``; its last row and column are slack. Real rows sum to 1
-    over ``n2 + 1`` entries, real columns to 1 over ``n1 + 1`` entries (Gold & Rangarajan). Stops
-    when the real block changes by less than ``tol`` (entrywise L1) in a sweep.
-    """
-    n1, n2 = M.shape[0] - 1, M.shape[1] - 1
-    for _ in range(max_iter):
-        old = M[:n1, :n2].copy()
-        M[:n1] /= M[:n1].sum(1, keepdims=True)
-        M[:, :n2] /= M[:, :n2].sum(0, keepdims=True)
-        if np.abs(M[:n1, :n2] - old).sum() < tol:
-            break
-    return M
+def _slack_sinkhorn(M: np.ndarray, *, max_iter: int, tol: float) -> np.ndarray:
+    """Gold & Rangarajan's slack Sinkhorn of ``M`` (shape ``(n1 + 1, n2 + 1)``), in place."""
+    return sinkhorn_normalize(M, domain="augmented", slack="augmented", tol=tol,
+                              max_iter=max_iter).X
 
 
 class GAStepper(_BaseStepper):

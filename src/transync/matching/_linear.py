@@ -14,14 +14,17 @@ array([0, 1])
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import scipy.sparse as sp
-from scipy.special import logsumexp
 
 from .._validation import check_array, check_int, check_positive
+from ..exceptions import ConvergenceWarning
 from ..permutations import assignment_to_matrix, solve_lap
 from ._affinity import Affinity, as_affinity
 from ._result import MatchingResult
+from ._sinkhorn import sinkhorn_normalize
 
 __all__ = ["hungarian", "sinkhorn"]
 
@@ -89,6 +92,8 @@ def hungarian(scores, *, n1: int | None = None, n2: int | None = None,
     >>> hungarian(np.array([[1.0, 5.0], [4.0, 2.0]])).assignment
     array([1, 0])
     """
+    if not isinstance(maximize, (bool, np.bool_)):
+        raise TypeError(f"`maximize` must be a bool, got {type(maximize).__name__} {maximize!r}")
     S, aff = _score_matrix(scores, n1, n2)
     assignment = solve_lap(S, maximize=bool(maximize))
     return MatchingResult(assignment=assignment, soft=None,
@@ -136,71 +141,18 @@ def sinkhorn(scores, *, n1: int | None = None, n2: int | None = None, tau: float
     >>> res.assignment, np.round(res.soft.sum(0), 6)
     (array([ 0,  1, -1]), array([1., 1.]))
     """
-    import warnings
-
-    from ..exceptions import ConvergenceWarning
-
     S, aff = _score_matrix(scores, n1, n2)
     tau = check_positive(tau, "tau")
     max_iter = check_int(max_iter, "max_iter", minimum=1)
     tol = check_positive(tol, "tol")
-    transposed = S.shape[0] > S.shape[1]
-    L = (S.T if transposed else S) / tau          # now rows <= cols
-    r, c = L.shape
-    slack = float(c - r)
-    g = np.zeros(c)
-    f = -logsumexp(L + g, axis=1)
-    f_slack = np.log(slack) - logsumexp(g) if slack else -np.inf
-    err = np.inf
-    n_iter = 0
-    for n_iter in range(1, max_iter + 1):
-        g = -np.logaddexp(logsumexp(L + f[:, None], axis=0), f_slack)
-        lse = logsumexp(L + g, axis=1)
-        err = float(np.max(np.abs(np.exp(f + lse) - 1.0)))
-        f = -lse
-        f_slack = np.log(slack) - logsumexp(g) if slack else -np.inf
-        if err < tol:
-            break
-    converged = err < tol
+    out = sinkhorn_normalize(S / tau, domain="log", slack="mass", tol=tol, max_iter=max_iter)
+    X, n_iter, err, converged = out.X, out.n_sweeps, out.error, out.converged
     if not converged:
         warnings.warn(f"sinkhorn: row sums off by {err:.3g} > tol={tol:g} after "
                       f"max_iter={max_iter} sweeps", ConvergenceWarning, stacklevel=2)
-    X = np.exp(f[:, None] + L + g[None, :])
-    if transposed:
-        X = X.T
     assignment = solve_lap(X)
     return MatchingResult(assignment=assignment, soft=X,
                           objective=_linear_objective(S, aff, assignment), n_iter=n_iter,
                           converged=bool(converged), method="sinkhorn", n2=S.shape[1],
                           info={"marginal_error": err, "tau": tau})
 
-
-def _sinkhorn_scaling(A: np.ndarray, *, tol: float, max_iter: int, v0=None):
-    """Sinkhorn on a positive kernel ``A`` with the slack convention of :func:`sinkhorn`.
-
-    Scaling (not log) domain, for kernels with a bounded dynamic range (RRWM's
-    ``exp(amp * x / max x)`` lies in ``[1, e^amp]``). ``v0`` warm-starts the column scaling (pass
-    back the returned one). The row error is checked every 4th sweep (the check costs as much as
-    a sweep). Returns ``(X, v, n_sweeps, converged)``.
-    """
-    transposed = A.shape[0] > A.shape[1]
-    if transposed:
-        A = A.T
-    r, c = A.shape
-    slack = float(c - r)
-    v = np.ones(c) if v0 is None or v0.shape != (c,) else v0
-    u = None
-    it = 0
-    converged = False
-    for it in range(1, max_iter + 1):
-        Av = A @ v
-        if u is not None and it % 4 == 0 and np.max(np.abs(u * Av - 1.0)) < tol:
-            converged = True
-            break
-        u = 1.0 / Av
-        w = slack / v.sum()
-        v = 1.0 / (u @ A + w)
-    else:
-        u = 1.0 / (A @ v)
-    X = (u[:, None] * A) * v[None, :]
-    return (X.T if transposed else X), v, it, converged

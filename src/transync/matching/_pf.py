@@ -30,7 +30,7 @@ from .._validation import check_int, check_positive
 from ..permutations import assignment_to_matrix, solve_lap
 from ._affinity import as_affinity
 from ._result import MatchingResult
-from ._stepwise import _BaseStepper, _power_iteration, _run, _symmetric
+from ._stepwise import _BaseStepper, _moderate, _power_iteration, _run, _symmetric
 
 __all__ = ["PFStepper", "pf"]
 
@@ -64,7 +64,7 @@ class PFStepper(_BaseStepper):
         self.jump_tol = check_positive(jump_tol, "jump_tol")
         self.fw_max_iter = check_int(fw_max_iter, "fw_max_iter", minimum=1)
         self.fw_tol = check_positive(fw_tol, "fw_tol")
-        self._K = _symmetric(aff)
+        self._K = _moderate(_symmetric(aff))   # rescaled only if its scale would overflow
         lam, v, _, _ = _power_iteration(self._K.matvec, self.n1, self.n2, max_iter=200, tol=1e-8)
         # Collatz-Wielandt: max (Kv)_i / v_i bounds lambda_max from above for v > 0, K >= 0
         Kv = self._K.matvec(v)
@@ -135,7 +135,8 @@ class PFStepper(_BaseStepper):
         return self.converged or self.n_iter >= self.max_iter
 
     def _info(self) -> dict:
-        return {"lambda": self.lam, "mu": self.mu, "fw_iterations": self.fw_iterations}
+        return {"lambda": self.lam, "mu": self.mu / getattr(self._K, "factor", 1.0),
+                "fw_iterations": self.fw_iterations}
 
 
 def pf(K, *, n1: int | None = None, n2: int | None = None, max_iter: int = _DEFAULTS["max_iter"],

@@ -24,12 +24,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from scipy.special import logsumexp
-
 from .._validation import check_choice, check_int, check_positive, check_probability
 from ._affinity import as_affinity
-from ._linear import _sinkhorn_scaling
 from ._result import MatchingResult
+from ._sinkhorn import sinkhorn_normalize
 from ._stepwise import _BaseStepper, _run
 
 __all__ = ["RRWMStepper", "rrwm"]
@@ -46,35 +44,24 @@ _DEFAULTS = {
 
 
 def _sinkhorn_half_sweeps(S: np.ndarray, half_sweeps: int) -> np.ndarray:
-    """pygmtools' Sinkhorn of ``exp(S)``: ``half_sweeps`` alternating normalisations, smaller side first.
+    """pygmtools' Sinkhorn of ``exp(S)``: ``half_sweeps`` normalisations, smaller side first.
 
     No slack: with ``n1 != n2`` the sides alternate between summing to one, exactly as
     ``pygmtools.sinkhorn`` does without ``dummy_row``. pygmtools works in the log domain; while
     the score range ``max S - min S`` stays below 600 the kernel ``exp(S - max S)`` cannot
-    underflow and the same normalisations are done with two scaling vectors (about 10x cheaper).
+    underflow and the same normalisations are done in the scaling domain (about 10x cheaper).
     """
-    transposed = S.shape[0] > S.shape[1]
-    L = S.T if transposed else S
-    top = L.max()
-    if top - L.min() < 600.0:
-        A = np.exp(L - top)
-        u = np.ones(A.shape[0])
-        v = np.ones(A.shape[1])
-        for i in range(half_sweeps):
-            if i % 2 == 0:
-                u = 1.0 / (A @ v)
-            else:
-                v = 1.0 / (u @ A)
-        X = (u[:, None] * A) * v[None, :]
-    else:
-        for i in range(half_sweeps):
-            L = L - logsumexp(L, axis=1 if i % 2 == 0 else 0, keepdims=True)
-        X = np.exp(L)
-    return X.T if transposed else X
+    top = S.max()
+    if top - S.min() < 600.0:
+        return sinkhorn_normalize(np.exp(S - top), domain="scaling", slack="none",
+                                  half_sweeps=half_sweeps).X
+    return sinkhorn_normalize(S, domain="log", slack="none", half_sweeps=half_sweeps).X
 
 
 class RRWMStepper(_BaseStepper):
     """Step-wise RRWM: one random-walk-with-reweighted-jump iteration per :meth:`step`.
+
+    ``RRWMStepper(K, variant=...)`` returns the stepper of that variant, a subclass:
 
     ``variant="original"`` (the authors' code). State: the walk scores ``x`` (sum 1) and the jump
     distribution ``y``. The public :attr:`iterate` is ``y`` before its sum-normalisation, i.e. the
@@ -91,51 +78,41 @@ class RRWMStepper(_BaseStepper):
     """
 
     method = "rrwm"
+    variant = ""
+    _variants: dict[str, type] = {}
+
+    def __new__(cls, affinity=None, *args, variant: str = "original", **kwargs):
+        if cls is RRWMStepper:
+            cls = cls._variants[check_choice(variant, "variant", VARIANTS)]
+        return super().__new__(cls)
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        RRWMStepper._variants[cls.variant] = cls
 
     def __init__(self, affinity, *, n1: int | None = None, n2: int | None = None,
                  variant: str = "original", c: float | None = None,
                  amplification: float | None = None, max_iter: int | None = None,
                  tol: float | None = None, sinkhorn_tol: float | None = None,
                  sinkhorn_max_iter: int | None = None):
-        variant = check_choice(variant, "variant", VARIANTS)
-        d = _DEFAULTS[variant]
+        d = _DEFAULTS[self.variant]
         pick = lambda value, key: d[key] if value is None else value  # noqa: E731
         aff = as_affinity(affinity, n1=n1, n2=n2)
         super().__init__(aff, max_iter=check_int(pick(max_iter, "max_iter"), "max_iter",
                                                  minimum=1))
-        self.variant = variant
         self.c = check_probability(pick(c, "c"), "c")
         self.amplification = check_positive(pick(amplification, "amplification"),
                                             "amplification")
         self.tol = check_positive(pick(tol, "tol"), "tol")
         self.sinkhorn_max_iter = check_int(pick(sinkhorn_max_iter, "sinkhorn_max_iter"),
                                            "sinkhorn_max_iter", minimum=1)
-        size = self.n1 * self.n2
         self.sinkhorn_sweeps = 0
-        if variant == "original":
-            self.sinkhorn_tol = check_positive(pick(sinkhorn_tol, "sinkhorn_tol"), "sinkhorn_tol")
-            self._walk = aff.drop_conflicts()
-            self.max_degree = self._walk.max_column_sum()
-            self._scale = 1.0 / self.max_degree if self.max_degree > 0 else 0.0
-            self._x = np.full((self.n1, self.n2), 1.0 / size)       # prev_score
-            self._x2 = self._x.copy()                                 # prev_score2
-            self._y = np.full((self.n1, self.n2), 1.0 / size)         # prev_assign (sum 1)
-            # the doubly-stochastic matrix whose normalisation is y (uniform: feasible for slack)
-            self._X = np.full((self.n1, self.n2), 1.0 / max(self.n1, self.n2))
-        else:
-            if sinkhorn_tol is not None:
-                raise ValueError("`sinkhorn_tol` is not used by variant='pygmtools' (its Sinkhorn "
-                                 f"runs `sinkhorn_max_iter` half-sweeps), got {sinkhorn_tol!r}")
-            self.sinkhorn_tol = None
-            # pygmtools: K / (max row sum + 1e-5 min row sum), conflicts kept
-            self._walk = aff
-            rows = aff.matvec(np.ones((self.n1, self.n2)))
-            self.max_degree = float(rows.max()) if rows.size else 0.0
-            denom = self.max_degree + float(rows.min(initial=0.0)) * 1e-5
-            self._scale = 1.0 / denom if denom > 0 else 0.0
-            self._v = np.full((self.n1, self.n2), 1.0 / size)
-            self._w = self._v.copy()
-            self._X = np.full((self.n1, self.n2), 1.0 / max(self.n1, self.n2))
+        # the Sinkhorn output before any step: uniform, feasible with and without slack
+        self._X = np.full((self.n1, self.n2), 1.0 / max(self.n1, self.n2))
+        self._setup(aff, sinkhorn_tol)
+
+    def _setup(self, aff, sinkhorn_tol) -> None:  # pragma: no cover - overridden
+        raise NotImplementedError
 
     def set_iterate(self, X) -> None:
         X = self._check_iterate(X)
@@ -143,24 +120,42 @@ class RRWMStepper(_BaseStepper):
         if total <= 0:
             raise ValueError("`X` must have a positive sum")
         self._X = X
-        if self.variant == "original":
-            self._y = X / total
-        else:
-            v = (1.0 - self.c) * X + self.c * self._w
-            self._v = v / v.sum()
+        self._set_jump(X, total)
         self.converged = False
 
     def step(self) -> bool:
         if self.done:
             return True
-        if self.variant == "original":
-            self._step_original()
-        else:
-            self._step_pygmtools()
+        self._step()
         self.n_iter += 1
         return self.done
 
-    def _step_original(self) -> None:
+    def _info(self) -> dict:
+        return {"scores": self._rounding_scores().copy(), "max_degree": self.max_degree,
+                "sinkhorn_sweeps": self.sinkhorn_sweeps, "variant": self.variant}
+
+
+class _OriginalRRWMStepper(RRWMStepper):
+    """RRWM as in the authors' MATLAB code (``RRWM.m`` v1.22); see :class:`RRWMStepper`."""
+
+    variant = "original"
+
+    def _setup(self, aff, sinkhorn_tol) -> None:
+        self.sinkhorn_tol = check_positive(
+            _DEFAULTS["original"]["sinkhorn_tol"] if sinkhorn_tol is None else sinkhorn_tol,
+            "sinkhorn_tol")
+        self._walk = aff.drop_conflicts()
+        self.max_degree = self._walk.max_column_sum()
+        self._scale = 1.0 / self.max_degree if self.max_degree > 0 else 0.0
+        size = self.n1 * self.n2
+        self._x = np.full((self.n1, self.n2), 1.0 / size)       # prev_score
+        self._x2 = self._x.copy()                                 # prev_score2
+        self._y = np.full((self.n1, self.n2), 1.0 / size)         # prev_assign (sum 1)
+
+    def _set_jump(self, X, total) -> None:
+        self._y = X / total
+
+    def _step(self) -> None:
         c = self.c
         x = self._walk.matvec(c * self._x + (1.0 - c) * self._y) * self._scale
         s = x.sum()
@@ -168,11 +163,12 @@ class RRWMStepper(_BaseStepper):
             x /= s
         xmax = x.max()
         amp = self.amplification / xmax if xmax > 0 else 0.0
-        A = np.exp(amp * x)
-        X, _, sweeps, _ = _sinkhorn_scaling(A, tol=self.sinkhorn_tol,
-                                            max_iter=self.sinkhorn_max_iter)
-        self.sinkhorn_sweeps += sweeps
-        self._X = X
+        out = sinkhorn_normalize(np.exp(amp * x), domain="scaling", slack="mass",
+                                 tol=self.sinkhorn_tol, max_iter=self.sinkhorn_max_iter,
+                                 check_every=4)
+        # sweeps begun: a converged run stops at the test that opens the next sweep
+        self.sinkhorn_sweeps += out.n_sweeps + int(out.converged)
+        X = self._X = out.X
         sy = X.sum()
         y = X / sy if sy > 0 else X
         diff = min(float(np.sum((x - self._x) ** 2)), float(np.sum((x - self._x2) ** 2)))
@@ -180,7 +176,34 @@ class RRWMStepper(_BaseStepper):
         if diff < self.tol:
             self.converged = True
 
-    def _step_pygmtools(self) -> None:
+    def _rounding_scores(self) -> np.ndarray:
+        return self._x
+
+
+class _PygmtoolsRRWMStepper(RRWMStepper):
+    """RRWM as ``pygmtools.rrwm`` (0.6, numpy backend); see :class:`RRWMStepper`."""
+
+    variant = "pygmtools"
+
+    def _setup(self, aff, sinkhorn_tol) -> None:
+        if sinkhorn_tol is not None:
+            raise ValueError("`sinkhorn_tol` is not used by variant='pygmtools' (its Sinkhorn "
+                             f"runs `sinkhorn_max_iter` half-sweeps), got {sinkhorn_tol!r}")
+        self.sinkhorn_tol = None
+        # pygmtools: K / (max row sum + 1e-5 min row sum), conflicts kept
+        self._walk = aff
+        rows = aff.matvec(np.ones((self.n1, self.n2)))
+        self.max_degree = float(rows.max()) if rows.size else 0.0
+        denom = self.max_degree + float(rows.min(initial=0.0)) * 1e-5
+        self._scale = 1.0 / denom if denom > 0 else 0.0
+        self._v = np.full((self.n1, self.n2), 1.0 / (self.n1 * self.n2))
+        self._w = self._v.copy()
+
+    def _set_jump(self, X, total) -> None:
+        v = (1.0 - self.c) * X + self.c * self._w
+        self._v = v / v.sum()
+
+    def _step(self) -> None:
         # pygmtools 0.6 numpy_backend.rrwm, one loop iteration (alpha = 1 - c)
         alpha = 1.0 - self.c
         raw = self._walk.matvec(self._v) * self._scale
@@ -200,12 +223,7 @@ class RRWMStepper(_BaseStepper):
             self.converged = True
 
     def _rounding_scores(self) -> np.ndarray:
-        return self._x if self.variant == "original" else self._v
-
-    def _info(self) -> dict:
-        scores = self._x if self.variant == "original" else self._v
-        return {"scores": scores.copy(), "max_degree": self.max_degree,
-                "sinkhorn_sweeps": self.sinkhorn_sweeps, "variant": self.variant}
+        return self._v
 
 
 def rrwm(K, *, n1: int | None = None, n2: int | None = None, variant: str = "original",

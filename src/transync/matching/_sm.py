@@ -20,7 +20,7 @@ import numpy as np
 from .._validation import check_int, check_positive
 from ._affinity import as_affinity
 from ._result import MatchingResult
-from ._stepwise import _BaseStepper, _run
+from ._stepwise import _BaseStepper, _moderate, _run
 
 __all__ = ["SMStepper", "sm"]
 
@@ -44,17 +44,19 @@ class SMStepper(_BaseStepper):
         self.tol = check_positive(tol, "tol")
         self._X = np.full((self.n1, self.n2), 1.0 / (self.n1 * self.n2))
         self.eigenvalue = 0.0
+        self._K = _moderate(aff)            # aff itself unless its scale would overflow
 
     def step(self) -> bool:
         if self.done:
             return True
-        w = self.affinity.matvec(self._X)
+        w = self._K.matvec(self._X)
         nrm = float(np.linalg.norm(w))
         self.n_iter += 1
         if nrm == 0.0:                      # K vec(X) = 0: nothing to learn, stop here
             self.converged = True
             return True
-        self.eigenvalue = float(np.vdot(self._X, w) / np.vdot(self._X, self._X))
+        self.eigenvalue = float(np.vdot(self._X, w) / np.vdot(self._X, self._X)
+                                / getattr(self._K, "factor", 1.0))
         w /= nrm
         if np.linalg.norm(w - self._X) < self.tol:
             self.converged = True

@@ -189,6 +189,44 @@ class _SymmetrizedAffinity(Affinity):
         return 0.5 * (K + K.T)
 
 
+class _ScaledAffinity(Affinity):
+    """``factor * K`` through products (solvers invariant to the scale of ``K``)."""
+
+    def __init__(self, base: Affinity, factor: float):
+        self.base, self.factor = base, factor
+        self.n1, self.n2 = base.n1, base.n2
+
+    def matvec(self, X):
+        return self.factor * self.base.matvec(X)
+
+    def rmatvec(self, X):
+        return self.factor * self.base.rmatvec(X)
+
+    def diag(self):
+        return self.factor * self.base.diag()
+
+    def to_dense(self):
+        return self.factor * self.base.to_dense()
+
+
+def _moderate(affinity: Affinity, *, limit: float = 1e100) -> Affinity:
+    """``affinity`` itself, or rescaled to a largest column sum of 1 when that sum lies outside
+    ``[1 / limit, limit]`` (products of a 1e200 ``K`` overflow in norms and dot products).
+
+    For the solvers that rank matchings by ``vec(X)^T K vec(X)``, which a positive factor does not
+    change; ordinary affinities are returned untouched, so their arithmetic is unchanged.
+    """
+    with np.errstate(over="ignore"):
+        top = affinity.max_column_sum()
+    if top == 0 or 1.0 / limit <= top <= limit:
+        return affinity
+    if np.isfinite(top):
+        return _ScaledAffinity(affinity, 1.0 / top)
+    # the sum itself overflowed: sum the entries times 1e-200 instead
+    tiny = float(affinity.rmatvec(np.full((affinity.n1, affinity.n2), 1e-200)).max())
+    return _ScaledAffinity(affinity, 1e-200 / tiny)
+
+
 def _symmetric(affinity: Affinity, *, rtol: float = 1e-10) -> Affinity:
     """``affinity`` itself if it is symmetric (checked on one random probe), else its symmetric part."""
     probe = np.random.default_rng(12345).random((affinity.n1, affinity.n2))

@@ -1,7 +1,7 @@
 """Evaluation metrics: one home for every measure the library reports.
 
 * Matchings (:mod:`._matching`): :func:`matching_accuracy`, :func:`matching_precision_recall`,
-  :func:`affinity_score`, :func:`cycle_inconsistency`.
+  :func:`affinity_score`, :func:`cycle_inconsistency`, :func:`multimatching_accuracy`.
 * Plane homographies (:mod:`._homography`): :func:`corner_error`, :func:`pairwise_corner_error`,
   :func:`corner_accuracy`, :func:`brenner_focus`, :func:`segmentation_scores`.
 
@@ -29,6 +29,7 @@ from ._matching import (
     cycle_inconsistency,
     matching_accuracy,
     matching_precision_recall,
+    multimatching_accuracy,
 )
 
 __all__ = [
@@ -39,6 +40,7 @@ __all__ = [
     "cycle_inconsistency",
     "matching_accuracy",
     "matching_precision_recall",
+    "multimatching_accuracy",
     "pairwise_corner_error",
     "segmentation_scores",
 ]

@@ -18,13 +18,32 @@ __all__ = [
 
 
 def _sizes(image_size, n):
-    arr = np.asarray(image_size, dtype=float)
+    if isinstance(image_size, (str, bytes)) or image_size is None:
+        raise TypeError(f"`image_size` must be (width, height) or an array of shape ({n}, 2), "
+                        f"got {type(image_size).__name__} {image_size!r}")
+    arr = check_array(image_size, "image_size", finite=False)
     if arr.shape == (2,):
         arr = np.broadcast_to(arr, (n, 2))
-    if arr.shape != (n, 2):
-        raise ValueError(f"`image_size` must be (width, height) or of shape ({n}, 2), "
-                         f"got {arr.tolist()!r}")
+    if arr.shape != (n, 2) or not np.all(np.isfinite(arr)) or not np.all(arr >= 1):
+        raise ValueError(f"`image_size` must be (width, height) or of shape ({n}, 2), with finite "
+                         f"entries >= 1, got {np.asarray(image_size).tolist()!r}")
     return arr
+
+
+def _homographies(H, name, ndim):
+    """A finite stack of invertible homographies (condition number <= 1e14)."""
+    H = check_array(H, name, ndim=ndim)
+    H3 = H[None] if H.ndim == 2 else H
+    if H3.shape[1:] != (3, 3):
+        raise ValueError(f"`{name}` must have shape (3, 3) or (N, 3, 3), got shape {H.shape}")
+    if len(H3):
+        with np.errstate(all="ignore"):
+            sv = np.linalg.svd(H3, compute_uv=False)
+        singular = np.flatnonzero(~(sv[:, -1] > 1e-14 * sv[:, 0]))
+        if singular.size:
+            raise ValueError(f"`{name}` must hold invertible homographies, got a singular matrix "
+                             f"at index {int(singular[0])}")
+    return H
 
 
 def corner_error(H_est, H_true, *, image_size) -> np.ndarray:
@@ -40,6 +59,12 @@ def corner_error(H_est, H_true, *, image_size) -> np.ndarray:
     Returns
     -------
     ndarray of shape (N,) (or a float for single homographies)
+        ``inf`` where a corner is sent to infinity by one homography and not the other.
+
+    Raises
+    ------
+    ValueError
+        Non-finite or singular homographies, shapes that disagree, a bad ``image_size``.
 
     Examples
     --------
@@ -48,8 +73,8 @@ def corner_error(H_est, H_true, *, image_size) -> np.ndarray:
     >>> float(corner_error(H, H2, image_size=(640, 480)))
     0.5
     """
-    He = check_array(H_est, "H_est", ndim=(2, 3))
-    Ht = check_array(H_true, "H_true", ndim=(2, 3), finite=False)
+    He = _homographies(H_est, "H_est", (2, 3))
+    Ht = _homographies(H_true, "H_true", (2, 3))
     single = He.ndim == 2
     if single:
         He = He[None]
@@ -62,14 +87,26 @@ def corner_error(H_est, H_true, *, image_size) -> np.ndarray:
     err = np.empty(len(He))
     for i in range(len(He)):
         c = _corners(sizes[i])
-        err[i] = np.linalg.norm(_transfer(He[i], c) - _transfer(Ht[i], c), axis=1).mean()
+        with np.errstate(all="ignore"):
+            err[i] = np.linalg.norm(_transfer(He[i], c) - _transfer(Ht[i], c), axis=1).mean()
+    err[~np.isfinite(err)] = np.inf         # a corner sent to infinity: infinitely wrong
     return float(err[0]) if single else err
 
 
 def corner_accuracy(errors, thresholds=(1.0, 3.0, 5.0)) -> dict:
     """Fraction of views whose corner error is at most each threshold (pixels)."""
-    errors = np.asarray(errors, dtype=float)
-    return {f"acc@{t:g}px": float(np.mean(errors <= t)) for t in thresholds}
+    errors = check_array(errors, "errors", ndim=1, finite=False)
+    if errors.size == 0:
+        raise ValueError("`errors` must hold at least one corner error, got an empty array")
+    if np.isnan(errors).any() or (errors < 0).any():
+        raise ValueError("`errors` must be non-negative numbers (inf allowed), got NaN or "
+                         "negative entries")
+    if isinstance(thresholds, (str, bytes)):
+        raise TypeError(f"`thresholds` must be a sequence of pixel thresholds, got {thresholds!r}")
+    ts = check_array(thresholds, "thresholds", ndim=1)
+    if (ts < 0).any():
+        raise ValueError(f"`thresholds` must be non-negative, got {ts.tolist()!r}")
+    return {f"acc@{t:g}px": float(np.mean(errors <= t)) for t in ts}
 
 
 def pairwise_corner_error(H_est, H_true, *, image_size, min_overlap=0.05) -> np.ndarray:
@@ -80,8 +117,11 @@ def pairwise_corner_error(H_est, H_true, *, image_size, min_overlap=0.05) -> np.
     """
     import cv2
 
-    He = check_array(H_est, "H_est", ndim=3)
-    Ht = check_array(H_true, "H_true", ndim=3)
+    He = _homographies(H_est, "H_est", 3)
+    Ht = _homographies(H_true, "H_true", 3)
+    if He.shape != Ht.shape:
+        raise ValueError(f"`H_est` and `H_true` must both have shape (N, 3, 3), got "
+                         f"{He.shape} and {Ht.shape}")
     n = len(He)
     sizes = _sizes(image_size, n)
     inv_e, inv_t = np.linalg.inv(He), np.linalg.inv(Ht)
@@ -102,8 +142,10 @@ def pairwise_corner_error(H_est, H_true, *, image_size, min_overlap=0.05) -> np.
             if inter < min_overlap * area_i:
                 continue
             Pe = inv_e[i] @ He[j]
-            out.append(np.linalg.norm(_transfer(Pe, cj) - _transfer(Pt, cj), axis=1).mean())
-    return np.asarray(out)
+            with np.errstate(all="ignore"):
+                e = np.linalg.norm(_transfer(Pe, cj) - _transfer(Pt, cj), axis=1).mean()
+            out.append(e if np.isfinite(e) else np.inf)
+    return np.asarray(out, dtype=float)
 
 
 def brenner_focus(image, mask=None) -> float:
@@ -120,6 +162,13 @@ def brenner_focus(image, mask=None) -> float:
     0.3333
     """
     img = np.asarray(image)
+    if img.dtype.kind not in "biuf":
+        raise TypeError(f"`image` must be a real-valued image, got dtype {img.dtype}")
+    if img.dtype.kind == "f" and not np.all(np.isfinite(img)):
+        raise ValueError("`image` must be finite, got NaN or infinite pixels")
+    if img.ndim not in (2, 3) or img.size == 0 or (img.ndim == 3 and img.shape[2] not in (1, 3, 4)):
+        raise ValueError("`image` must be a non-empty 2-D grey or 3-D color image (1, 3 or 4 "
+                         f"channels), got shape {img.shape}")
     if img.ndim == 3:
         img = img.mean(axis=2) if img.dtype != np.uint8 else img.astype(float).mean(axis=2)
         if np.asarray(image).dtype == np.uint8:
@@ -133,7 +182,11 @@ def brenner_focus(image, mask=None) -> float:
     dv = np.zeros_like(img)
     dh[:, :-2] = img[:, 2:] - img[:, :-2]
     dv[:-2, :] = img[2:, :] - img[:-2, :]
-    fm = np.maximum(np.abs(dh), np.abs(dv)) ** 2
+    with np.errstate(over="ignore"):
+        fm = np.maximum(np.abs(dh), np.abs(dv)) ** 2
+    if not np.all(np.isfinite(fm)):
+        raise ValueError("`image` values are too large for the focus measure (squared "
+                         "differences overflow); scale the image to [0, 1] or [0, 255]")
     valid = np.zeros(img.shape, dtype=bool)
     valid[:-2, :-2] = True
     if mask is not None:

@@ -9,13 +9,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..permutations import assignment_to_matrix, check_assignment, cycle_inconsistency
+from ..permutations import (
+    MultiMatching,
+    assignment_to_matrix,
+    check_assignment,
+    cycle_inconsistency,
+)
 
 __all__ = [
     "affinity_score",
     "cycle_inconsistency",
     "matching_accuracy",
     "matching_precision_recall",
+    "multimatching_accuracy",
 ]
 
 
@@ -39,6 +45,25 @@ def matching_accuracy(assignment, truth) -> float:
     if not inl.any():
         return 1.0
     return float(np.mean(a[inl] == t[inl]))
+
+
+def multimatching_accuracy(prediction, truth, *, pairs=None) -> float:
+    """Fraction of the true correspondences of a multi-matching that ``prediction`` recovers.
+
+    Summed over the pairs ``i < j`` (or the ``(P, 2)`` ``pairs``): a correspondence is two nodes
+    that ``truth`` puts in the same universe slot. ``truth`` is a
+    :class:`~transync.permutations.MultiMatching` (or its labels); ``prediction`` a
+    ``MultiMatching``, labels, a result carrying ``.matching``, or a dict
+    ``{(i, j): assignment}``. One implementation: :meth:`MultiMatching.accuracy`.
+
+    >>> import numpy as np
+    >>> truth = [np.array([0, 1]), np.array([1, 0])]
+    >>> multimatching_accuracy([np.array([0, 1]), np.array([0, 1])], truth)
+    0.0
+    >>> multimatching_accuracy({(0, 1): np.array([1, 0])}, truth)
+    1.0
+    """
+    return MultiMatching.from_labels(truth).accuracy(prediction, pairs=pairs)
 
 
 def matching_precision_recall(assignment, truth) -> dict[str, float]:

@@ -7,6 +7,12 @@
   Birkhoff-von Neumann decomposition :func:`birkhoff_von_neumann`.
 * Invertible linear maps and homographies: :func:`synchronize_linear_maps`,
   :func:`synchronize_homographies`.
+
+Every permutation and Birkhoff result carries its consistent multi-matching as a
+:class:`transync.permutations.MultiMatching` (``result.matching``). Every function reads its
+pairwise input through one parser, with one meaning of ``mask``: it selects the pairs to use
+(pair ``{i, j}`` when ``mask[i, j] or mask[j, i]``), for a dict, triples or a dense array alike,
+and ignores the diagonal. Results are frozen dataclasses and pickle.
 """
 
 from ._birkhoff import BirkhoffSyncResult, birkhoff_von_neumann, synchronize_doubly_stochastic

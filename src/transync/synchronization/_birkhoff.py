@@ -26,8 +26,9 @@ from scipy.optimize import linear_sum_assignment
 
 from .._validation import as_generator, check_array, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning
+from ..permutations import MultiMatching
 from . import _spectral as spec
-from ._pairwise_input import parse_pairwise
+from ._pairwise_input import check_universe, parse_pairwise
 
 __all__ = ["BirkhoffSyncResult", "birkhoff_von_neumann", "synchronize_doubly_stochastic"]
 
@@ -44,9 +45,11 @@ def birkhoff_von_neumann(X, *, tol: float = 1e-9, max_terms: int | None = None):
     X : (n, n) array
         Non-negative, every row and column summing to 1 (to ``1e-6``).
     tol : float, default=1e-9
-        Entries of the remainder at or below ``tol`` count as zero.
+        Entries of the remainder at or below ``tol`` count as zero (round-off; at most 1e-6).
     max_terms : int, optional
-        Default ``n^2 - 2n + 2`` (at least 1) plus ``n`` for round-off.
+        At most this many terms (>= 1). Default ``n^2 - 2n + 2`` (at least 1) plus ``n`` for
+        round-off. A ``ValueError`` is raised when ``X`` needs more terms than allowed (the
+        weights would not sum to 1).
 
     Returns
     -------
@@ -75,7 +78,11 @@ def birkhoff_von_neumann(X, *, tol: float = 1e-9, max_terms: int | None = None):
         raise ValueError(f"`X` must be doubly stochastic (rows and columns summing to 1), got a "
                          f"deviation of {err:.3g}")
     tol = check_positive(tol, "tol")
-    limit = max_terms if max_terms is not None else max(n * n - 2 * n + 2, 1) + n
+    if tol > 1e-6:
+        raise ValueError(f"`tol` must be <= 1e-6 (it only absorbs round-off; a larger one leaves "
+                         f"part of `X` undecomposed), got {tol!r}")
+    limit = (max(n * n - 2 * n + 2, 1) + n if max_terms is None
+             else check_int(max_terms, "max_terms", minimum=1))
     R = np.clip(X, 0, None).copy()
     weights: list[float] = []
     perms: list[np.ndarray] = []
@@ -90,6 +97,10 @@ def birkhoff_von_neumann(X, *, tol: float = 1e-9, max_terms: int | None = None):
         R[rows, cols] -= a
         weights.append(a)
         perms.append(cols.astype(np.int64))
+    if len(weights) >= limit and R.max() > tol:
+        raise ValueError(f"`max_terms`={limit} is too small for `X`: after {limit} terms a "
+                         f"remainder of total weight {R.sum() / n:.3g} is left; raise "
+                         "`max_terms` or leave it at None")
     return np.asarray(weights), np.asarray(perms, dtype=np.int64).reshape(-1, n)
 
 
@@ -110,8 +121,9 @@ class BirkhoffSyncResult:
         order of first appearance, so ``atoms[k, 0, :n_0] = arange(n_0)``.
     weights : (K,) ndarray
         Convex weights of the atoms (sum 1).
-    labels : tuple of ndarray
-        The MAP configuration (atom with the largest weight): a cycle-consistent multi-matching.
+    matching : MultiMatching
+        The MAP configuration (atom with the largest weight): a cycle-consistent multi-matching;
+        ``labels``, ``n_universe`` and ``pairwise`` delegate to it.
     objective : float
         Final ``1/2 sum_{(i,j) observed} w_ij ||X_ij - Y_ij||_F^2`` (pairs counted once).
     objective_history : ndarray
@@ -127,7 +139,7 @@ class BirkhoffSyncResult:
     blocks: Mapping[tuple[int, int], np.ndarray]
     atoms: np.ndarray
     weights: np.ndarray
-    labels: tuple[np.ndarray, ...]
+    matching: MultiMatching
     objective: float
     objective_history: np.ndarray
     n_iter: int
@@ -135,50 +147,59 @@ class BirkhoffSyncResult:
     info: Mapping[str, Any] = field(default_factory=dict)
 
     @property
+    def labels(self) -> tuple[np.ndarray, ...]:
+        return self.matching.labels
+
+    @property
     def n_universe(self) -> int:
-        return int(self.info.get("n_universe", self.atoms.shape[2]))
+        return self.matching.n_universe
+
+    @property
+    def n_objects(self) -> int:
+        return self.matching.n_objects
 
     @property
     def sizes(self) -> np.ndarray:
-        return (self.atoms[0] >= 0).sum(1)
+        return self.matching.sizes
 
-    def _check(self, g, name):
-        N = self.atoms.shape[1]
-        if not 0 <= int(g) < N:
-            raise ValueError(f"`{name}` must be an object index in [0, {N}), got {g}")
-        return int(g)
+    def atom(self, k: int) -> MultiMatching:
+        """Atom ``k`` (a consistent configuration) as a :class:`MultiMatching`."""
+        k = check_int(k, "k", minimum=0, maximum=self.atoms.shape[0] - 1)
+        sizes = self.sizes
+        return MultiMatching([self.atoms[k, g, : sizes[g]] for g in range(sizes.size)],
+                             self.n_universe)
 
     def block(self, i: int, j: int) -> np.ndarray:
         """Soft consistent block ``Y_ij`` (``n_i x n_j``) for any pair (identity if ``i == j``)."""
-        i, j = self._check(i, "i"), self._check(j, "j")
+        self.matching.pairwise(i, j)                      # validates i and j
         sizes = self.sizes
         Y = np.zeros((sizes[i], sizes[j]))
-        for w, lab in zip(self.weights, self.atoms):
-            a = _map_from_labels(lab[i, : sizes[i]], lab[j, : sizes[j]], self.n_universe)
+        for k, w in enumerate(self.weights):
+            a = self.atom(k).pairwise(i, j)
             r = np.flatnonzero(a >= 0)
             Y[r, a[r]] += w
         return Y
 
     def pairwise(self, i: int, j: int) -> np.ndarray:
         """The MAP consistent assignment from object ``i`` to object ``j`` (``-1`` unmatched)."""
-        i, j = self._check(i, "i"), self._check(j, "j")
-        return _map_from_labels(self.labels[i], self.labels[j], self.n_universe)
+        return self.matching.pairwise(i, j)
+
+    def to_matrix(self) -> np.ndarray:
+        """The ``(sum n_g, sum n_g)`` soft block matrix ``sum_k weights[k] X^k X^kT`` (blocks
+        ``Y_ij``, identity blocks on the diagonal); meant for small problems."""
+        return sum(w * self.atom(k).to_matrix() for k, w in enumerate(self.weights))
 
 
-def _map_from_labels(lab_i, lab_j, d):
-    inv = np.full(d + 1, -1, dtype=np.int64)
-    ok = lab_j >= 0
-    inv[lab_j[ok]] = np.flatnonzero(ok)
-    return inv[lab_i]
+def _matching(labels: np.ndarray, sizes: np.ndarray, d: int) -> MultiMatching:
+    """The configuration held as padded ``labels`` (N, n_max) as a :class:`MultiMatching`."""
+    return MultiMatching([labels[g, : sizes[g]] for g in range(sizes.size)], d)
 
 
 def _pair_maps(labels: np.ndarray, pairs: np.ndarray, d: int) -> np.ndarray:
-    """(Q, n_max) maps i -> j (``-1`` unmatched / padding) of padded ``labels`` (N, n_max)."""
-    N, n_max = labels.shape
-    inv = np.full((N, d + 1), -1, dtype=np.int64)
-    g, u = np.nonzero(labels >= 0)
-    inv[g, labels[g, u]] = u
-    return inv[pairs[:, 1][:, None], labels[pairs[:, 0]]]        # label -1 -> column d -> -1
+    """(Q, n_max) maps i -> j (``-1`` unmatched / padding) of padded ``labels`` (N, n_max).
+
+    Padding entries are unplaced nodes of the :class:`MultiMatching`, so they map to -1."""
+    return MultiMatching(list(labels), d).pairwise_array(pairs)
 
 
 def _canonical(labels: np.ndarray, d: int) -> np.ndarray:
@@ -332,6 +353,11 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
     and columns summing to at most 1). With equal sizes ``n`` and ``d = n`` the blocks must be
     doubly stochastic and so is every output block.
 
+    The observation graph is not split into components: when it is disconnected, the output
+    still places every object in the one universe, and maps between objects of different
+    components (``pairwise(i, j)``, ``block(i, j)``) rest on no observation. Check connectivity
+    first (e.g. ``synchronize_permutations(..., disconnected="raise")``) when that matters.
+
     Parameters
     ----------
     pairwise : dict {(i, j): (n_i, n_j) soft matrix or assignment}
@@ -339,6 +365,8 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
         transpose. Both given: their weighted average is used.
     mask, weights : see :func:`synchronize_permutations`.
     max_iter : int, default=20
+        Frank-Wolfe iterations. ``0`` returns the initialization: the consistent configuration
+        closest to the input (one atom of weight 1, ``n_iter=0``), not a projection.
     n_universe : int, optional
         Universe size ``d >= max n_i``. Default: ``n`` for equal sizes, otherwise the eigengap of
         the degree-normalized soft block matrix (``info["n_universe_rule"]``).
@@ -373,17 +401,38 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
     gen = as_generator(rng)
     stk = parse_pairwise(pairwise, mask=mask, weights=weights, soft=True)
     sizes = stk.sizes
-    N, n_max = stk.n_objects, int(sizes.max())
-    equal = bool(np.all(sizes == sizes[0]))
-    if n_universe is not None:
-        n_universe = check_int(n_universe, "n_universe", minimum=1)
-        if n_universe < n_max:
-            raise ValueError(f"`n_universe` must be >= the largest object size {n_max}, got "
-                             f"{n_universe}")
-    Xq = stk.soft
+    n_max = int(sizes.max())
+    n_universe = check_universe(n_universe, sizes)
+    full = bool(np.all(sizes == sizes[0])) and n_universe in (None, n_max)
+    _check_soft_blocks(stk.soft, full)
+    pairs, w, X = _merge_observations(stk)
+    info: dict = {"fully_corrective": fully_corrective, "pairs": pairs}
+    d = _choose_universe(n_universe, full, X, w, pairs, sizes, solver, gen, info)
+    M = int(sizes.sum())
+    info["solver"] = solver if solver != "auto" else (
+        "dense" if M <= spec.DENSE_MAX else "matrix_free")
+    fw = _FrankWolfe(X, w, pairs, sizes, d, inner_sweeps=inner_sweeps, rng=gen, solver=solver)
+    atoms, alpha, Y, history, gaps, it, converged = fw.run(max_iter, tol, fully_corrective)
+    if not converged and max_iter > 0:
+        warnings.warn(f"synchronize_doubly_stochastic stopped after max_iter={max_iter} "
+                      f"iterations with Frank-Wolfe gap {gaps[-1]:.3g} > tol * ||X||^2",
+                      ConvergenceWarning, stacklevel=2)
+    atoms_arr = np.asarray(atoms, dtype=np.int64)
+    best = int(np.argmax(alpha))
+    blocks = {(int(i), int(j)): Y[q][: sizes[i], : sizes[j]].copy()
+              for q, (i, j) in enumerate(pairs.tolist())}
+    info.update({"gap_history": np.asarray(gaps), "n_atoms": len(atoms)})
+    matching = _matching(atoms_arr[best], sizes, d)
+    return BirkhoffSyncResult(blocks=blocks, atoms=atoms_arr, weights=alpha, matching=matching,
+                              objective=history[-1], objective_history=np.asarray(history),
+                              n_iter=it, converged=converged, info=info)
+
+
+def _check_soft_blocks(Xq: np.ndarray, full: bool) -> None:
+    """Doubly stochastic blocks (``full``) or sub-doubly stochastic ones (partial model)."""
     if Xq.min() < -1e-12:
-        raise ValueError("`pairwise` blocks must be non-negative (doubly stochastic)")
-    full = equal and n_universe in (None, n_max)
+        raise ValueError("`pairwise` blocks must be non-negative (doubly stochastic), got a "
+                         f"minimum of {Xq.min():.3g}")
     if full:
         dev = max(np.abs(Xq.sum(1) - 1).max(), np.abs(Xq.sum(2) - 1).max())
         if dev > 1e-6:
@@ -395,114 +444,122 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
             raise ValueError("`pairwise` blocks must be sub-doubly stochastic for objects of "
                              "different sizes (rows and columns summing to at most 1), got a "
                              f"sum of {1 + over:.6g}")
-    # merge duplicate observations of a pair (weights were split by parse_pairwise)
+
+
+def _merge_observations(stk):
+    """One block per observed pair: duplicates averaged (weights were split by the parser)."""
+    N = stk.n_objects
+    n_max = int(stk.sizes.max())
     key = stk.pairs[:, 0] * N + stk.pairs[:, 1]
     uniq, inverse = np.unique(key, return_inverse=True)
     pairs = np.column_stack([uniq // N, uniq % N])
     w = np.bincount(inverse, weights=stk.weights, minlength=uniq.size)
     X = np.zeros((uniq.size, n_max, n_max))
-    np.add.at(X, inverse, Xq * stk.weights[:, None, None])
+    np.add.at(X, inverse, stk.soft * stk.weights[:, None, None])
     X /= np.maximum(w, 1e-300)[:, None, None]
-    norm_x = float((w * (X ** 2).sum((1, 2))).sum())
-    info: dict = {"fully_corrective": fully_corrective, "pairs": pairs}
+    return pairs, w, X
+
+
+def _choose_universe(n_universe, full, X, w, pairs, sizes, solver, gen, info) -> int:
     if n_universe is not None:
         d = n_universe
         info["n_universe_rule"] = "given"
     elif full:
-        d = n_max
+        d = int(sizes.max())
         info["n_universe_rule"] = "equal sizes: d = number of nodes"
     else:
         d, rule, vals = _estimate_universe_soft(X, w, pairs, sizes, solver, gen)
         info["n_universe_rule"] = rule
         info["eigenvalues"] = vals
     info["n_universe"] = d
-    M = int(sizes.sum())
-    info["solver"] = solver if solver != "auto" else (
-        "dense" if M <= spec.DENSE_MAX else "matrix_free")
+    return d
 
-    def objective(Y):
-        return 0.5 * float((w * ((X - Y) ** 2).sum((1, 2))).sum())
 
-    qi = np.arange(pairs.shape[0])[:, None]
-    ui = np.arange(n_max)[None, :]
+class _FrankWolfe:
+    """Conditional gradient with column generation on the consistent configurations (§4.2)."""
 
-    def S_of(labels):
-        maps = _pair_maps(labels, pairs, d)
-        S = np.zeros_like(X)
+    def __init__(self, X, w, pairs, sizes, d, *, inner_sweeps, rng, solver):
+        self.X, self.w, self.pairs, self.sizes, self.d = X, w, pairs, sizes, d
+        self.inner_sweeps, self.rng, self.solver = inner_sweeps, rng, solver
+        self.qi = np.arange(pairs.shape[0])[:, None]
+        self.ui = np.arange(X.shape[1])[None, :]
+
+    def objective(self, Y) -> float:
+        return 0.5 * float((self.w * ((self.X - Y) ** 2).sum((1, 2))).sum())
+
+    def lmo(self, G):
+        lab, _ = _lmo(G, self.w, self.pairs, self.sizes, self.d, self.inner_sweeps, self.rng,
+                      self.solver)
+        return lab
+
+    def add_maps(self, Y, maps, weight=1.0):
         ok = maps >= 0
-        S[np.broadcast_to(qi, maps.shape)[ok], np.broadcast_to(ui, maps.shape)[ok], maps[ok]] = 1.0
-        return S, maps
+        Y[np.broadcast_to(self.qi, maps.shape)[ok], np.broadcast_to(self.ui, maps.shape)[ok],
+          maps[ok]] += weight
+        return Y
 
-    lab0, _ = _lmo(X, w, pairs, sizes, d, inner_sweeps, gen, solver)
-    atoms = [lab0]
-    S0, m0 = S_of(lab0)
-    maps_list = [m0]
-    alpha = np.array([1.0])
-    Y = S0
-    history = [objective(Y)]
-    gaps: list[float] = []
-    converged = False
-    it = 0
-    for it in range(1, max_iter + 1):
-        G = X - Y
-        lab, _ = _lmo(G, w, pairs, sizes, d, inner_sweeps, gen, solver)
-        S_hat, maps_hat = S_of(lab)
-        D = S_hat - Y
-        gap = float((w * (G * D).sum((1, 2))).sum())
-        gaps.append(gap)
-        if gap <= tol * max(norm_x, 1e-300):
-            converged = True
-            it -= 1
-            break
-        dd = float((w * (D ** 2).sum((1, 2))).sum())
-        gamma = float(np.clip(gap / dd, 0.0, 1.0)) if dd > 0 else 0.0
-        alpha = alpha * (1 - gamma)
-        found = next((k for k, a in enumerate(atoms) if np.array_equal(a, lab)), None)
-        if found is None:
-            atoms.append(lab)
-            maps_list.append(maps_hat)
-            alpha = np.append(alpha, gamma)
-        else:
-            alpha[found] += gamma
-        if fully_corrective and len(atoms) > 1:
-            K = len(atoms)
-            A = np.empty((K, K))
-            b = np.empty(K)
-            for k in range(K):
-                b[k] = float((w * _masked_take(X, maps_list[k]).sum(1)).sum())
-                for m in range(k, K):
-                    same = (maps_list[k] == maps_list[m]) & (maps_list[k] >= 0)
-                    A[k, m] = A[m, k] = float((w * same.sum(1)).sum())
-            L = max(np.linalg.eigvalsh(A)[-1], 1e-12)
-            f_old = 0.5 * alpha @ A @ alpha - b @ alpha
-            a_new = alpha.copy()
-            for _ in range(500):
-                a_next = _project_simplex(a_new - (A @ a_new - b) / L)
-                if np.abs(a_next - a_new).max() < 1e-12:
-                    a_new = a_next
-                    break
+    def run(self, max_iter, tol, fully_corrective):
+        X, w = self.X, self.w
+        norm_x = float((w * (X ** 2).sum((1, 2))).sum())
+        lab0 = self.lmo(X)
+        atoms, maps_list = [lab0], [_pair_maps(lab0, self.pairs, self.d)]
+        alpha = np.array([1.0])
+        Y = self.add_maps(np.zeros_like(X), maps_list[0])
+        history, gaps = [self.objective(Y)], []
+        converged = False
+        it = 0
+        for it in range(1, max_iter + 1):
+            G = X - Y
+            lab = self.lmo(G)
+            maps_hat = _pair_maps(lab, self.pairs, self.d)
+            D = self.add_maps(np.zeros_like(X), maps_hat) - Y
+            gap = float((w * (G * D).sum((1, 2))).sum())
+            gaps.append(gap)
+            if gap <= tol * max(norm_x, 1e-300):
+                converged = True
+                it -= 1
+                break
+            dd = float((w * (D ** 2).sum((1, 2))).sum())
+            gamma = float(np.clip(gap / dd, 0.0, 1.0)) if dd > 0 else 0.0
+            alpha = alpha * (1 - gamma)
+            found = next((k for k, a in enumerate(atoms) if np.array_equal(a, lab)), None)
+            if found is None:
+                atoms.append(lab)
+                maps_list.append(maps_hat)
+                alpha = np.append(alpha, gamma)
+            else:
+                alpha[found] += gamma
+            if fully_corrective and len(atoms) > 1:
+                alpha = self.reoptimize(alpha, maps_list)
+            keep = alpha > 1e-14
+            atoms = [a for a, k in zip(atoms, keep) if k]
+            maps_list = [m for m, k in zip(maps_list, keep) if k]
+            alpha = alpha[keep] / alpha[keep].sum()
+            Y = np.zeros_like(X)
+            for a, m in zip(alpha, maps_list):
+                self.add_maps(Y, m, a)
+            history.append(self.objective(Y))
+        return atoms, alpha, Y, history, gaps, it, converged
+
+    def reoptimize(self, alpha, maps_list):
+        """Fully corrective step: all atom weights re-optimized on the simplex (projected
+        gradient); kept only when the objective does not increase."""
+        X, w = self.X, self.w
+        K = len(maps_list)
+        A = np.empty((K, K))
+        b = np.empty(K)
+        for k in range(K):
+            b[k] = float((w * _masked_take(X, maps_list[k]).sum(1)).sum())
+            for m in range(k, K):
+                same = (maps_list[k] == maps_list[m]) & (maps_list[k] >= 0)
+                A[k, m] = A[m, k] = float((w * same.sum(1)).sum())
+        L = max(np.linalg.eigvalsh(A)[-1], 1e-12)
+        f_old = 0.5 * alpha @ A @ alpha - b @ alpha
+        a_new = alpha.copy()
+        for _ in range(500):
+            a_next = _project_simplex(a_new - (A @ a_new - b) / L)
+            if np.abs(a_next - a_new).max() < 1e-12:
                 a_new = a_next
-            if 0.5 * a_new @ A @ a_new - b @ a_new <= f_old:
-                alpha = a_new
-        keep = alpha > 1e-14
-        atoms = [a for a, k in zip(atoms, keep) if k]
-        maps_list = [m for m, k in zip(maps_list, keep) if k]
-        alpha = alpha[keep] / alpha[keep].sum()
-        Y = np.zeros_like(X)
-        for a, m in zip(alpha, maps_list):
-            ok = m >= 0
-            Y[np.broadcast_to(qi, m.shape)[ok], np.broadcast_to(ui, m.shape)[ok], m[ok]] += a
-        history.append(objective(Y))
-    if not converged and max_iter > 0:
-        warnings.warn(f"synchronize_doubly_stochastic stopped after max_iter={max_iter} "
-                      f"iterations with Frank-Wolfe gap {gaps[-1]:.3g} > tol * ||X||^2",
-                      ConvergenceWarning, stacklevel=2)
-    atoms_arr = np.asarray(atoms, dtype=np.int64)
-    best = int(np.argmax(alpha))
-    blocks = {(int(i), int(j)): Y[q][: sizes[i], : sizes[j]].copy()
-              for q, (i, j) in enumerate(pairs.tolist())}
-    info.update({"gap_history": np.asarray(gaps), "n_atoms": len(atoms)})
-    labels = tuple(atoms_arr[best, g, : sizes[g]].copy() for g in range(N))
-    return BirkhoffSyncResult(blocks=blocks, atoms=atoms_arr, weights=alpha, labels=labels,
-                              objective=history[-1], objective_history=np.asarray(history),
-                              n_iter=it, converged=converged, info=info)
+                break
+            a_new = a_next
+        return a_new if 0.5 * a_new @ A @ a_new - b @ a_new <= f_old else alpha

@@ -39,6 +39,7 @@ from scipy.sparse.csgraph import connected_components
 from .._validation import check_array, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning, DegenerateInputError
 from ..geometry import normalization_matrix, normalize_determinant
+from ._pairwise_input import check_mask, observations
 
 __all__ = [
     "LinearMapSyncResult",
@@ -140,60 +141,68 @@ def _residual(A, B, kind: str) -> np.ndarray:
     return num / np.maximum(den, 1e-300)
 
 
+_MAX_ND = 20000   # the null-space method factorizes an (N d) x (N d) matrix
+_MAX_SCALE = 1e100  # observed maps with singular values beyond [1e-100, 1e100] overflow
+
+
 def _parse_input(T, mask, n_objects):
-    """Accept a dense (N, N, d, d) array or a dict {(i, j): (d, d)}; return T, mask (bool)."""
-    if isinstance(T, Mapping):
-        if not T:
-            raise ValueError("`T` must contain at least one pair, got an empty dict")
-        keys = list(T)
-        for key in keys:
-            if not (isinstance(key, tuple) and len(key) == 2):
-                raise ValueError(f"`T` dict keys must be pairs (i, j), got {key!r}")
-            if key[0] == key[1]:
-                raise ValueError(f"`T` must not contain self-pairs (i == j), got pair {key!r}")
-        n = max(max(int(i), int(j)) for i, j in keys) + 1
-        if n_objects is not None:
-            n_objects = check_int(n_objects, "n_objects", minimum=1)
-            if n > n_objects:
-                raise ValueError(f"`T` has a pair index {n - 1} but `n_objects` is {n_objects}")
-            n = n_objects
-        first = check_array(T[keys[0]], f"T[{keys[0]}]", ndim=2)
-        d = first.shape[0]
-        dense = np.zeros((n, n, d, d))
-        obs = np.zeros((n, n), dtype=bool)
-        for (i, j), Tij in T.items():
-            Tij = check_array(Tij, f"T[{(i, j)}]", ndim=2)
-            if Tij.shape != (d, d):
-                raise ValueError(f"`T[{(i, j)}]` must have shape ({d}, {d}) like the first pair, "
-                                 f"got shape {Tij.shape}")
-            dense[i, j] = Tij
-            obs[i, j] = True
-        if mask is not None:
-            raise ValueError("`mask` must be None when `T` is a dict (the keys are the mask)")
-        return dense, obs
-    T = check_array(T, "T", ndim=4, finite=False)
-    n, n2, d, d2 = T.shape
-    if n != n2 or d != d2 or d == 0:
-        raise ValueError(f"`T` must have shape (N, N, d, d), got shape {T.shape}")
-    if mask is None:
-        obs = ~np.eye(n, dtype=bool)
-    else:
-        obs = np.asarray(mask)
-        if obs.shape != (n, n):
-            raise ValueError(f"`mask` must have shape ({n}, {n}) to match `T`, got shape {obs.shape}")
-        if obs.dtype != bool:
-            if not np.all(np.isin(obs, (0, 1))):
-                raise ValueError("`mask` must be boolean (or 0/1)")
-            obs = obs.astype(bool)
-        diag = np.flatnonzero(np.diag(obs))
-        if diag.size:
-            raise ValueError(f"`mask` must be False on the diagonal (self-pairs i == j carry no "
-                             f"information), got True for i = {diag.tolist()}")
-    bad = obs & ~np.all(np.isfinite(T), axis=(-2, -1))
-    if bad.any():
-        i, j = np.argwhere(bad)[0]
-        raise ValueError(f"`T[{i}, {j}]` must be finite where observed, got NaN or infinite entries")
-    return T, obs.copy()
+    """Dense ``(N, N, d, d)`` maps and the observed entries, from an array, a dict or triples.
+
+    ``mask`` has the meaning of every synchronization function (see
+    ``_pairwise_input``): it selects pairs; a dense array is read in each masked direction.
+    """
+    if isinstance(T, np.ndarray) or not isinstance(T, Mapping) and np.ndim(T) == 4:
+        T = check_array(T, "T", ndim=4, finite=False)
+        n, n2, d, d2 = T.shape
+        if n != n2 or d != d2 or d == 0:
+            raise ValueError(f"`T` must have shape (N, N, d, d) with d >= 1, got shape {T.shape}")
+        if n == 0:
+            raise ValueError(f"`T` must hold at least one object, got shape {T.shape}")
+        _check_size(n, d)
+        mask = check_mask(mask, n, against="T")
+        obs = ~np.eye(n, dtype=bool) if mask is None else mask
+        bad = obs & ~np.all(np.isfinite(T), axis=(-2, -1))
+        if bad.any():
+            i, j = np.argwhere(bad)[0]
+            raise ValueError(f"`T[{i}, {j}]` must be finite where observed, got NaN or infinite "
+                             "entries")
+        return T, obs.copy()
+    mask = check_mask(mask)
+    items = observations(T, mask, name="T", dense_both=True)
+    if not items:
+        raise ValueError("`T` must contain at least one pair, got none" if mask is None else
+                         "`mask` selects no pair of `T`")
+    n = max(max(i, j) for i, j, _ in items) + 1
+    if n_objects is not None:
+        n_objects = check_int(n_objects, "n_objects", minimum=1)
+        if n > n_objects:
+            raise ValueError(f"`T` has a pair index {n - 1} but `n_objects` is {n_objects}")
+        n = n_objects
+    if mask is not None and mask.shape[0] > n:
+        n = mask.shape[0]
+    first = check_array(items[0][2], f"T[{items[0][:2]}]", ndim=2)
+    d = first.shape[0]
+    if d == 0 or first.shape != (d, d):
+        raise ValueError(f"`T[{items[0][:2]}]` must be a square (d, d) matrix with d >= 1, got "
+                         f"shape {first.shape}")
+    _check_size(n, d)
+    dense = np.zeros((n, n, d, d))
+    obs = np.zeros((n, n), dtype=bool)
+    for i, j, Tij in items:
+        Tij = check_array(Tij, f"T[{(i, j)}]", ndim=2)
+        if Tij.shape != (d, d):
+            raise ValueError(f"`T[{(i, j)}]` must have shape ({d}, {d}) like the first pair, "
+                             f"got shape {Tij.shape}")
+        dense[i, j] = Tij
+        obs[i, j] = True
+    return dense, obs
+
+
+def _check_size(n: int, d: int) -> None:
+    if n * d > _MAX_ND:
+        raise ValueError(f"`T` holds {n} objects of dimension {d}: the null-space method "
+                         f"factorizes an (N d) x (N d) matrix, N d = {n * d} > {_MAX_ND}; "
+                         "renumber the objects without gaps or split the problem")
 
 
 def _check_invertible(T, obs, name="T"):
@@ -202,12 +211,21 @@ def _check_invertible(T, obs, name="T"):
         return
     blocks = T[obs]
     sv = np.linalg.svd(blocks, compute_uv=False)
-    cond = sv[:, 0] / np.maximum(sv[:, -1], 1e-300)
-    bad = np.flatnonzero(~(cond < 1e12))
+    ok = sv[:, -1] > 1e-12 * sv[:, 0]                     # all-zero blocks fail too
+    bad = np.flatnonzero(~ok)
     if bad.size:
         i, j = idx[bad[0]]
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            cond = sv[bad[0], 0] / sv[bad[0], -1] if sv[bad[0], -1] > 0 else np.inf
         raise ValueError(f"`{name}[{i}, {j}]` must be invertible, got a singular matrix "
-                         f"(condition number {cond[bad[0]]:.3g}); {bad.size} singular pair(s)")
+                         f"(condition number {cond:.3g}); {bad.size} singular pair(s)")
+    scaled = np.flatnonzero((sv[:, 0] > _MAX_SCALE) | (sv[:, -1] < 1 / _MAX_SCALE))
+    if scaled.size:
+        q = scaled[0]
+        i, j = idx[q]
+        raise ValueError(f"`{name}[{i}, {j}]` must have singular values within "
+                         f"[{1 / _MAX_SCALE:.0e}, {_MAX_SCALE:.0e}], got {sv[q, -1]:.3g} .. "
+                         f"{sv[q, 0]:.3g}; rescale the coordinates")
 
 
 def _symmetrize(T, obs, weights):
@@ -357,7 +375,10 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
         ``T[i, j]`` maps coordinates of object ``j`` into object ``i``. Entries outside ``mask``
         are ignored. Where only one direction of a pair is observed, the other is its inverse.
     mask : ndarray of shape (N, N), bool, default=None
-        Observed pairs (default: every off-diagonal pair). The diagonal must be False.
+        The pairs to use (default: every pair): pair ``{i, j}`` is used when ``mask[i, j]`` or
+        ``mask[j, i]``, for a dict as for an array (the same meaning in every synchronization
+        function); an array is read in each direction whose entry is True, a direction left
+        out is the inverse of the other. The diagonal is ignored.
     weights : ndarray of shape (N, N), default=None
         Non-negative confidence per observed pair (e.g. inlier counts); default all ones.
     reference : int, default=0
@@ -432,84 +453,14 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
         residual = "frobenius"
     if residual == "corner" and d != 3:
         raise ValueError(f"`residual='corner'` needs 3x3 maps, got d = {d}")
-    if weights is not None:
-        weights = check_array(weights, "weights", ndim=2)
-        if weights.shape != (n, n):
-            raise ValueError(f"`weights` must have shape ({n}, {n}) to match `T`, "
-                             f"got shape {weights.shape}")
-        if np.any(weights[obs] < 0):
-            raise ValueError("`weights` must be non-negative on observed pairs, got a negative value")
-        obs = obs & (weights > 0)
-    if not obs.any():
-        raise ValueError("`mask` must select at least one pair, got none")
-    _check_invertible(T, obs)
-    if group == "SL":
-        det = np.linalg.det(T[obs])
-        if d % 2 == 0 and np.any(det < 0):
-            i, j = np.argwhere(obs)[np.flatnonzero(det < 0)[0]]
-            raise ValueError(f"`T[{i}, {j}]` has a negative determinant, which no scaling maps "
-                             f"into SL({d})")
-        T = T.copy()
-        T[obs] = normalize_determinant(T[obs])
-    T, obs, w0 = _symmetrize(T, obs, weights)
-    T = np.where(obs[:, :, None, None], T, np.eye(d))
-
-    n_comp, labels = _components(obs)
-    excluded = np.array([], dtype=int)
-    keep = np.arange(n)
-    if n_comp > 1:
-        sizes = np.bincount(labels)
-        comps = [np.flatnonzero(labels == c).tolist() for c in range(n_comp)]
-        if disconnected == "raise":
-            raise DegenerateInputError(
-                f"the observation graph is disconnected: {n_comp} components "
-                f"(sizes {sizes.tolist()}): {comps if n <= 30 else '...'}; maps between "
-                "components are undetermined (use disconnected='component' to synchronize the "
-                "reference's component only)")
-        keep = np.flatnonzero(labels == labels[reference])
-        excluded = np.flatnonzero(labels != labels[reference])
+    T, obs, w0 = _prepare_observations(T, obs, weights, group, mask_given=mask is not None)
+    keep, excluded, labels = _reference_component(obs, reference, disconnected)
     Tk = T[np.ix_(keep, keep)]
     ok = obs[np.ix_(keep, keep)]
-    wk0 = w0[np.ix_(keep, keep)]
     ref_k = int(np.flatnonzero(keep == reference)[0])
-
-    history = []
-    w = wk0.copy()
-    n_iter = 0
-    converged = True
-    if len(keep) == 1:
-        maps_k = np.eye(d)[None]
-        sv = np.zeros(d + 1)
-    else:
-        if robust:
-            cs = _cycle_scores(Tk, ok, residual)
-            floor = 1e-9
-            w_c, _ = _robust_weights(np.where(np.isnan(cs), np.nanmedian(cs[ok]) if
-                                              np.isfinite(cs[ok]).any() else 0.0, cs),
-                                     ok, floor)
-            w = _keep_connected(wk0 * w_c, wk0, ok)
-        U, sv = _nullspace(Tk, w, d)
-        maps_k = _maps_from_nullspace(U, ref_k, group)
-        n_iter = 1
-        if robust:
-            converged = False
-            for _ in range(max_iter):
-                r = _pair_residuals(Tk, ok, maps_k, residual)
-                w_r, _ = _robust_weights(r, ok, 1e-9)
-                w = _keep_connected(wk0 * w_r, wk0, ok)
-                U, sv = _nullspace(Tk, w, d)
-                new = _maps_from_nullspace(U, ref_k, group)
-                n_iter += 1
-                change = float(np.max(_residual(new, maps_k, residual)))
-                history.append(change)
-                maps_k = new
-                if change <= tol:
-                    converged = True
-                    break
-            if not converged:
-                warnings.warn(f"robust synchronization did not converge in {max_iter} iterations "
-                              f"(last change {history[-1]:.3g})", ConvergenceWarning, stacklevel=2)
-
+    maps_k, w, sv, n_iter, converged, history = _solve(
+        Tk, ok, w0[np.ix_(keep, keep)], ref_k, group=group, residual=residual, robust=robust,
+        max_iter=max_iter, tol=tol)
     maps = np.full((n, d, d), np.nan)
     maps[keep] = maps_k
     r_k = _pair_residuals(Tk, ok, maps_k, residual) * residual_scale
@@ -533,15 +484,105 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
                                objective=objective, n_iter=n_iter, converged=converged, info=info)
 
 
+def _prepare_observations(T, obs, weights, group, *, mask_given):
+    """Weights, invertibility, SL(d) scaling and the missing directions (inverses)."""
+    n, d = T.shape[0], T.shape[-1]
+    if weights is not None:
+        weights = check_array(weights, "weights", ndim=2)
+        if weights.shape != (n, n):
+            raise ValueError(f"`weights` must have shape ({n}, {n}) to match `T`, "
+                             f"got shape {weights.shape}")
+        if weights.size and weights.min() < 0:
+            raise ValueError(f"`weights` must be non-negative, got {float(weights.min())}")
+        obs = obs & (weights > 0)
+    if not obs.any():
+        what = "`mask` and `weights` select" if mask_given or weights is not None else "it holds"
+        raise ValueError(f"`T` must hold at least one observed pair i != j, but {what} none "
+                         f"({n} object(s))")
+    if group == "SL":            # scale-free group: rescale blocks of extreme magnitude
+        top = np.abs(T[obs]).max(axis=(-2, -1), keepdims=True)
+        extreme = (top > 1e50) | ((top < 1e-50) & (top > 0))
+        if extreme.any():
+            T = T.copy()
+            T[obs] = np.where(extreme, T[obs] / np.where(extreme, top, 1.0), T[obs])
+    _check_invertible(T, obs)
+    if group == "SL":
+        det = np.linalg.det(T[obs])
+        if d % 2 == 0 and np.any(det < 0):
+            i, j = np.argwhere(obs)[np.flatnonzero(det < 0)[0]]
+            raise ValueError(f"`T[{i}, {j}]` has a negative determinant, which no scaling maps "
+                             f"into SL({d})")
+        T = T.copy()
+        T[obs] = normalize_determinant(T[obs])
+    T, obs, w0 = _symmetrize(T, obs, weights)
+    T = np.where(obs[:, :, None, None], T, np.eye(d))
+    return T, obs, w0
+
+
+def _reference_component(obs, reference, disconnected):
+    """Objects of the reference's component (``keep``), the others and the component labels."""
+    n = obs.shape[0]
+    n_comp, labels = _components(obs)
+    if n_comp == 1:
+        return np.arange(n), np.array([], dtype=int), labels
+    sizes = np.bincount(labels)
+    comps = [np.flatnonzero(labels == c).tolist() for c in range(n_comp)]
+    if disconnected == "raise":
+        raise DegenerateInputError(
+            f"the observation graph is disconnected: {n_comp} components "
+            f"(sizes {sizes.tolist()}): {comps if n <= 30 else '...'}; maps between "
+            "components are undetermined (use disconnected='component' to synchronize the "
+            "reference's component only)")
+    return (np.flatnonzero(labels == labels[reference]),
+            np.flatnonzero(labels != labels[reference]), labels)
+
+
+def _solve(Tk, ok, wk0, ref_k, *, group, residual, robust, max_iter, tol):
+    """Null-space solve on one connected component, with IRLS when ``robust``."""
+    d = Tk.shape[-1]
+    history: list[float] = []
+    w = wk0.copy()
+    if Tk.shape[0] == 1:
+        return np.eye(d)[None], w, np.zeros(d + 1), 0, True, history
+    if robust:
+        cs = _cycle_scores(Tk, ok, residual)
+        fill = np.nanmedian(cs[ok]) if np.isfinite(cs[ok]).any() else 0.0
+        w_c, _ = _robust_weights(np.where(np.isnan(cs), fill, cs), ok, 1e-9)
+        w = _keep_connected(wk0 * w_c, wk0, ok)
+    U, sv = _nullspace(Tk, w, d)
+    maps_k = _maps_from_nullspace(U, ref_k, group)
+    n_iter = 1
+    if not robust:
+        return maps_k, w, sv, n_iter, True, history
+    converged = False
+    for _ in range(max_iter):
+        r = _pair_residuals(Tk, ok, maps_k, residual)
+        w_r, _ = _robust_weights(r, ok, 1e-9)
+        w = _keep_connected(wk0 * w_r, wk0, ok)
+        U, sv = _nullspace(Tk, w, d)
+        new = _maps_from_nullspace(U, ref_k, group)
+        n_iter += 1
+        change = float(np.max(_residual(new, maps_k, residual)))
+        history.append(change)
+        maps_k = new
+        if change <= tol:
+            converged = True
+            break
+    if not converged:
+        warnings.warn(f"robust synchronization did not converge in {max_iter} iterations "
+                      f"(last change {history[-1]:.3g})", ConvergenceWarning, stacklevel=3)
+    return maps_k, w, sv, n_iter, converged, history
+
+
 def _image_sizes(image_size, n):
     if image_size is None:
         return None
-    arr = np.asarray(image_size, dtype=float)
+    arr = check_array(image_size, "image_size", ndim=(1, 2))
     if arr.shape == (2,):
         arr = np.broadcast_to(arr, (n, 2))
     if arr.shape != (n, 2) or not np.all(arr > 0):
         raise ValueError(f"`image_size` must be (width, height) or an array of shape ({n}, 2) "
-                         f"with positive entries, got {np.asarray(image_size).tolist()!r}")
+                         f"with positive entries, got {np.asarray(image_size).tolist()!r:.80}")
     return arr
 
 
@@ -586,10 +627,15 @@ def synchronize_homographies(H, *, mask=None, weights=None, reference=0, robust=
     True
     """
     if isinstance(H, Mapping):
-        n = max(max(int(i), int(j)) for i, j in H) + 1 if H else 0
+        if not H:
+            raise ValueError("`H` must contain at least one pair, got an empty dict")
+        n = max(check_int(k, "H key", minimum=0) for key in H for k in key) + 1
+        _check_size(n, 3)
     else:
         H = check_array(H, "H", ndim=4, finite=False)
         n = H.shape[0]
+        if n == 0:
+            raise ValueError(f"`H` must hold at least one view, got shape {H.shape}")
     sizes = _image_sizes(image_size, n)
     scale = 1.0
     if sizes is not None:

@@ -1,14 +1,27 @@
-"""Parsing of pairwise inputs into stacked arrays (private).
+"""The one parser of pairwise inputs for every synchronization function (private).
 
-Accepted forms of ``pairwise``:
+Accepted forms of ``pairwise`` (permutations and soft matchings) and of ``T`` (linear maps):
 
-* a mapping ``{(i, j): value}`` with ``i != j`` non-negative ints; ``value`` an assignment index
-  array (``value[u] = v``, ``-1`` unmatched) or an ``(n_i, n_j)`` matrix (0/1 for permutations,
-  soft for the doubly-stochastic function);
+* a mapping ``{(i, j): value}`` with ``i != j`` non-negative ints;
 * an iterable of ``(i, j, value)`` triples;
-* a dense array of shape ``(N, N, n, n)`` (blocks) or ``(N, N, n)`` (assignments); which pairs are
-  used is given by ``mask`` (default: every ``i != j``). Each unordered pair is read once:
-  ``[i, j]`` (``i < j``) when ``mask[i, j]``, otherwise ``[j, i]``; every object has ``n`` nodes.
+* a dense array ``(N, N, ...)`` whose entry ``[i, j]`` is the observation of pair ``(i, j)``.
+
+Values of permutation inputs are assignments (``value[u] = v``, ``-1`` unmatched; validated by
+:func:`transync.permutations.check_assignment`) or ``(n_i, n_j)`` matrices (0/1 for
+permutations, converted by :func:`transync.permutations.matrix_to_assignment`; soft for the
+doubly-stochastic function). Linear maps are ``(d, d)`` matrices.
+
+``mask`` -- one meaning everywhere
+----------------------------------
+``mask`` is an ``(N, N)`` boolean (or 0/1) array (its diagonal is ignored) that selects the
+*pairs* to use: the pair ``{i, j}`` is used when ``mask[i, j] or mask[j, i]``. It only filters:
+every observation given for a selected pair is kept, observations of other pairs are ignored,
+whatever the form of the input (dict, triples or dense array). A dense array is read at the
+selected pairs: permutation arrays once per pair (``[i, j]`` with ``i < j`` when
+``mask[i, j]``, else ``[j, i]``: the two directions of a permutation carry the same
+information), linear-map arrays in every direction whose mask entry is True (a direction left out
+is the inverse of the other). ``mask=None`` selects every pair ``i != j``. A mask that selects
+none of the observed pairs is an error.
 
 Both ``(i, j)`` and ``(j, i)`` may be given: they are two observations of the same pair, both are
 kept (each with its weight) and the block matrix averages them.
@@ -22,7 +35,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validation import check_array, check_int
-from ..permutations import check_assignment
+from ..permutations import (
+    MAX_NODES,
+    assignment_to_matrix,
+    check_assignment,
+    matrix_to_assignment,
+)
 
 __all__: list[str] = []
 
@@ -54,284 +72,401 @@ class StackedPairs:
         return bool(np.all(self.maps[:, : self.sizes[0]] >= 0))
 
 
-def _items(pairwise, mask):
-    """Yield ``(i, j, value)`` from any accepted form."""
-    if isinstance(pairwise, Mapping):
-        for key, value in pairwise.items():
-            if not (isinstance(key, tuple) and len(key) == 2):
-                raise ValueError(f"`pairwise` keys must be pairs (i, j), got {key!r}")
-            i, j = key
-            if mask is not None and not _in_mask(mask, i, j):
-                continue
-            yield i, j, value
-        return
-    if isinstance(pairwise, np.ndarray) and pairwise.ndim in (3, 4):
-        n = pairwise.shape[0]
-        if pairwise.shape[1] != n:
-            raise ValueError(f"`pairwise` as an array must have shape (N, N, n[, n]), got "
-                             f"{pairwise.shape}")
-        if mask is not None and mask.shape != (n, n):
-            raise ValueError(f"`mask` must have shape ({n}, {n}) to match `pairwise`, got "
-                             f"{mask.shape}")
-        m = ~np.eye(n, dtype=bool) if mask is None else (mask & ~np.eye(n, dtype=bool))
-        # one read per unordered pair: [i, j] (i < j) where mask[i, j], else [j, i]
-        iu, ju = np.nonzero(np.triu(m | m.T, 1))
-        for i, j in zip(iu.tolist(), ju.tolist()):
-            if m[i, j]:
-                yield i, j, pairwise[i, j]
-            else:
-                yield j, i, pairwise[j, i]
-        return
-    try:
-        it = iter(pairwise)
-    except TypeError:
-        raise TypeError("`pairwise` must be a dict {(i, j): map}, an iterable of (i, j, map) or "
-                        f"an (N, N, n[, n]) array, got {type(pairwise).__name__}") from None
-    for item in it:
-        if not (isinstance(item, tuple) and len(item) == 3):
-            raise ValueError(f"`pairwise` as an iterable must hold (i, j, map) triples, got {item!r}")
-        i, j, value = item
-        if mask is not None and not _in_mask(mask, i, j):
-            continue
-        yield i, j, value
+# ----------------------------------------------------------------------------------------------
+# shared pieces: mask, universe, keys
+# ----------------------------------------------------------------------------------------------
+
+def check_mask(mask, n: int | None = None, *, against: str = "pairwise") -> np.ndarray | None:
+    """Validate ``mask``: square, boolean or 0/1, ``(n, n)`` if given; the diagonal is ignored."""
+    if mask is None:
+        return None
+    arr = check_array(mask, "mask", ndim=2, dtype=None, finite=False)
+    if arr.dtype != bool:
+        if arr.dtype.kind not in "iuf" or not np.all(np.isin(arr, (0, 1))):
+            raise ValueError(f"`mask` must be boolean (or 0/1), got dtype {arr.dtype}")
+        arr = arr.astype(bool)
+    if arr.shape[0] != arr.shape[1]:
+        raise ValueError(f"`mask` must be a square (N, N) array, got shape {arr.shape}")
+    if n is not None and arr.shape != (n, n):
+        raise ValueError(f"`mask` must have shape ({n}, {n}) to match `{against}`, got shape "
+                         f"{arr.shape}")
+    arr = arr.copy()
+    np.fill_diagonal(arr, False)             # self-pairs carry no information: ignored
+    return arr
 
 
-def _in_mask(mask, i, j) -> bool:
-    i, j = int(i), int(j)
+def mask_selects(mask: np.ndarray, i: int, j: int, *, name: str = "pairwise") -> bool:
+    """Whether ``mask`` selects the pair ``{i, j}`` (``mask[i, j] or mask[j, i]``)."""
     n = mask.shape[0]
     if not (0 <= i < n and 0 <= j < n):
-        raise ValueError(f"`mask` has shape {mask.shape} but `pairwise` holds pair {(i, j)}")
+        raise ValueError(f"`mask` has shape {mask.shape} but `{name}` holds pair {(i, j)}")
     return bool(mask[i, j] or mask[j, i])
 
 
-def _weight_of(weights, i, j):
-    if weights is None:
-        return 1.0
-    if isinstance(weights, Mapping):
-        if (i, j) in weights:
-            return weights[(i, j)]
-        if (j, i) in weights:
-            return weights[(j, i)]
-        raise ValueError(f"`weights` has no entry for pair {(i, j)}")
-    return weights[i, j]
+def check_universe(n_universe, sizes: np.ndarray) -> int | None:
+    """``max n_g <= n_universe <= sum n_g``: a slot that no node can fill is never needed."""
+    if n_universe is None:
+        return None
+    n_universe = check_int(n_universe, "n_universe", minimum=1)
+    n_max, total = int(sizes.max()), int(sizes.sum())
+    if n_universe < n_max:
+        raise ValueError(f"`n_universe` must be >= the largest object size {n_max}, got "
+                         f"{n_universe}")
+    if n_universe > total:
+        raise ValueError(f"`n_universe` must be <= the total number of nodes {total} (every "
+                         f"universe slot holds at least one node), got {n_universe}")
+    return n_universe
 
+
+def _key(i, j, name: str) -> tuple[int, int]:
+    try:
+        i = check_int(i, f"{name} key")
+        j = check_int(j, f"{name} key")
+    except TypeError:
+        raise TypeError(f"`{name}` keys must be pairs of ints, got {(i, j)!r}") from None
+    if i < 0 or j < 0:
+        raise ValueError(f"`{name}` keys must be non-negative object indices, got {(i, j)}")
+    if i == j:
+        raise ValueError(f"`{name}` must not contain pairs with i == j (self-pairs), got "
+                         f"{(i, j)}")
+    return i, j
+
+
+def observations(pairwise, mask, *, name: str = "pairwise", dense_both: bool = False):
+    """``[(i, j, value)]`` of the observations of the selected pairs, from any accepted form.
+
+    ``dense_both``: read a dense array in every masked direction (linear maps) instead of once
+    per pair (permutations). Keys are validated (ints, non-negative, ``i != j``).
+    """
+    out = []
+    if isinstance(pairwise, Mapping):
+        out = _mapping_observations(pairwise, name)
+    elif isinstance(pairwise, np.ndarray) and pairwise.ndim >= 3:
+        return _dense_observations(pairwise, mask, name=name, dense_both=dense_both)
+    else:
+        if isinstance(pairwise, (str, bytes)) or not hasattr(pairwise, "__iter__"):
+            raise TypeError(f"`{name}` must be a dict {{(i, j): map}}, an iterable of (i, j, map) "
+                            f"or an (N, N, ...) array, got {type(pairwise).__name__}")
+        for item in pairwise:
+            if not (isinstance(item, tuple) and len(item) == 3):
+                raise ValueError(f"`{name}` as an iterable must hold (i, j, map) triples, got "
+                                 f"{item!r:.80}")
+            out.append((*_key(item[0], item[1], name), item[2]))
+    if mask is not None:
+        kept = [o for o in out if mask_selects(mask, o[0], o[1], name=name)]
+        if out and not kept:
+            raise ValueError(f"`mask` selects none of the {len(out)} observed pairs of `{name}`")
+        out = kept
+    return out
+
+
+def _mapping_observations(pairwise: Mapping, name: str) -> list:
+    keys = list(pairwise.keys())
+    if keys and all(type(k) is tuple and len(k) == 2 for k in keys):
+        try:
+            karr = np.array(keys)
+        except (TypeError, ValueError):
+            karr = None
+        if karr is not None and karr.ndim == 2 and karr.dtype.kind in "iu":
+            bad = np.flatnonzero((karr < 0).any(1) | (karr[:, 0] == karr[:, 1]))
+            if not bad.size:                             # fast path: valid int keys
+                return [(int(i), int(j), v)
+                        for (i, j), v in zip(karr.tolist(), pairwise.values())]
+    out = []
+    for key, value in pairwise.items():
+        if not (isinstance(key, tuple) and len(key) == 2):
+            raise ValueError(f"`{name}` keys must be pairs (i, j), got {key!r}")
+        out.append((*_key(*key, name), value))
+    return out
+
+
+def _dense_observations(arr, mask, *, name, dense_both):
+    n = arr.shape[0]
+    if arr.shape[1] != n:
+        raise ValueError(f"`{name}` as an array must have shape (N, N, ...), got {arr.shape}")
+    if mask is not None and mask.shape != (n, n):
+        raise ValueError(f"`mask` must have shape ({n}, {n}) to match `{name}`, got "
+                         f"{mask.shape}")
+    m = ~np.eye(n, dtype=bool) if mask is None else mask
+    if dense_both:
+        return [(i, j, arr[i, j]) for i, j in zip(*np.nonzero(m))]
+    iu, ju = np.nonzero(np.triu(m | m.T, 1))
+    return [(i, j, arr[i, j]) if m[i, j] else (j, i, arr[j, i])
+            for i, j in zip(iu.tolist(), ju.tolist())]
+
+
+# ----------------------------------------------------------------------------------------------
+# permutations and soft matchings
+# ----------------------------------------------------------------------------------------------
 
 def parse_pairwise(pairwise, *, mask=None, weights=None, sizes=None, soft: bool = False,
                    name: str = "pairwise") -> StackedPairs:
     """Validate ``pairwise`` and stack it. ``soft=True`` keeps matrices as float blocks."""
-    if mask is not None:
-        mask = check_array(mask, "mask", ndim=2, dtype=bool)
-        if mask.shape[0] != mask.shape[1]:
-            raise ValueError(f"`mask` must be a square (N, N) array, got shape {mask.shape}")
-    if weights is not None and not isinstance(weights, Mapping):
-        weights = check_array(weights, "weights", ndim=2)
-        if weights.shape[0] != weights.shape[1]:
-            raise ValueError(f"`weights` must be a square (N, N) array or a dict, got shape "
-                             f"{weights.shape}")
-    fixed = None
+    mask = check_mask(mask)
+    weights = _check_weights_arg(weights)
+    fixed = _check_sizes_arg(sizes, pairwise)
+    ki, kj, raw = _observation_arrays(pairwise, mask, name)
+    if not raw and mask is not None:
+        raise ValueError(f"`mask` selects no pair of `{name}`")
+    if not raw:
+        raise ValueError(f"`{name}` must contain at least one observed pair i != j")
+    vals = _as_values(ki, kj, raw, soft, name)
+    ws = _pair_weights(weights, ki, kj)
+    n_obj = _count_objects(ki, kj, fixed, mask, name)
+    sizes_out = _infer_sizes(ki, kj, vals, fixed, n_obj, name)
+    pairs = np.column_stack([np.minimum(ki, kj), np.maximum(ki, kj)])
+    if soft:
+        maps, blocks = None, _stack_soft(ki, kj, vals, sizes_out)
+    else:
+        maps, blocks = _stack_maps(ki, kj, vals, sizes_out, name), None
+    # average duplicated observations of the same unordered pair
+    key = pairs[:, 0] * n_obj + pairs[:, 1]
+    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    return StackedPairs(n_objects=n_obj, sizes=sizes_out, pairs=pairs, maps=maps, soft=blocks,
+                        weights=ws / counts[inverse])
+
+
+def _check_weights_arg(weights):
+    if weights is None or isinstance(weights, Mapping):
+        return weights
+    weights = check_array(weights, "weights", ndim=2)
+    if weights.shape[0] != weights.shape[1]:
+        raise ValueError(f"`weights` must be a square (N, N) array or a dict, got shape "
+                         f"{weights.shape}")
+    if weights.size and weights.min() < 0:
+        raise ValueError(f"`weights` must be finite and >= 0, got {float(weights.min())}")
+    return weights
+
+
+def _check_sizes_arg(sizes, pairwise):
     if sizes is None and isinstance(pairwise, np.ndarray) and pairwise.ndim in (3, 4):
         sizes = np.full(pairwise.shape[0], pairwise.shape[2], dtype=np.int64)
-    if sizes is not None:
-        fixed = np.asarray(sizes)
-        if fixed.ndim != 1 or fixed.dtype.kind not in "iu" or (fixed.size and fixed.min() < 1):
-            raise ValueError(f"`sizes` must be a 1-d array of positive ints, got {sizes!r}")
-        fixed = fixed.astype(np.int64)
+    if sizes is None:
+        return None
+    fixed = np.asarray(sizes)
+    if fixed.ndim != 1 or fixed.dtype.kind not in "iu" or (fixed.size and fixed.min() < 1):
+        raise ValueError(f"`sizes` must be a 1-d array of positive ints, got {sizes!r:.80}")
+    if fixed.size and fixed.max() > MAX_NODES:
+        raise ValueError(f"`sizes` must be <= {MAX_NODES} nodes per object, got "
+                         f"{int(fixed.max())}")
+    return fixed.astype(np.int64)
 
-    keys_i: list[int] = []
-    keys_j: list[int] = []
-    vals: list[np.ndarray] = []
-    if isinstance(pairwise, Mapping) and mask is None:
-        raw_keys = list(pairwise.keys())
-        vals = [np.asarray(v) for v in pairwise.values()]
-        karr = np.array(raw_keys, dtype=object) if raw_keys else np.zeros((0, 2))
-        try:
-            karr = np.array(raw_keys)
-        except ValueError:
-            karr = None
-        if karr is not None and karr.ndim == 2 and karr.shape[1] == 2 and karr.dtype.kind in "iu":
-            keys_i = karr[:, 0].tolist()
-            keys_j = karr[:, 1].tolist()
-        else:
-            for key in raw_keys:
-                if not (isinstance(key, tuple) and len(key) == 2):
-                    raise ValueError(f"`{name}` keys must be pairs (i, j), got {key!r}")
-                try:
-                    keys_i.append(check_int(key[0], f"{name} key"))
-                    keys_j.append(check_int(key[1], f"{name} key"))
-                except TypeError:
-                    raise TypeError(f"`{name}` keys must be pairs of ints, got {key!r}") from None
-    else:
-        for i, j, value in _items(pairwise, mask):
-            try:
-                i = check_int(i, f"{name} key"); j = check_int(j, f"{name} key")  # noqa: E702
-            except TypeError:
-                raise TypeError(f"`{name}` keys must be pairs of ints, got {(i, j)!r}") from None
-            keys_i.append(i); keys_j.append(j); vals.append(np.asarray(value))  # noqa: E702
-    if not vals:
-        raise ValueError(f"`{name}` must contain at least one observed pair i != j")
-    ki_arr = np.asarray(keys_i, dtype=np.int64)
-    kj_arr = np.asarray(keys_j, dtype=np.int64)
-    if ki_arr.min() < 0 or kj_arr.min() < 0:
-        q = int(np.flatnonzero((ki_arr < 0) | (kj_arr < 0))[0])
-        raise ValueError(f"`{name}` keys must be non-negative object indices, got "
-                         f"{(keys_i[q], keys_j[q])}")
-    if np.any(ki_arr == kj_arr):
-        q = int(np.flatnonzero(ki_arr == kj_arr)[0])
-        raise ValueError(f"`{name}` must not contain pairs with i == j, got "
-                         f"{(keys_i[q], keys_j[q])}")
-    for q, arr in enumerate(vals):
-        if arr.ndim not in (1, 2):
-            raise ValueError(f"`{name}[{(keys_i[q], keys_j[q])}]` must be an assignment (1-d) or "
-                             f"a matrix (2-d), got shape {arr.shape}")
-    is_matrix = [arr.ndim == 2 for arr in vals]
+
+@dataclass
+class _Values:
+    """Validated values: ``items[q] = (array, n_columns)`` (an int64 assignment, ``n_columns``
+    None or the column count of the 0/1 matrix it came from; a float matrix with ``soft``), and
+    ``stacked`` ``(Q, n)`` when every value is an assignment of the same length ``n``."""
+
+    items: list | None
+    stacked: np.ndarray | None = None
+
+    def __getitem__(self, q):
+        return self.items[q]
+
+
+def _observation_arrays(pairwise, mask, name):
+    """``(ki, kj, values)`` of the selected observations; dicts with int keys vectorized."""
+    if isinstance(pairwise, Mapping):
+        keys = _int_keys(pairwise)
+        if keys is not None:
+            ki, kj = keys
+            raw = list(pairwise.values())
+            if mask is not None and ki.size:
+                top = np.maximum(ki, kj)
+                if top.max() >= mask.shape[0]:
+                    q = int(np.flatnonzero(top >= mask.shape[0])[0])
+                    raise ValueError(f"`mask` has shape {mask.shape} but `{name}` holds pair "
+                                     f"{(int(ki[q]), int(kj[q]))}")
+                idx = np.flatnonzero(mask[ki, kj] | mask[kj, ki])
+                if not idx.size:
+                    raise ValueError(f"`mask` selects none of the {ki.size} observed pairs of "
+                                     f"`{name}`")
+                ki, kj, raw = ki[idx], kj[idx], [raw[q] for q in idx.tolist()]
+            return ki, kj, raw
+    obs = observations(pairwise, mask, name=name)
+    return (np.array([o[0] for o in obs], dtype=np.int64),
+            np.array([o[1] for o in obs], dtype=np.int64), [o[2] for o in obs])
+
+
+def _int_keys(pairwise: Mapping):
+    """Keys as two int arrays when all are valid ``(i, j)`` int pairs, else None."""
+    keys = list(pairwise.keys())
+    if not keys or not all(type(k) is tuple and len(k) == 2 for k in keys):
+        return None
+    try:
+        karr = np.array(keys)
+    except (TypeError, ValueError):
+        return None
+    if karr.ndim != 2 or karr.dtype.kind not in "iu":
+        return None
+    if np.any((karr < 0).any(1) | (karr[:, 0] == karr[:, 1])):
+        return None                                  # the slow path names the bad key
+    karr = karr.astype(np.int64)
+    return karr[:, 0].copy(), karr[:, 1].copy()
+
+
+def _as_values(ki, kj, raw, soft: bool, name: str) -> _Values:
+    """Validate every value (assignments by ``check_assignment``, 0/1 matrices by
+    ``matrix_to_assignment``, soft ones by ``check_array``)."""
+    if (not soft and all(isinstance(v, np.ndarray) and v.ndim == 1 and v.dtype.kind == "i"
+                         for v in raw) and len({v.shape[0] for v in raw}) == 1):
+        stacked = np.stack(raw).astype(np.int64, copy=False)      # fast path: one check
+        bad = (stacked < -1).any(1)
+        srt = np.sort(stacked, axis=1)
+        bad |= ((srt[:, 1:] == srt[:, :-1]) & (srt[:, 1:] >= 0)).any(1)
+        if not bad.any():
+            return _Values(None, stacked)
+        q = int(np.flatnonzero(bad)[0])
+        check_assignment(stacked[q], f"{name}[{(int(ki[q]), int(kj[q]))}]")   # raises
+    return _Values([_as_value(v, f"{name}[{(i, j)}]", soft)
+                    for i, j, v in zip(ki.tolist(), kj.tolist(), raw)])
+
+
+def _as_value(value, label: str, soft: bool) -> tuple[np.ndarray, int | None]:
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"`{label}` must be an assignment or a matrix, got {type(value).__name__}")
+    arr = np.asarray(value)
+    if arr.ndim == 1:
+        return check_assignment(arr, label), None
+    if arr.ndim != 2:
+        raise ValueError(f"`{label}` must be an assignment (1-d) or a matrix (2-d), got shape "
+                         f"{arr.shape}")
+    if soft:
+        return check_array(arr, label, ndim=2), arr.shape[1]
+    return matrix_to_assignment(arr, name=label), arr.shape[1]
+
+
+def _pair_weights(weights, ki, kj) -> np.ndarray:
     if weights is None:
-        ws = np.ones(len(vals))
-    elif isinstance(weights, Mapping):
-        ws = np.array([float(_weight_of(weights, i, j)) for i, j in zip(keys_i, keys_j)])
+        return np.ones(ki.size)
+    if isinstance(weights, Mapping):
+        ws = []
+        for i, j in zip(ki.tolist(), kj.tolist()):
+            if (i, j) in weights:
+                w = weights[(i, j)]
+            elif (j, i) in weights:
+                w = weights[(j, i)]
+            else:
+                raise ValueError(f"`weights` has no entry for pair {(i, j)}")
+            ws.append(check_array(w, f"weights[{(i, j)}]", ndim=0, finite=False))
+        ws = np.array(ws, dtype=float)
     else:
-        if max(ki_arr.max(), kj_arr.max()) >= weights.shape[0]:
-            raise ValueError(f"`weights` must be ({int(max(ki_arr.max(), kj_arr.max())) + 1}, ...) "
-                             f"or larger, got shape {weights.shape}")
-        ws = weights[ki_arr, kj_arr].astype(float)
-    if np.any(~np.isfinite(ws)) or np.any(ws < 0):
-        q = int(np.flatnonzero(~np.isfinite(ws) | (ws < 0))[0])
-        raise ValueError(f"`weights` must be finite and >= 0, got {ws[q]!r} for pair "
-                         f"{(keys_i[q], keys_j[q])}")
+        top = int(max(ki.max(), kj.max()))
+        if top >= weights.shape[0]:
+            raise ValueError(f"`weights` must be ({top + 1}, {top + 1}) or larger, got shape "
+                             f"{weights.shape}")
+        ws = weights[ki, kj].astype(float)
+    bad = np.flatnonzero(~np.isfinite(ws) | (ws < 0))
+    if bad.size:
+        q = int(bad[0])
+        raise ValueError(f"`weights` must be finite and >= 0, got {float(ws[q])} for pair "
+                         f"{(int(ki[q]), int(kj[q]))}")
+    return ws
 
-    ki, kj = ki_arr, kj_arr
+
+def _count_objects(ki, kj, fixed, mask, name) -> int:
+    """Number of objects; every object without an observation needs ``sizes``."""
     n_obj = int(max(ki.max(), kj.max())) + 1
     if fixed is not None:
         if fixed.size < n_obj:
             raise ValueError(f"`sizes` must have an entry for every object (>= {n_obj}), got "
                              f"{fixed.size}")
-        n_obj = fixed.size
+        return int(fixed.size)
     if mask is not None:
         n_obj = max(n_obj, mask.shape[0])
+    seen = np.unique(np.concatenate([ki, kj]))
+    if seen.size < n_obj:
+        missing = np.setdiff1d(np.arange(min(n_obj, seen.size + 6)), seen)[:5]
+        raise ValueError(f"`{name}`: cannot infer the size of object(s) {missing.tolist()} "
+                         f"(objects 0 .. {n_obj - 1}, {n_obj - seen.size} of them in no pair); "
+                         "pass `sizes=` or renumber the objects")
+    return n_obj
 
-    # sizes: exact from lengths / matrix shapes, lower bounds from targets
-    exact = np.full(n_obj, -1, dtype=np.int64) if fixed is None else fixed.copy()
-    lower = np.zeros(n_obj, dtype=np.int64)
-    stacked = None
 
-    def _set_exact(g, value, what):
-        if exact[g] >= 0 and exact[g] != value:
-            raise ValueError(f"`{name}`: mismatched sizes for object {g}: {what} has size "
-                             f"{value} but object {g} has {exact[g]} nodes elsewhere")
-        exact[g] = value
-
-    if not any(is_matrix):
-        lens = np.fromiter((a.shape[0] for a in vals), dtype=np.int64, count=len(vals))
-        stacked = None
-        if lens.min() == lens.max() and all(a.dtype.kind in "iu" for a in vals):
-            stacked = np.stack(vals).astype(np.int64, copy=False)
-            maxs = stacked.max(1) if stacked.shape[1] else np.full(len(vals), -1)
-        else:
-            maxs = np.fromiter((int(np.max(a)) if a.size else -1 for a in vals),
-                               dtype=np.int64, count=len(vals))
-        order = np.argsort(ki_arr, kind="stable")
-        ks, ls = ki_arr[order], lens[order]
-        first = np.r_[True, ks[1:] != ks[:-1]]
-        grp_len = ls[first]
-        grp_obj = ks[first]
-        # every occurrence of an object as a source must have the same length
-        bad = np.flatnonzero(ls != np.repeat(grp_len, np.diff(np.r_[np.flatnonzero(first), ks.size])))
-        if bad.size:
-            g = int(ks[bad[0]])
-            raise ValueError(f"`{name}`: mismatched sizes for object {g}: its assignments have "
-                             f"lengths {sorted(set(ls[ks == g].tolist()))}")
-        for g, n_g in zip(grp_obj.tolist(), grp_len.tolist()):
-            _set_exact(g, n_g, "an assignment")
-        np.maximum.at(lower, kj_arr, maxs + 1)
+def _infer_sizes(ki, kj, vals, fixed, n_obj, name) -> np.ndarray:
+    """Object sizes: exact from lengths / matrix shapes, lower bounds from targets (vectorized
+    over the observations; the first conflict in input order is reported)."""
+    Q = ki.size
+    if vals.stacked is not None:
+        n = vals.stacked.shape[1]
+        lens = np.full(Q, n, dtype=np.int64)
+        cols = np.full(Q, -1, dtype=np.int64)
+        tops = vals.stacked.max(1) if n else np.full(Q, -1, dtype=np.int64)
     else:
-        for i, j, arr, mat in zip(keys_i, keys_j, vals, is_matrix):
-            if mat:
-                _set_exact(i, arr.shape[0], f"pair {(i, j)} (rows)")
-                _set_exact(j, arr.shape[1], f"pair {(i, j)} (columns)")
-            else:
-                _set_exact(i, arr.shape[0], f"pair {(i, j)}")
-                if arr.size:
-                    lower[j] = max(lower[j], int(np.max(arr)) + 1)
-    sizes_out = np.where(exact >= 0, exact, np.maximum(lower, 0))
-    bad = np.flatnonzero((exact >= 0) & (lower > exact))
+        lens = np.fromiter((a.shape[0] for a, _ in vals.items), dtype=np.int64, count=Q)
+        cols = np.fromiter((-1 if n2 is None else n2 for _, n2 in vals.items), dtype=np.int64,
+                           count=Q)
+        tops = np.fromiter((int(a.max()) if n2 is None and a.size else -1
+                            for a, n2 in vals.items), dtype=np.int64, count=Q)
+    mat = cols >= 0
+    # every (object, size) claim: rows of every observation, columns of matrices
+    obj = np.concatenate([ki, kj[mat]])
+    size = np.concatenate([lens, cols[mat]])
+    src = np.concatenate([np.arange(Q), np.flatnonzero(mat)])
+    if fixed is not None:
+        ref = fixed[obj]
+    else:
+        first = np.full(n_obj, -1, dtype=np.int64)
+        order = np.lexsort((src, obj))[::-1]              # earliest claim of each object wins
+        first[obj[order]] = size[order]
+        ref = first[obj]
+    bad = np.flatnonzero(size != ref)
     if bad.size:
-        g = int(bad[0])
-        raise ValueError(f"`{name}`: mismatched sizes: some map targets node {lower[g] - 1} of "
-                         f"object {g}, which has only {exact[g]} nodes")
+        c = bad[np.argmin(src[bad])]
+        q, g = int(src[c]), int(obj[c])
+        raise ValueError(f"`{name}`: mismatched sizes for object {g}: pair "
+                         f"{(int(ki[q]), int(kj[q]))} gives it {int(size[c])} nodes but object "
+                         f"{g} has {int(ref[c])} nodes elsewhere")
+    exact = np.full(n_obj, -1, dtype=np.int64) if fixed is None else fixed.copy()
+    exact[obj] = size
+    lower = np.zeros(n_obj, dtype=np.int64)
+    np.maximum.at(lower, kj, tops + 1)
+    over = np.flatnonzero((exact[kj] >= 0) & (tops >= exact[kj]))
+    if over.size:
+        q = int(over[0])
+        g = int(kj[q])
+        raise ValueError(f"`{name}[{(int(ki[q]), g)}]` targets node {int(tops[q])}, beyond "
+                         f"object {g}'s {int(exact[g])} nodes (mismatched sizes)")
+    sizes_out = np.where(exact >= 0, exact, lower)
     empty = np.flatnonzero(sizes_out == 0)
     if empty.size:
-        raise ValueError(f"`{name}`: cannot infer the size of object(s) {empty.tolist()[:5]}; "
-                         "pass `sizes=`")
-    n_max = int(sizes_out.max())
+        raise ValueError(f"`{name}`: cannot infer the size of object(s) {empty.tolist()[:5]} "
+                         "(no node is ever matched); pass `sizes=`")
+    return sizes_out.astype(np.int64)
 
-    Q = len(vals)
-    pairs = np.column_stack([np.minimum(ki, kj), np.maximum(ki, kj)])
-    flip = ki > kj
-    maps = None
-    soft_blocks = None
-    if soft:
-        soft_blocks = np.zeros((Q, n_max, n_max))
-        for q, (i, j, arr, mat) in enumerate(zip(keys_i, keys_j, vals, is_matrix)):
-            if mat:
-                block = check_array(arr, f"{name}[{(i, j)}]", ndim=2)
-            else:
-                a = check_assignment(arr, f"{name}[{(i, j)}]", n2=sizes_out[j])
-                block = np.zeros((sizes_out[i], sizes_out[j]))
-                r = np.flatnonzero(a >= 0)
-                block[r, a[r]] = 1.0
-            if flip[q]:
-                block = block.T
-            soft_blocks[q, : block.shape[0], : block.shape[1]] = block
+
+def _stack_soft(ki, kj, vals, sizes) -> np.ndarray:
+    n_max = int(sizes.max())
+    blocks = np.zeros((ki.size, n_max, n_max))
+    for q, (i, j, (arr, _)) in enumerate(zip(ki.tolist(), kj.tolist(), vals.items)):
+        block = arr if arr.ndim == 2 else assignment_to_matrix(arr, int(sizes[j]))
+        if i > j:
+            block = block.T
+        blocks[q, : block.shape[0], : block.shape[1]] = block
+    return blocks
+
+
+def _stack_maps(ki, kj, vals, sizes, name) -> np.ndarray:
+    """(Q, n_max) maps oriented ``min -> max``; targets checked against the object sizes."""
+    n_max = int(sizes.max())
+    maps = np.full((ki.size, n_max), -1, dtype=np.int64)
+    if vals.stacked is not None:
+        maps[:, : vals.stacked.shape[1]] = vals.stacked
     else:
-        maps = np.full((Q, n_max), -1, dtype=np.int64)
-        if stacked is not None and stacked.shape[1] == n_max:
-            if stacked.min() < -1:
-                raise ValueError(f"`{name}` assignments must hold entries >= -1, got "
-                                 f"{int(stacked.min())}")
-            tgt_size = sizes_out[kj]
-            if np.any(stacked >= tgt_size[:, None]):
-                q = int(np.flatnonzero((stacked >= tgt_size[:, None]).any(1))[0])
-                raise ValueError(f"`{name}[{(keys_i[q], keys_j[q])}]` targets a node beyond "
-                                 f"object {keys_j[q]}'s {tgt_size[q]} nodes")
-            srt = np.sort(stacked, axis=1)
-            dup = (srt[:, 1:] == srt[:, :-1]) & (srt[:, 1:] >= 0)
-            if dup.any():
-                q = int(np.flatnonzero(dup.any(1))[0])
-                raise ValueError(f"`{name}[{(keys_i[q], keys_j[q])}]` must be injective (a "
-                                 "partial permutation): a target node is used twice")
-            maps[:] = stacked
-        else:
-            for q, (i, j, arr, mat) in enumerate(zip(keys_i, keys_j, vals, is_matrix)):
-                label = f"{name}[{(i, j)}]"
-                if mat:
-                    M = check_array(arr, label, ndim=2)
-                    if not _is_partial_perm(M):
-                        raise ValueError(
-                            f"`{label}` must be a 0/1 partial-permutation matrix (at most one 1 "
-                            "per row and column); for soft matrices use "
-                            "synchronize_doubly_stochastic or round them with solve_lap")
-                    a = np.full(M.shape[0], -1, dtype=np.int64)
-                    r, c = np.nonzero(M > 0.5)
-                    a[r] = c
-                else:
-                    a = check_assignment(arr, label, n2=sizes_out[j])
-                maps[q, : a.shape[0]] = a
-        if flip.any():
-            for q in np.flatnonzero(flip):
-                i, j = int(ki[q]), int(kj[q])
-                a = maps[q, : sizes_out[i]]
-                inv = np.full(n_max, -1, dtype=np.int64)
-                r = np.flatnonzero(a >= 0)
-                inv[a[r]] = r
-                maps[q] = inv
-    # average duplicated observations of the same unordered pair
-    w = np.asarray(ws, dtype=float).copy()
-    key = pairs[:, 0] * n_obj + pairs[:, 1]
-    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
-    w = w / counts[inverse]
-    return StackedPairs(n_objects=n_obj, sizes=sizes_out.astype(np.int64), pairs=pairs,
-                        maps=maps, soft=soft_blocks, weights=w)
-
-
-def _is_partial_perm(M: np.ndarray, atol: float = 1e-8) -> bool:
-    binary = np.all((np.abs(M) <= atol) | (np.abs(M - 1) <= atol))
-    return bool(binary and np.all(M.sum(0) <= 1 + atol) and np.all(M.sum(1) <= 1 + atol))
+        for q, (arr, _) in enumerate(vals.items):
+            maps[q, : arr.shape[0]] = arr
+    tgt = sizes[kj][:, None]
+    beyond = maps >= tgt
+    if beyond.any():
+        q = int(np.flatnonzero(beyond.any(1))[0])
+        raise ValueError(f"`{name}[{(int(ki[q]), int(kj[q]))}]` targets node "
+                         f"{int(maps[q].max())}, beyond object {int(kj[q])}'s {int(tgt[q, 0])} "
+                         "nodes")
+    for q in np.flatnonzero(ki > kj):                     # store as the inverse map j -> i
+        a = maps[q, : sizes[ki[q]]]
+        inv = np.full(n_max, -1, dtype=np.int64)
+        r = np.flatnonzero(a >= 0)
+        inv[a[r]] = r
+        maps[q] = inv
+    return maps

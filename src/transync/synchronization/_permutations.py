@@ -11,6 +11,7 @@ diagonal) and identity blocks on the diagonal; for consistent input ``T = X X^T`
 
 from __future__ import annotations
 
+import numbers
 import time
 import warnings
 
@@ -22,10 +23,11 @@ from scipy.sparse.csgraph import connected_components
 
 from .._validation import as_generator, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning, DegenerateInputError
-from ..permutations import _triangle_report
+from ..permutations import MultiMatching, cycle_inconsistency_arrays
 from . import _spectral as spec
-from ._pairwise_input import StackedPairs, parse_pairwise
-from ._result import PermutationSyncResult
+from ._linalg import polar
+from ._pairwise_input import StackedPairs, check_universe, parse_pairwise
+from ._result import BlockRounding, PermutationSyncResult
 
 __all__ = ["synchronize_permutations"]
 
@@ -60,27 +62,19 @@ def _padded(labels, n_max):
 
 def _agreement(stk: StackedPairs, labels, d: int):
     """(weighted agreements, observed matched entries, agreed entries) of labels vs input."""
-    lab = _padded(labels, stk.maps.shape[1])
-    inv = np.full((stk.n_objects, d + 1), -1, dtype=np.int64)
-    g, u = np.nonzero(lab >= 0)
-    inv[g, lab[g, u]] = u
+    matching = labels if isinstance(labels, MultiMatching) else MultiMatching(labels, d)
     agree = 0.0
     n_obs = 0
     n_ok = 0
     for s in range(0, stk.pairs.shape[0], 50_000):
         pr = stk.pairs[s:s + 50_000]
         mp = stk.maps[s:s + 50_000]
-        derived = inv[pr[:, 1][:, None], lab[pr[:, 0]]]
+        derived = matching.pairwise_array(pr)
         hit = (mp >= 0) & (derived == mp)
         agree += float((hit.sum(1) * stk.weights[s:s + 50_000]).sum())
         n_obs += int((mp >= 0).sum())
         n_ok += int(hit.sum())
     return agree, n_obs, n_ok
-
-
-def _polar(M: np.ndarray) -> np.ndarray:
-    U, _, Vt = np.linalg.svd(M, full_matrices=False)
-    return U @ Vt
 
 
 def _node_scores(stk: StackedPairs, labels, d: int, dobs=None):
@@ -92,18 +86,15 @@ def _node_scores(stk: StackedPairs, labels, d: int, dobs=None):
     where at least one claims a partner), 0 when nothing is claimed.
     """
     sizes = stk.sizes
-    n_max = int(sizes.max())
     ptr, dst, dmaps, dw = dobs if dobs is not None else spec.directed(stk)
-    lab = _padded(labels, n_max)
-    inv = np.full((stk.n_objects, d + 1), -1, dtype=np.int64)
-    g_idx, u_idx = np.nonzero(lab >= 0)
-    inv[g_idx, lab[g_idx, u_idx]] = u_idx
+    matching = MultiMatching(labels, d)
     scores = []
     for g in range(stk.n_objects):
         lo, hi = ptr[g], ptr[g + 1]
         n_g = int(sizes[g])
         obs = dmaps[lo:hi, :n_g]                                    # (deg, n_g)
-        out = inv[dst[lo:hi, None], lab[g, :n_g][None, :]]          # label -1 -> column d: -1
+        pairs = np.column_stack([np.full(hi - lo, g), dst[lo:hi]])
+        out = matching.pairwise_array(pairs)[:, :n_g]               # output maps g -> dst
         w = dw[lo:hi, None]
         agree = (w * ((obs >= 0) & (out == obs))).sum(0)
         claim = (w * ((obs >= 0) | (out >= 0))).sum(0)
@@ -141,7 +132,7 @@ def _refine_labels(stk: StackedPairs, labels, d: int, max_sweeps: int, dobs=None
             tgt = lab[dst[lo:hi, None], np.where(a >= 0, a, n_max)]      # (deg, n_g) slots
             e, u = np.nonzero(tgt >= 0)
             S = np.bincount(u * d + tgt[e, u], weights=dw[lo:hi][e],
-                            minlength=n_g * d).reshape(n_g, d)
+                            minlength=n_g * d).reshape(n_g, d).astype(float, copy=False)
             cur = lab[g, :n_g]
             placed = np.flatnonzero(cur >= 0)
             S[placed, cur[placed]] += tie
@@ -265,7 +256,7 @@ def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, re
     # Q_i: n_i x d with orthonormal rows; stacked with a zero row at index n_max for "-1"
     Qs = np.zeros((N, n_max + 1, d))
     for g in range(N):
-        Qs[g, : sizes[g]] = _polar(V[off[g]:off[g + 1]] + 1e-12)
+        Qs[g, : sizes[g]] = polar(V[off[g]:off[g + 1]] + 1e-12)
     ptr, dst, dmaps, dw = spec.directed(stk)
 
     def _B(g):
@@ -286,7 +277,7 @@ def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, re
         for g in range(N):
             B = _B(g)
             if np.any(B):
-                Qs[g, : sizes[g]] = _polar(B)
+                Qs[g, : sizes[g]] = polar(B)
         history.append(_objective())
         if abs(history[-1] - history[-2]) <= orth_tol * max(abs(history[-1]), 1e-12):
             converged = True
@@ -321,22 +312,6 @@ def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, re
     info["candidates"] = scores
     info["chosen"] = best[0]
     return best[2], d, it, converged and ok_eig, stacked
-
-
-def _matcheig_pairwise(V: np.ndarray, sizes: np.ndarray, threshold: float):
-    """MatchEIG block rounding: Hungarian on ``V_i V_j^T`` (rows normalized), drop < threshold."""
-    off = np.concatenate([[0], np.cumsum(sizes)])
-    Vn = V / np.maximum(np.linalg.norm(V, axis=1, keepdims=True), 1e-300)
-
-    def fn(i, j):
-        S = Vn[off[i]:off[i + 1]] @ Vn[off[j]:off[j + 1]].T
-        r, c = linear_sum_assignment(S, maximize=True)
-        a = np.full(S.shape[0], -1, dtype=np.int64)
-        keep = S[r, c] >= threshold
-        a[r[keep]] = c[keep]
-        return a
-
-    return fn
 
 
 # --------------------------------------------------------------------------------------------
@@ -401,8 +376,10 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
     (``info["node_scores"]``); nodes scoring below ``min_score`` are dropped.
 
     A disconnected observation graph is detected; with ``disconnected="separate"`` (default)
-    every connected component is synchronized on its own, into its own universe, and the ids are
-    offset so that different components never share a slot (``info["components"]``); with
+    every connected component is synchronized on its own, into its own universe (of size
+    ``n_universe``, or its number of nodes when that is smaller), and the ids are
+    offset so that different components never share a slot (``info["components"]``); maps
+    between components are empty (all ``-1``). With
     ``"raise"`` a :class:`~transync.exceptions.DegenerateInputError` names the components.
 
     Parameters
@@ -412,7 +389,7 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
         ``(j, i)`` are given they count as two observations of the pair, averaged in ``T``.
         An ``(N, N, n)`` assignment or ``(N, N, n, n)`` block array is read where ``mask``.
     n_universe : int, optional
-        Universe size ``d``, at least the largest object.
+        Universe size ``d``: at least the largest object, at most the total number of nodes.
     method : {"spectral", "orthogonal", "matcheig"}, default="spectral"
     mask : (N, N) bool array, optional
         Which pairs to use.
@@ -464,13 +441,53 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
     >>> bool((res.pairwise(0, 3) == data.true_pairwise(0, 3)).all())
     True
     """
+    opts = _check_options(method=method, solver=solver, disconnected=disconnected,
+                          max_iter=max_iter, tol=tol, eig_tol=eig_tol, threshold=threshold,
+                          refine=refine, min_score=min_score, max_triangles=max_triangles)
+    gen = as_generator(rng)
+    t_start = time.perf_counter()
+    stk = parse_pairwise(pairwise, mask=mask, weights=weights, sizes=sizes)
+    n_universe = check_universe(n_universe, stk.sizes)
+    info: dict = {"method": method, "seconds_parse": time.perf_counter() - t_start}
+    comps = _observation_components(stk, opts["disconnected"])
+    info["components"] = comps
+    labels, d_total, n_iter, converged, comp_info, embeddings = _synchronize_components(
+        stk, comps, n_universe, opts, gen)
+    if min_score is not None:
+        scores = _node_scores(stk, labels, d_total)
+        labels = [np.where(sc >= opts["min_score"], lab, -1) for lab, sc in zip(labels, scores)]
+        info["node_scores"] = tuple(scores)
+        info["n_unplaced"] = int(sum(int((lab < 0).sum()) for lab in labels))
+    matching = MultiMatching(tuple(labels), d_total)
+    if len(comps) == 1:
+        for key, value in comp_info[0].items():
+            if key not in ("objects", "offset"):
+                info.setdefault(key, value)
+    info["component_info"] = comp_info
+    agree, n_obs, n_ok = _agreement(stk, matching, d_total)
+    info["input_disagreement"] = float(1 - n_ok / n_obs) if n_obs else 0.0
+    info["input_consistency"] = cycle_inconsistency_arrays(
+        stk.pairs, stk.maps, stk.sizes, max_triangles=opts["max_triangles"], rng=gen)
+    objective = agree
+    rounding = None
+    if method == "matcheig":
+        rounding = _block_rounding(stk, comps, embeddings, opts["threshold"])
+        objective = _observed_objective(stk, rounding, info)
+    info["seconds_total"] = time.perf_counter() - t_start
+    return PermutationSyncResult(matching=matching, objective=float(objective),
+                                 n_iter=int(n_iter), converged=bool(converged),
+                                 cycle_consistent=rounding is None, info=info,
+                                 _block_rounding=rounding)
+
+
+def _check_options(*, method, solver, disconnected, max_iter, tol, eig_tol, threshold, refine,
+                   min_score, max_triangles) -> dict:
+    """Validate the options of :func:`synchronize_permutations` (stage 1)."""
     check_choice(method, "method", _METHODS)
     check_choice(solver, "solver", _SOLVERS)
     check_choice(disconnected, "disconnected", ("separate", "raise"))
     max_iter = check_int(max_iter, "max_iter", minimum=1)
-    tol = check_positive(tol, "tol")
-    eig_tol = check_positive(eig_tol, "eig_tol")
-    threshold = float(threshold)
+    threshold = _check_real(threshold, "threshold")
     if refine is None:
         n_refine = max_iter if method == "orthogonal" else 0
     else:
@@ -482,112 +499,99 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
         min_score = check_positive(min_score, "min_score", allow_zero=True)
         if min_score > 1:
             raise ValueError(f"`min_score` must lie in [0, 1], got {min_score!r}")
-    gen = as_generator(rng)
-    t_start = time.perf_counter()
-    stk = parse_pairwise(pairwise, mask=mask, weights=weights, sizes=sizes)
-    n_max = int(stk.sizes.max())
-    if n_universe is not None:
-        n_universe = check_int(n_universe, "n_universe", minimum=1)
-        if n_universe < n_max:
-            raise ValueError(f"`n_universe` must be >= the largest object size {n_max}, got "
-                             f"{n_universe}")
-    info: dict = {"method": method, "seconds_parse": time.perf_counter() - t_start}
+    return {"method": method, "solver": solver, "disconnected": disconnected,
+            "max_iter": max_iter, "tol": check_positive(tol, "tol"),
+            "eig_tol": check_positive(eig_tol, "eig_tol"), "threshold": threshold,
+            "refine": n_refine, "min_score": min_score,
+            "max_triangles": check_int(max_triangles, "max_triangles", minimum=1)}
 
-    # connected components of the observation graph (pairs with positive weight)
+
+def _check_real(value, name: str) -> float:
+    """A finite real number (``threshold`` may be negative: it compares cosines)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"`{name}` must be a real number, got {type(value).__name__} {value!r}")
+    if not np.isfinite(value):
+        raise ValueError(f"`{name}` must be finite, got {value!r}")
+    return float(value)
+
+
+def _observation_components(stk: StackedPairs, disconnected: str) -> list[np.ndarray]:
+    """Connected components of the observation graph (pairs with positive weight)."""
     pos = stk.weights > 0
     G = sp.coo_matrix((np.ones(int(pos.sum())), (stk.pairs[pos, 0], stk.pairs[pos, 1])),
                       shape=(stk.n_objects, stk.n_objects))
     n_comp, comp = connected_components(G, directed=False)
     comps = [np.flatnonzero(comp == c) for c in range(n_comp)]
-    info["components"] = comps
     if n_comp > 1 and disconnected == "raise":
         raise DegenerateInputError(
             f"the observation graph is disconnected: {n_comp} components, e.g. objects "
             f"{comps[0].tolist()[:10]} and {comps[1].tolist()[:10]}; pass "
             "disconnected='separate' to synchronize each component on its own")
+    return comps
 
-    labels: list[np.ndarray | None] = [None] * stk.n_objects
-    offset = 0
-    n_iter = 0
+
+def _synchronize_components(stk, comps, n_universe, opts, gen):
+    """Synchronize every component into its own block of universe slots (stage 3)."""
+    labels: list = [None] * stk.n_objects
+    offset = n_iter = 0
     converged = True
-    comp_info = []
-    embeddings = []
+    comp_info, embeddings = [], []
     for objs in comps:
         cinfo: dict = {}
+        # a component never needs more slots than it has nodes
+        d_req = None if n_universe is None else min(n_universe, int(stk.sizes[objs].sum()))
         if objs.size == 1:
             g = int(objs[0])
-            d_c = n_universe if n_universe is not None else int(stk.sizes[g])
+            d_c = d_req if d_req is not None else int(stk.sizes[g])
             labels[g] = np.arange(stk.sizes[g], dtype=np.int64) + offset
             offset += d_c
             comp_info.append({"objects": objs, "n_universe": d_c})
             embeddings.append(None)
             continue
         sub = _subset(stk, objs)
-        if method == "orthogonal":
-            lab, d_c, it, ok, emb = _component_orthogonal(sub, n_universe, solver, eig_tol, gen,
-                                                         cinfo, max_iter, tol, n_refine)
+        if opts["method"] == "orthogonal":
+            lab, d_c, it, ok, emb = _component_orthogonal(
+                sub, d_req, opts["solver"], opts["eig_tol"], gen, cinfo, opts["max_iter"],
+                opts["tol"], opts["refine"])
         else:
-            lab, d_c, it, ok, emb = _component_spectral(sub, n_universe, solver, eig_tol, gen,
-                                                       cinfo, n_refine)
+            lab, d_c, it, ok, emb = _component_spectral(
+                sub, d_req, opts["solver"], opts["eig_tol"], gen, cinfo, opts["refine"])
         for g, lab_g in zip(objs.tolist(), lab):
             labels[g] = np.where(lab_g >= 0, lab_g + offset, -1)
         cinfo.update({"objects": objs, "n_universe": d_c, "offset": offset})
         comp_info.append(cinfo)
-        embeddings.append((objs, emb))
+        embeddings.append(emb)
         offset += d_c
         n_iter += it
         converged &= bool(ok)
-    d_total = offset
-    if min_score is not None:
-        scores = _node_scores(stk, labels, d_total)
-        labels = [np.where(sc >= min_score, lab, -1) for lab, sc in zip(labels, scores)]
-        info["node_scores"] = tuple(scores)
-        info["n_unplaced"] = int(sum(int((lab < 0).sum()) for lab in labels))
-    labels_t = tuple(labels)  # type: ignore[arg-type]
+    return labels, offset, n_iter, converged, comp_info, embeddings
 
-    # summaries
-    if n_comp == 1:
-        for key, value in comp_info[0].items():
-            if key not in ("objects", "offset"):
-                info.setdefault(key, value)
-    info["component_info"] = comp_info
-    agree, n_obs, n_ok = _agreement(stk, labels_t, d_total)
-    info["input_disagreement"] = float(1 - n_ok / n_obs) if n_obs else 0.0
-    info["input_consistency"] = _triangle_report(stk.pairs, stk.maps, stk.sizes,
-                                                 max_triangles=max_triangles, rng=gen)
-    objective = agree
-    pairwise_fn = None
-    consistent = True
-    if method == "matcheig":
-        consistent = False
-        fns = {}
-        for objs_emb in embeddings:
-            if objs_emb is None:
-                continue
-            objs, emb = objs_emb
-            fns.update({int(g): (k, objs) for k, g in enumerate(objs.tolist())})
-        comp_fns = [None if e is None else _matcheig_pairwise(e[1], stk.sizes[e[0]], threshold)
-                    for e in embeddings]
-        comp_index = {int(g): ci for ci, objs in enumerate(comps) for g in objs.tolist()}
 
-        def pairwise_fn(i, j, _fns=fns, _cf=comp_fns, _ci=comp_index):
-            ci, cj = _ci[i], _ci[j]
-            if ci != cj or _cf[ci] is None:
-                return np.full(stk.sizes[i], -1, dtype=np.int64)
-            return _cf[ci](_fns[i][0], _fns[j][0])
+def _block_rounding(stk, comps, embeddings, threshold) -> BlockRounding:
+    """MatchEIG's block-wise rounding as plain (picklable) data."""
+    component = np.zeros(stk.n_objects, dtype=np.int64)
+    local = np.zeros(stk.n_objects, dtype=np.int64)
+    normalized, offsets = [], []
+    for c, (objs, V) in enumerate(zip(comps, embeddings)):
+        component[objs] = c
+        local[objs] = np.arange(objs.size)
+        offsets.append(np.concatenate([[0], np.cumsum(stk.sizes[objs])]))
+        normalized.append(None if V is None else
+                          V / np.maximum(np.linalg.norm(V, axis=1, keepdims=True), 1e-300))
+    return BlockRounding(embeddings=tuple(normalized), offsets=tuple(offsets),
+                         component=component, local=local, sizes=stk.sizes.copy(),
+                         threshold=float(threshold))
 
-        if stk.pairs.shape[0] <= 50_000:
-            objective = 0.0
-            for q in range(stk.pairs.shape[0]):
-                i, j = stk.pairs[q]
-                a = pairwise_fn(int(i), int(j))
-                ob = stk.maps[q, : stk.sizes[i]]
-                objective += stk.weights[q] * float(np.count_nonzero((ob >= 0) & (a == ob)))
-        else:
-            objective = float("nan")
-            info["objective_note"] = "not evaluated for matcheig above 50000 observed pairs"
-    info["seconds_total"] = time.perf_counter() - t_start
-    return PermutationSyncResult(labels=labels_t, n_universe=int(d_total),
-                                 objective=float(objective), n_iter=int(n_iter),
-                                 converged=bool(converged), cycle_consistent=consistent,
-                                 info=info, _pairwise_fn=pairwise_fn)
+
+def _observed_objective(stk, rounding: BlockRounding, info: dict) -> float:
+    """Weighted number of observed correspondences kept by block-wise rounded maps."""
+    if stk.pairs.shape[0] > 50_000:
+        info["objective_note"] = "not evaluated for matcheig above 50000 observed pairs"
+        return float("nan")
+    objective = 0.0
+    for q in range(stk.pairs.shape[0]):
+        i, j = stk.pairs[q]
+        a = rounding(int(i), int(j))
+        ob = stk.maps[q, : stk.sizes[i]]
+        objective += stk.weights[q] * float(np.count_nonzero((ob >= 0) & (a == ob)))
+    return objective

@@ -18,6 +18,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 from scipy.optimize import linear_sum_assignment
 
+from ._linalg import polar
 from ._pairwise_input import StackedPairs
 
 __all__: list[str] = []
@@ -227,11 +228,6 @@ def estimate_universe(vals: np.ndarray, n_max: int) -> tuple[int, str]:
                f"eigenvalues computed - 1)")
 
 
-def _polar(M: np.ndarray) -> np.ndarray:
-    U, _, Vt = np.linalg.svd(M, full_matrices=False)
-    return U @ Vt
-
-
 def _hungarian_rows(S_blocks, sizes, off, d):
     labels = []
     for g in range(len(sizes)):
@@ -259,7 +255,7 @@ def round_to_universe(V: np.ndarray, sizes: np.ndarray, d: int, *, refine: int =
     Vn = V / np.maximum(norms, 1e-300)
     _, _, piv = sla.qr(Vn.T, mode="economic", pivoting=True)
     C = Vn[piv[:k]]                         # (k, k): one prototype row per slot
-    R = _polar(C.T)                        # Vn @ R puts prototype a on axis a
+    R = polar(C.T)                        # Vn @ R puts prototype a on axis a
     S = Vn @ R
     if k < d:
         S = np.hstack([S, np.full((M, d - k), -1.0)])
@@ -269,7 +265,7 @@ def round_to_universe(V: np.ndarray, sizes: np.ndarray, d: int, *, refine: int =
         lab_all = np.concatenate(labels)
         ok = (lab_all >= 0) & (lab_all < k)
         X[np.flatnonzero(ok), lab_all[ok]] = 1.0
-        R = _polar(Vn.T @ X)
+        R = polar(Vn.T @ X)
         S = Vn @ R
         if k < d:
             S = np.hstack([S, np.full((M, d - k), -1.0)])

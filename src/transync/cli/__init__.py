@@ -1,0 +1,93 @@
+"""Command-line interface: ``transync demo | experiment | match | sync | homography | datasets``.
+
+The CLI holds no logic of its own: every subcommand parses arguments, calls the library through
+its public names and writes plain files (JSON, CSV, PNG) that other tools can read. Heavy
+libraries (OpenCV, matplotlib) are imported only inside the commands that need them.
+
+Every error prints one line, ``transync: error: ...``, on stderr and exits with status 2
+(``--debug`` shows the traceback instead); Ctrl-C exits with status 130.
+
+>>> build_parser().parse_args(["sync", "pairs.json", "--method", "spectral"]).command
+'sync'
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+import traceback
+
+from ._common import CLIError
+
+__all__ = ["CLIError", "build_parser", "main"]
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage errors as one line too: ``transync: error: ... (see `transync CMD --help`)``."""
+
+    def error(self, message):
+        self.exit(2, f"transync: error: {message} (see `{self.prog} --help`)\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``argparse`` parser of every subcommand (each sets ``func``)."""
+    from .. import __version__
+    from . import _datasets, _experiment, _homography, _match
+
+    parser = _Parser(prog="transync", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"transync {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the full traceback of an error (any position)")
+    sub = parser.add_subparsers(dest="command", required=True)
+    _experiment.add_parsers(sub)
+    _match.add_parsers(sub)
+    _homography.add_parser(sub)
+    _datasets.add_parser(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    """Run the command line ``argv`` (default: ``sys.argv[1:]``); returns the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv
+    argv = [a for a in argv if a != "--debug"]
+    parser = build_parser()
+    args = parser.parse_args(argv)          # usage errors: argparse prints them, exits 2
+    args.debug = debug
+    try:
+        return int(args.func(args) or 0)
+    except BrokenPipeError:        # output piped into e.g. `head`, which stopped reading
+        import os
+
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+    except KeyboardInterrupt:
+        if debug:
+            traceback.print_exc()
+        hint = getattr(args, "interrupt_hint", None)
+        print("transync: interrupted" + (f"; {hint}" if hint else ""), file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - the one place that turns errors into one line
+        if debug:
+            traceback.print_exc()
+        print(f"transync: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+
+
+def _one_line(exc: BaseException) -> str:
+    from ..exceptions import TransyncError
+
+    msg = " ".join(str(exc).split()) or type(exc).__name__
+    if isinstance(exc, (CLIError, TransyncError, ValueError, TypeError)):
+        return msg
+    if isinstance(exc, OSError):
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        return f"{where}{exc.strerror or msg}"
+    return (f"unexpected {type(exc).__name__}: {msg} (please report it; rerun with --debug "
+            "for the traceback)")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,74 @@
+"""Helpers shared by the subcommands: the CLI's error type, argument types, JSON output."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import shutil
+from pathlib import Path
+
+__all__ = ["CLIError", "emit", "new_output_folder", "positive_int"]
+
+
+class CLIError(Exception):
+    """A user error the command line reports as one line (exit status 2)."""
+
+
+def positive_int(text: str) -> int:
+    """``argparse`` type: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """``argparse`` type: a finite float > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text}")
+    return value
+
+
+def emit(payload: dict, out: str | None) -> int:
+    """Write ``payload`` as JSON to ``out``, or print it."""
+    text = json.dumps(payload, indent=2)
+    if out:
+        try:
+            Path(out).write_text(text + "\n")
+        except OSError as exc:
+            raise CLIError(f"cannot write {out}: {exc.strerror or exc}") from exc
+        print(f"wrote {out}")
+    else:
+        print(text)
+    return 0
+
+
+@contextlib.contextmanager
+def new_output_folder(path):
+    """Create ``path`` for writing; on failure remove it again if this call created it.
+
+    Yields the folder as a :class:`~pathlib.Path`. A folder that already existed is left in
+    place (only the files written into it stay behind).
+    """
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"output folder {out} exists and is not a folder")
+    created = not out.exists()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CLIError(f"cannot create the output folder {out}: {exc.strerror or exc}") from exc
+    try:
+        yield out
+    except BaseException:
+        if created:
+            shutil.rmtree(out, ignore_errors=True)
+        raise

@@ -1,0 +1,130 @@
+"""``transync experiment`` and ``transync demo``: thesis experiments on the resumable runner."""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import time
+from pathlib import Path
+
+from ._common import CLIError, positive_int
+
+__all__ = ["add_parsers"]
+
+
+def _registry() -> dict:
+    from ..experiments import REGISTRY
+
+    return REGISTRY
+
+
+def _build(name: str, *, quick: bool):
+    return importlib.import_module(_registry()[name]).build(quick=quick)
+
+
+def _check_names(names, what: str) -> None:
+    known = sorted(_registry())
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise CLIError(f"unknown {what} {', '.join(map(repr, unknown))}; choose from "
+                       f"{', '.join(known)}")
+
+
+def _cmd_experiment(args) -> int:
+    from ..experiments import run_experiment
+
+    registry = _registry()
+    if args.list or not args.name:
+        for name in sorted(registry):
+            mod = importlib.import_module(registry[name])
+            doc = (mod.__doc__ or "").strip().splitlines()
+            print(f"{name:14s} {doc[0] if doc else ''}")
+        return 0
+    _check_names([args.name], "experiment")
+    exp = _build(args.name, quick=args.quick)
+    out = Path(args.out or f"results/{args.name}{'-quick' if args.quick else ''}")
+    args.interrupt_hint = (f"finished trials are saved in {out / 'results.sqlite'}; run the "
+                           "same command again to resume")
+    report = run_experiment(exp, out, trials=args.trials, workers=args.workers, seed=args.seed,
+                            progress=not args.no_progress)
+    print(f"{report.n_new} new trials ({report.n_failed} failed) in {report.seconds:.1f} s; "
+          f"{len(report.records)} stored in {out / 'results.sqlite'}")
+    print(f"summary: {out / 'summary.md'}  plot: {report.figure}")
+    for path in report.extra_files:
+        print(f"also: {path}")
+    return 1 if report.n_failed else 0
+
+
+def _cmd_demo(args) -> int:
+    from ..experiments import run_experiment
+
+    _check_names(args.experiments, "experiment")
+    out = Path(args.out)
+    args.interrupt_hint = (f"finished trials are saved under {out}; run the same command again "
+                           "to resume")
+    t0 = time.perf_counter()
+    lines = ["# transync demo", "",
+             "Quick versions of the experiments on generated data (offline). Each folder holds "
+             "`results.sqlite`, `summary.md`, `summary.csv` and a plot.", ""]
+    failed = 0
+    created = not out.exists()
+    for name in dict.fromkeys(args.experiments):
+        exp = _build(name, quick=True)
+        try:
+            report = run_experiment(exp, out / name, workers=args.workers,
+                                    progress=not args.no_progress)
+        except BaseException:
+            if created:  # leave no empty folder behind (stored trials stay)
+                with contextlib.suppress(OSError):
+                    out.rmdir()
+            raise
+        failed += report.n_failed
+        lines += [f"## {name}: {exp.description}", "",
+                  f"{len(report.records)} trials, {report.n_failed} failed, "
+                  f"{report.seconds:.1f} s. Plot: `{name}/{report.figure.name}`"
+                  + "".join(f", `{name}/{p.name}`" for p in report.extra_files), "",
+                  _headline(report.summary), ""]
+    lines.append(f"Total time: {time.perf_counter() - t0:.1f} s")
+    (out / "summary.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    print(f"\nwritten to {out.resolve()}")
+    return 1 if failed else 0
+
+
+def _headline(summary: list[dict]) -> str:
+    """Mean of each method's first metric over the first sweep, as a small Markdown table."""
+    if not summary:
+        return ""
+    sweep = summary[0]["sweep"]
+    metric = summary[0]["metric"]
+    rows = [r for r in summary if r["sweep"] == sweep and r["metric"] == metric and r["n"]]
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    out = [f"{metric} averaged over the `{sweep}` sweep:", "", "| method | " + metric + " |",
+           "|---|---|"]
+    for m in methods:
+        vals = [r["mean"] for r in rows if r["method"] == m]
+        out.append(f"| {m} | {sum(vals) / len(vals):.3f} |")
+    return "\n".join(out)
+
+
+def add_parsers(sub) -> None:
+    """Register ``demo`` and ``experiment``."""
+    p = sub.add_parser("demo", help="run quick experiments on generated data (offline)")
+    p.add_argument("--out", default="transync-demo", help="output folder (default: transync-demo)")
+    p.add_argument("--workers", type=positive_int, default=1)
+    p.add_argument("--experiments", nargs="+", default=["pairwise", "sync", "homography"],
+                   help="which quick experiments to run (see `transync experiment --list`)")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser("experiment", help="run (or resume) a thesis experiment")
+    p.add_argument("name", nargs="?", help="experiment name (see --list)")
+    p.add_argument("--list", action="store_true", help="list the experiments")
+    p.add_argument("--quick", action="store_true", help="small version (about a minute)")
+    p.add_argument("--out", help="output folder (default: results/NAME)")
+    p.add_argument("--trials", type=positive_int, help="trials per configuration")
+    p.add_argument("--workers", type=positive_int, default=1, help="processes")
+    p.add_argument("--seed", type=int, default=0,
+                   help="changes every trial's random problem (stored apart from other seeds)")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=_cmd_experiment)

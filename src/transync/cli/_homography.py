@@ -1,0 +1,145 @@
+"""``transync homography IMAGE... --reference 0 --out DIR``: plane homographies, masks, report."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+from ._common import CLIError, new_output_folder, positive_float, positive_int
+
+__all__ = ["add_parser"]
+
+RANSAC = ["ransac", "lmeds", "rho", "usac_default", "usac_magsac", "usac_accurate",
+          "usac_prosac", "usac_fast"]
+
+
+def _check_images(paths) -> None:
+    import cv2
+
+    if len(paths) < 2:
+        raise CLIError(f"need at least 2 images, got {len(paths)}")
+    for path in paths:
+        p = Path(path)
+        if not p.is_file():
+            raise CLIError(f"no such image file: {path}")
+        if not cv2.haveImageReader(str(p)):
+            raise CLIError(f"{path}: not an image format OpenCV can read")
+
+
+def _estimate(args):
+    from ..exceptions import DegenerateInputError
+    from ..homography import estimate_plane_homographies
+
+    options = dict(reference=args.reference, dense=not args.no_dense,
+                   segment=not args.no_segment, method=args.method, threshold=args.threshold,
+                   n_features=args.features, max_iter=args.max_iter,
+                   dense_target=args.dense_target, rng=args.seed)
+    if args.verbose:
+        import logging
+
+        logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s")
+        options["verbose"] = True
+    try:
+        return estimate_plane_homographies(list(args.images), **options)
+    except DegenerateInputError as exc:
+        raise CLIError(f"no two of the {len(args.images)} images could be related ({exc}); do "
+                       "the images show a common plane?") from exc
+
+
+def _cmd_homography(args) -> int:
+    import numpy as np
+
+    _check_images(args.images)
+    if not 0 <= args.reference < len(args.images):
+        raise CLIError(f"--reference must be an image index in [0, {len(args.images) - 1}], got "
+                       f"{args.reference}")
+    t0 = time.perf_counter()
+    res = _estimate(args)
+    seconds = time.perf_counter() - t0
+    names = [str(p) for p in args.images]
+    finite = [bool(np.all(np.isfinite(H))) for H in res.homographies]
+    if not any(f for k, f in enumerate(finite) if k != res.reference):
+        raise CLIError("no image could be linked to the reference: no homography was estimated")
+    payload = {
+        "reference": res.reference,
+        "convention": "homographies[i] maps pixel (x, y, 1) of image i into the reference image",
+        "images": names,
+        "homographies": [H.tolist() if ok else None for H, ok in zip(res.homographies, finite)],
+        "sparse_homographies": [None if not np.all(np.isfinite(H)) else H.tolist()
+                                for H in res.sparse_homographies],
+        "failed_pairs": [[int(i), int(j), str(why)] for i, j, why in res.pairwise.failed],
+        "converged": bool(res.converged),
+        "n_iter": int(res.n_iter),
+        "seconds": seconds,
+        "history": res.info["history"],
+    }
+    with new_output_folder(args.out) as out:
+        lines = _write_outputs(out, res, payload, args, names, seconds)
+    print("\n".join(lines[:7]))
+    print(f"written to {out}")
+    return 0
+
+
+def _write_outputs(out: Path, res, payload: dict, args, names, seconds) -> list[str]:
+    import numpy as np
+
+    (out / "homographies.json").write_text(json.dumps(payload, indent=2, default=float))
+    (out / "masks").mkdir(exist_ok=True)
+    for k, m in enumerate(res.masks):
+        _imwrite(out / "masks" / f"mask_{k:03d}.png", m.astype(np.uint8) * 255)
+    mean = np.nan_to_num(res.mean_image)
+    _imwrite(out / "mean_warped.png", np.clip(np.round(mean), 0, 255).astype(np.uint8))
+    sync = res.info["sync"]
+    lines = [
+        "# transync homography", "",
+        f"- images: {len(names)}, reference: {res.reference} ({names[res.reference]})",
+        f"- pairs estimated: {int(res.pairwise.mask.sum() // 2)}, failed: "
+        f"{len(res.pairwise.failed)}, rejected by robust synchronization: "
+        f"{int((sync.mask & ~sync.inliers).sum() // 2)}",
+        f"- dense refinement: {'off' if args.no_dense else 'on'}, segmentation: "
+        f"{'off' if args.no_segment else 'on'}, rounds: {res.n_iter}, converged: "
+        f"{res.converged}",
+        f"- plane fraction per view: "
+        f"{', '.join(f'{m.mean():.2f}' for m in res.masks)}",
+        f"- time: {seconds:.1f} s "
+        f"({', '.join(f'{k} {v:.1f}' for k, v in res.info['seconds'].items())})",
+        "", "| round | max corner change (px) | plane fraction |", "|---|---|---|",
+    ]
+    for h in res.info["history"]:
+        lines.append(f"| {h['iteration']} | {h['max_corner_change']:.4f} | "
+                     f"{h['plane_fraction']:.3f} |")
+    lines += ["", "Files: `homographies.json`, `masks/mask_NNN.png` (255 = plane), "
+              "`mean_warped.png`."]
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+    return lines
+
+
+def _imwrite(path: Path, image) -> None:
+    import cv2
+
+    if not cv2.imwrite(str(path), image):
+        raise CLIError(f"cannot write {path}")
+
+
+def add_parser(sub) -> None:
+    """Register ``homography``."""
+    p = sub.add_parser(
+        "homography", help="homographies of the dominant plane across images, with plane masks")
+    p.add_argument("images", nargs="+", metavar="IMAGE", help="image files (2 or more)")
+    p.add_argument("--reference", type=int, default=0, help="reference image index (default 0)")
+    p.add_argument("--out", default="transync-homography",
+                   help="output folder (created only when the run succeeds)")
+    p.add_argument("--no-dense", action="store_true", help="skip the dense photometric step")
+    p.add_argument("--no-segment", action="store_true", help="skip the plane segmentation")
+    p.add_argument("--method", default="ransac", choices=RANSAC)
+    p.add_argument("--threshold", type=positive_float, default=3.0,
+                   help="RANSAC threshold (pixels)")
+    p.add_argument("--features", type=positive_int, default=2000, help="SIFT features per image")
+    p.add_argument("--max-iter", type=positive_int, default=3, help="segmentation + dense rounds")
+    p.add_argument("--dense-target", default="auto", choices=["auto", "mean", "reference"])
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the random stages (RANSAC, segmentation); same seed, same answer "
+                        "(default 0)")
+    p.add_argument("--verbose", action="store_true", help="progress bar and stage log on stderr")
+    p.set_defaults(func=_cmd_homography)

@@ -1,0 +1,203 @@
+"""``transync match`` (two point sets) and ``transync sync`` (pairwise assignments as JSON)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from ._common import CLIError, emit, positive_float, positive_int
+
+__all__ = ["add_parsers", "read_points"]
+
+METHODS = ("hungarian", "sinkhorn", "sm", "rrwm", "ipfp", "ga", "pf")
+LINEAR = ("hungarian", "sinkhorn")
+
+
+def read_points(path):
+    """Points from ``.npy`` or a text/CSV file with one point a row, as a finite (n, d) array.
+
+    Text files: numbers separated by commas or white space; blank lines and lines starting
+    with ``#`` are skipped. Every error names the file (and the line for text files).
+    """
+    import numpy as np
+
+    p = Path(path)
+    if not p.exists():
+        raise CLIError(f"no such file: {path}")
+    if not p.is_file():
+        raise CLIError(f"{path} is not a file")
+    if p.suffix.lower() == ".npy":
+        try:
+            pts = np.load(p, allow_pickle=False)
+        except (ValueError, OSError, EOFError) as exc:
+            raise CLIError(f"{path}: not a readable .npy array ({exc})") from exc
+        if pts.dtype.kind not in "biuf":
+            raise CLIError(f"{path}: expected a real numeric array, got dtype {pts.dtype}")
+        if pts.ndim != 2:
+            raise CLIError(f"{path}: expected an array of shape (n_points, dim), got shape "
+                           f"{pts.shape}")
+        pts = pts.astype(float)
+        bad = np.flatnonzero(~np.isfinite(pts).all(axis=1))
+        if bad.size:
+            raise CLIError(f"{path}: coordinates must be finite, row {bad[0]} is "
+                           f"{pts[bad[0]].tolist()}")
+    else:
+        pts = _read_text_points(p)
+    if pts.shape[0] == 0:
+        raise CLIError(f"{path}: no points found (empty file)")
+    if pts.shape[1] == 0:
+        raise CLIError(f"{path}: points have no coordinates")
+    return pts
+
+
+def _read_text_points(p: Path):
+    import numpy as np
+
+    raw = p.read_bytes()
+    try:
+        if b"\0" in raw:
+            raise UnicodeDecodeError("ascii", raw, 0, 1, "NUL byte")
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise CLIError(f"{p}: not a text file of points (binary content); give a .npy file or "
+                       "text/CSV with one point a row") from None
+    rows, dim, first = [], None, None
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        fields = [f for f in s.replace(",", " ").replace(";", " ").split()]
+        try:
+            row = [float(f) for f in fields]
+        except ValueError:
+            raise CLIError(f"{p}, line {lineno}: expected numbers, got {s[:60]!r}"
+                           + (" (remove the header line)" if not rows else "")) from None
+        if not all(math.isfinite(v) for v in row):
+            raise CLIError(f"{p}, line {lineno}: coordinates must be finite, got {s[:60]!r}")
+        if dim is None:
+            dim, first = len(row), lineno
+        elif len(row) != dim:
+            raise CLIError(f"{p}, line {lineno}: expected {dim} coordinates (as on line "
+                           f"{first}), got {len(row)}")
+        rows.append(row)
+    return np.array(rows, dtype=float).reshape(len(rows), dim or 0)
+
+
+def _cmd_match(args) -> int:
+    import numpy as np
+
+    from ..graphs import Graph
+    from ..matching import gaussian_edge_affinity, match_graphs
+
+    P1, P2 = read_points(args.points1), read_points(args.points2)
+    if P1.shape[1] != P2.shape[1]:
+        raise CLIError(f"the point sets have different dimensions: {args.points1} has "
+                       f"{P1.shape[1]} coordinates a point, {args.points2} has {P2.shape[1]}")
+    scale = float(max(np.ptp(P1, axis=0).max(), np.ptp(P2, axis=0).max()))
+    if not scale > 0:
+        scale = 1.0                      # every point identical: nothing to rescale
+    g1 = Graph.from_points(P1 / scale, edges=args.edges)
+    g2 = Graph.from_points(P2 / scale, edges=args.edges)
+    aff = gaussian_edge_affinity(g1, g2, sigma2=args.sigma2)
+    # first-order linearization of the edge affinity, (K 1)[i, a]: how well the edges around
+    # i and a agree. All zero: every solver would return an arbitrary assignment.
+    linear = aff.matvec(np.ones((aff.n1, aff.n2)))
+    top = float(linear.max()) if linear.size else 0.0
+    if min(len(P1), len(P2)) < 2:
+        raise CLIError(f"need at least 2 points in each set to compare edges, got {len(P1)} and "
+                       f"{len(P2)}")
+    if not top > 0:
+        raise CLIError(f"the edge affinity is zero for every candidate pair (no edges, or "
+                       f"--sigma2 {args.sigma2} too small for these point sets); increase "
+                       "--sigma2 or use --edges full")
+    unary = None
+    if args.method in LINEAR:
+        # point sets carry no node attributes: the linear solvers get the linearization, scaled
+        # to a maximum of 1, as their unary term -- as in `transync experiment pairwise`
+        unary = linear / top
+    res = match_graphs(g1, g2, method=args.method, affinity=aff, node_affinity=unary)
+    payload = {"method": args.method, "assignment": np.asarray(res.assignment).tolist(),
+               "objective": float(res.objective), "n_iter": int(res.n_iter),
+               "converged": bool(res.converged), "edges": args.edges, "sigma2": args.sigma2,
+               "coordinate_scale": scale}
+    if unary is not None:
+        payload["unary"] = "first-order linearization of the edge affinity"
+    return emit(payload, args.out)
+
+
+def _read_pairs(path: str) -> dict:
+    import numpy as np
+
+    p = Path(path)
+    if not p.is_file():
+        raise CLIError(f"no such file: {path}")
+    try:
+        data = json.loads(p.read_text())
+    except UnicodeDecodeError:
+        raise CLIError(f"{path}: not a JSON text file") from None
+    except json.JSONDecodeError as exc:
+        raise CLIError(f"{path}, line {exc.lineno}: not valid JSON ({exc.msg})") from None
+    form = '{"pairs": [[i, j, assignment], ...]}'
+    if not isinstance(data, dict) or "pairs" not in data:
+        got = f"an object with keys {sorted(data)}" if isinstance(data, dict) else \
+            type(data).__name__
+        raise CLIError(f"{path}: expected a JSON object {form}, got {got}")
+    entries = data["pairs"]
+    if not isinstance(entries, list) or not entries:
+        raise CLIError(f"{path}: \"pairs\" must be a non-empty list {form}")
+    pairs = {}
+    for k, entry in enumerate(entries):
+        ok = (isinstance(entry, list) and len(entry) == 3
+              and all(isinstance(v, int) and not isinstance(v, bool) for v in entry[:2])
+              and isinstance(entry[2], list)
+              and all(isinstance(v, int) and not isinstance(v, bool) for v in entry[2]))
+        if not ok:
+            raise CLIError(f"{path}: pairs[{k}] must be [i, j, assignment] with integers i, j "
+                           f"and a list of integers, got {json.dumps(entry)[:80]}")
+        i, j, a = entry
+        if (i, j) in pairs:
+            raise CLIError(f"{path}: pairs[{k}] repeats the pair ({i}, {j})")
+        pairs[(i, j)] = np.asarray(a, dtype=np.int64)
+    return pairs
+
+
+def _cmd_sync(args) -> int:
+    import numpy as np
+
+    from ..synchronization import synchronize_permutations
+
+    pairs = _read_pairs(args.pairwise)
+    try:
+        res = synchronize_permutations(pairs, method=args.method, n_universe=args.n_universe)
+    except (ValueError, TypeError) as exc:
+        raise CLIError(f"{args.pairwise}: {exc}") from exc
+    payload = {"method": args.method, "labels": [np.asarray(lab).tolist() for lab in res.labels],
+               "objective": float(res.objective), "converged": bool(res.converged),
+               "n_iter": int(res.n_iter)}
+    info = {k: v for k, v in res.info.items() if isinstance(v, (int, float, str, bool))}
+    payload["info"] = info
+    return emit(payload, args.out)
+
+
+def add_parsers(sub) -> None:
+    """Register ``match`` and ``sync``."""
+    p = sub.add_parser("match", help="match two point sets (.npy, .txt or .csv, one point a row)")
+    p.add_argument("points1")
+    p.add_argument("points2")
+    p.add_argument("--method", default="rrwm", choices=list(METHODS),
+                   help="solver; hungarian and sinkhorn use the linearized edge affinity as "
+                        "their unary term")
+    p.add_argument("--edges", default="full", choices=["full", "delaunay", "knn"])
+    p.add_argument("--sigma2", type=positive_float, default=0.05,
+                   help="Gaussian edge-length kernel width after scaling points to unit size")
+    p.add_argument("--out", help="JSON output file (default: print)")
+    p.set_defaults(func=_cmd_match)
+
+    p = sub.add_parser("sync", help="synchronize pairwise assignments given as JSON "
+                                    "{\"pairs\": [[i, j, assignment], ...]}")
+    p.add_argument("pairwise")
+    p.add_argument("--method", default="spectral")
+    p.add_argument("--n-universe", type=positive_int, default=None)
+    p.add_argument("--out", help="JSON output file (default: print)")
+    p.set_defaults(func=_cmd_sync)

@@ -1,0 +1,1059 @@
+"""Property-based contract of the public API (issue 13 item 5).
+
+Every public function, on any input, either
+
+* returns a valid result -- assignments injective and in range, maps and scores finite, blocks
+  (sub-)doubly stochastic, labels within the universe, results cycle-consistent where promised,
+  each as the function documents it -- or
+* raises one of the library's documented exceptions: ``ValueError``/``TypeError`` whose message
+  names the argument (a backquoted name, the project's message style), or a
+  :class:`transync.exceptions.TransyncError`.
+
+Never ``IndexError``/``KeyError``/``LinAlgError``/``ZeroDivisionError``/``MemoryError``/numpy's
+``UFuncTypeError``/``cv2.error``, never a silent NaN, never a warning other than the library's own
+(``ConvergenceWarning``, ``UnlinkedViewsWarning``), never a hang (each call is bounded in time).
+
+One test per function or contract, so that a violation in one place hides no other. Inputs are
+small; the settings are reproducible (``derandomize=True``) and sized so that the module runs in
+about 30 s on one core.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import signal
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, example, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+import transync
+from transync import geometry, metrics, permutations
+from transync.exceptions import ConvergenceWarning, TransyncError, UnlinkedViewsWarning
+
+_COMMON = dict(deadline=None, derandomize=True, database=None, print_blob=True,
+               suppress_health_check=list(HealthCheck))
+CHEAP = settings(max_examples=60, **_COMMON)
+MEDIUM = settings(max_examples=30, **_COMMON)
+COSTLY = settings(max_examples=20, **_COMMON)
+
+CALL_LIMIT_S = 20          # a call running longer counts as a hang
+OUR_WARNINGS = (ConvergenceWarning, UnlinkedViewsWarning)
+REFUSED = object()         # the call raised a documented exception
+STATS: dict = {}           # function -> [returned, raised]; printed with TRANSYNC_CONTRACT_STATS=1
+MESSAGES: dict = {}        # function -> distinct refusal messages (same switch)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _report_stats():
+    yield
+    if os.environ.get("TRANSYNC_CONTRACT_STATS"):
+        for name, (ok, raised) in sorted(STATS.items()):
+            print(f"{name:60s} returned {ok:5d}  raised {raised:5d}")
+            if os.environ["TRANSYNC_CONTRACT_STATS"] == "2":
+                for msg in list(MESSAGES.get(name, ()))[:6]:
+                    print(f"    {msg}")
+
+
+# ----------------------------------------------------------------------------------- harness
+
+class ContractViolation(AssertionError):
+    pass
+
+
+@contextlib.contextmanager
+def _time_limit(seconds):
+    if not hasattr(signal, "SIGALRM"):      # pragma: no cover - Windows
+        yield
+        return
+
+    def handler(signum, frame):
+        raise ContractViolation(f"call did not return within {seconds} s (hang)")
+
+    old = signal.signal(signal.SIGALRM, handler)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+
+
+def _forbidden(exc, fn_name="") -> str | None:
+    """Why ``exc`` breaks the contract, or None when it is a documented exception.
+
+    A ``ValueError``/``TypeError`` must name what was wrong: a backquoted argument (the project's
+    message style) or the function called.
+    """
+    name = type(exc).__name__
+    if isinstance(exc, (IndexError, KeyError, ZeroDivisionError, MemoryError, AttributeError,
+                        AssertionError, OverflowError, FloatingPointError, RecursionError)):
+        return f"undocumented {name}"
+    if isinstance(exc, np.linalg.LinAlgError) or "UFunc" in name or name == "error":
+        return f"low-level {type(exc).__module__}.{name}"
+    if isinstance(exc, TransyncError):
+        return None
+    if isinstance(exc, (ValueError, TypeError)):
+        if "`" not in str(exc) and not (fn_name and fn_name in str(exc)):
+            return f"{name} that names no argument"
+        return None
+    return f"undocumented {name}"
+
+
+def call(fn, *args, **kwargs):
+    """Call ``fn``; return its value, or REFUSED after a documented exception.
+
+    Raise ContractViolation on an undocumented exception, a foreign warning or a hang.
+    """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            with _time_limit(CALL_LIMIT_S):
+                out = fn(*args, **kwargs)
+        except ContractViolation:
+            raise
+        except Exception as exc:  # noqa: BLE001 - the contract is about which ones
+            why = _forbidden(exc, getattr(fn, "__name__", ""))
+            STATS.setdefault(getattr(fn, "__qualname__", str(fn)), [0, 0])[1] += 1
+            MESSAGES.setdefault(getattr(fn, "__qualname__", str(fn)), {}).setdefault(
+                str(exc)[:90], 0)
+            if why is not None:
+                raise ContractViolation(f"{getattr(fn, '__qualname__', fn)}: {why}: "
+                                        f"{str(exc)[:300]}") from exc
+            return REFUSED
+    STATS.setdefault(getattr(fn, "__qualname__", str(fn)), [0, 0])[0] += 1
+    foreign = [w for w in caught if not issubclass(w.category, OUR_WARNINGS)]
+    if foreign:
+        w = foreign[0]
+        raise ContractViolation(f"{getattr(fn, '__qualname__', fn)}: foreign warning "
+                                f"{w.category.__name__}: {w.message}")
+    return out
+
+
+def check(cond, what):
+    if not cond:
+        raise ContractViolation(what)
+
+
+def check_assignment(a, n1, n2, what="assignment"):
+    a = np.asarray(a)
+    check(a.shape == (n1,), f"{what}: shape {a.shape}, expected ({n1},)")
+    check(a.dtype.kind in "iu", f"{what}: dtype {a.dtype}, expected integers")
+    check(bool(np.all((a >= -1) & (a < n2))), f"{what}: entries outside [-1, {n2}): {a}")
+    m = a[a >= 0]
+    check(len(np.unique(m)) == len(m), f"{what}: not injective: {a}")
+
+
+def check_finite_array(x, what):
+    x = np.asarray(x)
+    if x.size == 0:
+        return
+    check(x.dtype.kind in "biuf", f"{what}: accepted a non-numeric array of dtype {x.dtype}")
+    x = x.astype(float)
+    check(bool(np.all(np.isfinite(x))), f"{what}: NaN or infinite entries (silent NaN)")
+
+
+def check_finite_scalar(x, what):
+    check(isinstance(x, (float, int, np.floating, np.integer)) and np.isfinite(x),
+          f"{what}: expected a finite number, got {x!r}")
+
+
+# ----------------------------------------------------------------------------------- strategies
+
+SPECIAL = [0.0, -0.0, 1.0, -1.0, 0.5, np.nan, np.inf, -np.inf, 1e300, -1e300, 1e-300, 5e-324,
+           1e9, -1e9, 1e-9]
+nasty_floats = st.one_of(st.floats(-10, 10, allow_nan=False, width=64), st.sampled_from(SPECIAL))
+tame_floats = st.floats(0, 1, allow_nan=False, width=64)
+SCALES = st.sampled_from([1.0] * 12 + [0.0, 1e-300, 1e-30, 1e-8, 1e8, 1e30, 1e300, np.nan,
+                          np.inf, -1.0])
+small = st.integers(0, 4)
+
+
+def float_arrays(shape, elements=nasty_floats):
+    return hnp.arrays(np.float64, shape, elements=elements)
+
+
+@st.composite
+def any_arrays(draw, max_dims=3, max_side=4):
+    """Arrays of any small shape and a dtype the API might meet: float (nasty), int, bool,
+    complex, object/str."""
+    shape = draw(hnp.array_shapes(min_dims=0, max_dims=max_dims, min_side=0, max_side=max_side))
+    kind = draw(st.sampled_from(["f", "f", "f", "i", "b", "c", "U"]))
+    if kind == "f":
+        return draw(float_arrays(shape))
+    if kind == "i":
+        return draw(hnp.arrays(np.int64, shape, elements=st.integers(-3, 6)))
+    if kind == "b":
+        return draw(hnp.arrays(np.bool_, shape))
+    if kind == "c":
+        return draw(hnp.arrays(np.complex128, shape,
+                               elements=st.complex_numbers(max_magnitude=5, allow_nan=False)))
+    return draw(hnp.arrays(np.dtype("U3"), shape, elements=st.text("ab1.", max_size=3)))
+
+
+@st.composite
+def assignments(draw, n1=None, n2=None, valid=None):
+    """An assignment (n1,) into n2; valid (injective, in range) or not."""
+    n1 = draw(small) if n1 is None else n1
+    n2 = draw(small) if n2 is None else n2
+    valid = draw(st.booleans()) if valid is None else valid
+    if valid:
+        perm = draw(st.permutations(list(range(max(n1, n2)))))
+        a = np.array(perm[:n1], dtype=np.int64)
+        a[a >= n2] = -1
+        if draw(st.integers(0, 3)) == 0:                   # partial: drop some nodes
+            a[draw(hnp.arrays(np.bool_, n1))] = -1
+        return a, n2
+    return draw(hnp.arrays(np.int64, n1, elements=st.integers(-3, n2 + 2))), n2
+
+
+@st.composite
+def partial_permutation_matrices(draw):
+    a, n2 = draw(assignments(valid=True))
+    X = np.zeros((a.size, n2))
+    X[np.flatnonzero(a >= 0), a[a >= 0]] = 1.0
+    return X
+
+
+@st.composite
+def dense_affinities(draw):
+    """(K, n1, n2): a symmetric non-negative K times a nasty scale, sometimes raw junk."""
+    n1, n2 = draw(small), draw(small)
+    n = n1 * n2
+    if draw(st.integers(0, 4)) == 0:
+        return draw(float_arrays((n, n))), n1, n2
+    base = draw(float_arrays((n, n), elements=tame_floats))
+    K = (base + base.T) / 2
+    with np.errstate(all="ignore"):
+        K = K * draw(SCALES)
+    return K, n1, n2
+
+
+@st.composite
+def point_graph_pairs(draw):
+    """(points, perm, scale): g2 is g1 with nodes permuted, coordinates times ``scale``."""
+    n = draw(st.integers(0, 5))
+    pts = draw(float_arrays((n, 2), elements=st.floats(-1, 1, width=64)))
+    perm = np.array(draw(st.permutations(list(range(n)))), dtype=np.int64)
+    scale = draw(st.sampled_from([1.0, 1.0, 1e-9, 1e-3, 1e3, 1e6, 1e9, 1e12]))
+    return pts, perm, scale
+
+
+@st.composite
+def pairwise_dicts(draw, soft=False):
+    """{(i, j): assignment or matrix} over up to 4 objects of up to 4 nodes, some entries junk."""
+    n_obj = draw(st.sampled_from([2, 3, 4] * 3 + [0, 1]))
+    sizes = [draw(st.sampled_from([1, 2, 3, 4] * 2 + [0])) for _ in range(n_obj)]
+    out = {}
+    pairs = [(i, j) for i in range(n_obj) for j in range(n_obj) if i != j]
+    chosen = draw(st.lists(st.sampled_from(pairs), unique=True, min_size=1,
+                           max_size=len(pairs))) if pairs else []
+    clean = draw(st.booleans())
+    if clean:
+        sizes = [max(n, 1) for n in sizes]
+    for i, j in chosen:
+        kind = "valid" if clean else draw(st.sampled_from(
+            ["valid"] * 8 + ["junk_assign", "matrix", "junk_array"]))
+        if kind == "valid":
+            a, _ = draw(assignments(n1=sizes[i], n2=sizes[j], valid=True))
+            if soft:
+                a = np.zeros((sizes[i], sizes[j])) if a.size == 0 else \
+                    np.eye(max(sizes[j], 1))[np.where(a >= 0, a, 0)][:, :sizes[j]] \
+                    * (a >= 0)[:, None]
+            out[(i, j)] = a
+        elif kind == "junk_assign":
+            out[(i, j)] = draw(assignments(n1=sizes[i], n2=sizes[j], valid=False))[0]
+        elif kind == "matrix":
+            out[(i, j)] = draw(float_arrays((sizes[i], sizes[j]), elements=tame_floats))
+        else:
+            out[(i, j)] = draw(any_arrays(max_dims=2))
+    return out, sizes
+
+
+N_UNIVERSE = st.sampled_from([None] * 10 + [0, 1, 3, 4, 8, 10**9, -1])
+
+
+# ----------------------------------------------------------------------------------- permutations
+
+@CHEAP
+@given(assignments(), st.sampled_from([None, -1, 0, 2, 10**12]))
+def test_assignment_to_matrix(a_n2, n2_override):
+    a, n2 = a_n2
+    n2 = n2 if n2_override is None else n2_override
+    X = call(permutations.assignment_to_matrix, a, n2)
+    if X is REFUSED:
+        return
+    check(X.shape == (a.size, n2), f"shape {X.shape}")
+    check(bool(np.all(X.sum(0) <= 1) and np.all(X.sum(1) <= 1)), "not a partial permutation")
+    check(bool(np.array_equal(np.flatnonzero(X.sum(1)), np.flatnonzero(a >= 0))),
+          "rows do not follow the assignment")
+
+
+@CHEAP
+@given(st.one_of(partial_permutation_matrices(), any_arrays(max_dims=2)))
+def test_matrix_to_assignment(X):
+    a = call(permutations.matrix_to_assignment, X)
+    if a is REFUSED:
+        return
+    X = np.asarray(X)
+    check(X.ndim == 2, f"accepted a {X.ndim}-d array")
+    check_assignment(a, X.shape[0], X.shape[1])
+    back = permutations.assignment_to_matrix(a, X.shape[1])
+    check(bool(np.array_equal(back, X.astype(float))), "accepted a matrix that is not a "
+                                                       "partial permutation (no round trip)")
+
+
+@CHEAP
+@given(st.one_of(assignments(), st.tuples(any_arrays(max_dims=2), small)),
+       st.sampled_from([None, 0, 3, -1]))
+def test_check_assignment(a_n2, n2):
+    a, _ = a_n2
+    out = call(permutations.check_assignment, a, n2=n2)
+    if out is REFUSED:
+        return
+    arr = np.asarray(a)
+    check(arr.ndim == 1, "accepted a non-1-d assignment")
+    check_assignment(out, arr.size, n2 if n2 is not None else max(int(out.max(initial=-1)) + 1,
+                                                                  0))
+
+
+@CHEAP
+@given(assignments(), assignments())
+def test_compose(first_n, second_n):
+    first, second = first_n[0], second_n[0]
+    out = call(permutations.compose, first, second)
+    if out is REFUSED:
+        return
+    n2 = second_n[1]
+    check_assignment(out, first.size, max(n2, int(second.max(initial=-1)) + 1))
+    for i, a in enumerate(first):
+        want = second[a] if 0 <= a < second.size else -1
+        check(out[i] == want, f"compose[{i}] = {out[i]}, expected {want}")
+
+
+@CHEAP
+@given(assignments(), st.sampled_from([None, -1, 0, 10**12]))
+def test_invert(a_n2, n2_override):
+    a, n2 = a_n2
+    n2 = n2 if n2_override is None else n2_override
+    inv = call(permutations.invert, a, n2)
+    if inv is REFUSED:
+        return
+    check_assignment(a, a.size, n2, "input accepted by invert")
+    check_assignment(inv, n2, a.size, "invert")
+    for i, t in enumerate(a):
+        if t >= 0:
+            check(inv[t] == i, "invert is not the inverse")
+
+
+@CHEAP
+@given(st.one_of(st.tuples(small, small).flatmap(lambda s: float_arrays(s)), any_arrays()),
+       st.booleans(), st.sampled_from([None, None, 0.0, 0.5, np.nan]))
+def test_solve_lap(score, maximize, min_score):
+    a = call(permutations.solve_lap, score, maximize=maximize, min_score=min_score)
+    if a is REFUSED:
+        return
+    S = np.asarray(score)
+    check(S.ndim == 2, f"accepted a {S.ndim}-d score")
+    check_finite_array(S, "accepted score")
+    check_assignment(a, S.shape[0], S.shape[1])
+    if min_score is None and S.size:
+        from scipy.optimize import linear_sum_assignment
+        r, c = linear_sum_assignment(S, maximize=maximize)
+        best = S[r, c].sum()
+        got = S[np.flatnonzero(a >= 0), a[a >= 0]].sum()
+        check(bool(np.isclose(got, best, rtol=1e-9, atol=1e-9)),
+              f"not optimal: {got} vs {best}")
+
+
+@MEDIUM
+@given(pairwise_dicts(), st.sampled_from([200000, 1, 0, -1]))
+def test_cycle_inconsistency(pw_sizes, max_triangles):
+    pw, _ = pw_sizes
+    for fn in (permutations.cycle_inconsistency, metrics.cycle_inconsistency):
+        out = call(fn, pw, max_triangles=max_triangles, rng=0)
+        if out is REFUSED:
+            continue
+        check(isinstance(out["n_triangles"], (int, np.integer)) and out["n_triangles"] >= 0,
+              f"n_triangles {out['n_triangles']!r}")
+        for key in ("inconsistent_triangles", "cycle_error"):
+            check_finite_scalar(out[key], key)
+            check(0 <= out[key] <= 1, f"{key} = {out[key]} outside [0, 1]")
+
+
+@CHEAP
+@given(st.one_of(st.integers(-3, 6), st.sampled_from([10**12, 2.5, "3", None, np.nan])))
+def test_identity_and_random_permutation(n):
+    for fn in (permutations.identity, lambda n: permutations.random_permutation(n, rng=0)):
+        p = call(fn, n)
+        if p is REFUSED:
+            continue
+        check(isinstance(n, (int, np.integer)) and 0 <= n, f"accepted n={n!r}")
+        check_assignment(p, n, n)
+        check(bool(np.all(p >= 0)), "a permutation has no -1")
+
+
+@CHEAP
+@given(st.one_of(partial_permutation_matrices(), any_arrays()))
+def test_is_partial_permutation_matrix(X):
+    out = call(permutations.is_partial_permutation_matrix, X)
+    if out is REFUSED:
+        return
+    check(isinstance(out, (bool, np.bool_)), f"returned {type(out).__name__}, expected bool")
+
+
+# ----------------------------------------------------------------------------------- metrics
+
+@CHEAP
+@given(st.integers(0, 5).flatmap(lambda n: st.tuples(assignments(n1=n), assignments(n1=n))),
+       st.booleans())
+def test_matching_accuracy_and_precision_recall(pair, mismatched):
+    (a, _), (t, _) = pair
+    if mismatched:
+        t = np.append(t, 0)
+    acc = call(metrics.matching_accuracy, a, t)
+    if acc is not REFUSED:
+        check(a.size == t.size, "accepted assignments of different lengths")
+        check_finite_scalar(acc, "matching_accuracy")
+        check(0 <= acc <= 1, f"accuracy {acc} outside [0, 1]")
+    pr = call(metrics.matching_precision_recall, a, t)
+    if pr is not REFUSED:
+        check(a.size == t.size, "accepted assignments of different lengths")
+        for k, v in pr.items():
+            if isinstance(v, float):
+                check_finite_scalar(v, k)
+                check(0 <= v <= 1, f"{k} = {v} outside [0, 1]")
+
+
+@MEDIUM
+@given(dense_affinities(), assignments())
+def test_affinity_score(K_n, a_n2):
+    K, n1, n2 = K_n
+    a, _ = a_n2
+    s = call(metrics.affinity_score, K, a, n2=n2)
+    if s is REFUSED:
+        return
+    check_finite_scalar(s, "affinity_score")
+
+
+H_ARRAYS = st.one_of(
+    float_arrays((3, 3)),
+    st.integers(0, 3).flatmap(lambda n: float_arrays((n, 3, 3))),
+    st.integers(0, 3).flatmap(lambda n: float_arrays((n, 3, 3), elements=tame_floats)),
+    any_arrays(),
+)
+SIZES = st.one_of(st.tuples(st.integers(-2, 50), st.integers(-2, 50)),
+                  st.sampled_from([(np.nan, 4), (1e300, 1e300), (4,), "ab", None]))
+
+
+@MEDIUM
+@given(H_ARRAYS, H_ARRAYS, SIZES)
+def test_corner_errors(H_est, H_true, size):
+    for fn in (metrics.corner_error, metrics.pairwise_corner_error):
+        out = call(fn, H_est, H_true, image_size=size)
+        if out is REFUSED:
+            continue
+        out = np.asarray(out, dtype=float)
+        # a corner sent to infinity is an infinitely wrong estimate (documented: inf), never NaN
+        check(not np.isnan(out).any(), f"{fn.__name__}: silent NaN")
+        check(bool(np.all(out >= 0)), f"{fn.__name__}: negative error")
+
+
+@CHEAP
+@given(st.one_of(float_arrays(st.integers(0, 5)), any_arrays(max_dims=1)),
+       st.sampled_from([(1.0, 3.0, 5.0), (), (-1.0,), (np.nan,), "x"]))
+def test_corner_accuracy(errors, thresholds):
+    out = call(metrics.corner_accuracy, errors, thresholds)
+    if out is REFUSED:
+        return
+    for k, v in out.items():
+        if isinstance(v, (float, np.floating)):
+            check(0 <= v <= 1 or np.isnan(v) and np.size(errors) == 0, f"{k} = {v}")
+
+
+@CHEAP
+@given(any_arrays(), any_arrays())
+def test_segmentation_scores(pred, truth):
+    out = call(metrics.segmentation_scores, pred, truth)
+    if out is REFUSED:
+        return
+    for k, v in out.items():
+        v = np.asarray(v, dtype=float)
+        check_finite_array(v, f"segmentation_scores[{k!r}]")
+        check(bool(np.all((v >= 0) & (v <= 1))), f"{k} outside [0, 1]")
+
+
+@CHEAP
+@given(st.one_of(float_arrays(st.tuples(small, small)), any_arrays()))
+def test_brenner_focus(image):
+    out = call(metrics.brenner_focus, image)
+    if out is REFUSED:
+        return
+    check_finite_scalar(out, "brenner_focus")
+
+
+# ----------------------------------------------------------------------------------- matching
+
+def _check_matching_result(res, n1, n2, K=None):
+    check(isinstance(res, transync.MatchingResult), f"returned {type(res).__name__}")
+    check_assignment(res.assignment, n1, n2)
+    check_finite_scalar(res.objective, "objective")
+    if res.soft is not None:
+        check(np.shape(res.soft) == (n1, n2), f"soft shape {np.shape(res.soft)}")
+        check_finite_array(res.soft, "soft")
+    check(isinstance(res.n_iter, (int, np.integer)) and res.n_iter >= 0, f"n_iter {res.n_iter}")
+    check(isinstance(res.converged, (bool, np.bool_)), "converged is not a bool")
+    if K is not None and n1 * n2:
+        x = np.zeros(n1 * n2)
+        rows = np.flatnonzero(res.assignment >= 0)
+        x[res.assignment[rows] * n1 + rows] = 1.0
+        want = float(x @ np.asarray(K, dtype=float) @ x)
+        check(bool(np.isclose(res.objective, want, rtol=1e-6, atol=1e-12 * max(1, abs(want)))),
+              f"objective {res.objective} is not vec(X)^T K vec(X) = {want}")
+
+
+@pytest.mark.parametrize("method", ["sm", "rrwm", "ipfp", "ga", "pf"])
+@COSTLY
+@given(K_n=dense_affinities(), wrap=st.booleans(), lie=st.sampled_from([None, None, (1, 0)]))
+def test_quadratic_solvers(method, K_n, wrap, lie):
+    from transync import matching
+
+    K, n1, n2 = K_n
+    if lie is not None:                                    # wrong declared sizes
+        n1, n2 = n1 + lie[0], n2 + lie[1]
+    if wrap:
+        A = call(matching.DenseAffinity, K, n1, n2)
+        if A is REFUSED:
+            return
+        check_finite_array(K, "DenseAffinity accepted K")
+        check(K.shape == (n1 * n2, n1 * n2), f"DenseAffinity accepted K {K.shape} for "
+                                             f"n1={n1}, n2={n2}")
+        res = call(getattr(matching, method), A)
+    else:
+        res = call(getattr(matching, method), K, n1=n1, n2=n2)
+    if res is REFUSED:
+        return
+    check_finite_array(K, "accepted K")
+    _check_matching_result(res, n1, n2, K)
+
+
+@pytest.mark.parametrize("method", ["hungarian", "sinkhorn"])
+@MEDIUM
+@given(scores=st.one_of(st.tuples(small, small).flatmap(lambda s: float_arrays(s)),
+                        st.tuples(small, small).flatmap(
+                            lambda s: float_arrays(s, elements=tame_floats)).map(
+                                lambda S: S * 1e300),
+                        any_arrays()))
+def test_linear_solvers(method, scores):
+    from transync import matching
+
+    res = call(getattr(matching, method), scores)
+    if res is REFUSED:
+        return
+    S = np.asarray(scores)
+    check(S.ndim == 2, f"accepted a {S.ndim}-d score")
+    check_finite_array(S, "accepted scores")
+    _check_matching_result(res, *S.shape)
+
+
+@pytest.mark.parametrize("method", ["sm", "rrwm", "ipfp", "ga", "pf", "hungarian", "sinkhorn"])
+@settings(COSTLY, max_examples=10)
+@given(case=point_graph_pairs(), use_unary=st.booleans())
+@example(case=(np.array([[0.0, 0.0], [1.0, 0.1], [0.2, 0.9], [0.8, 0.7], [0.4, 0.3]]),
+               np.array([2, 0, 4, 1, 3]), 1e9), use_unary=False)      # issue 13 item 7
+def test_match_graphs_on_permuted_points(method, case, use_unary):
+    """g2 is g1 permuted (and both scaled): a quadratic answer of objective 0 means the affinity
+    underflowed (issue 13 item 7) and must be rescaled, refused or at least warned about."""
+    from transync import match_graphs
+    from transync.graphs import Graph
+
+    pts, perm, scale = case
+    g1 = call(Graph.from_points, pts * scale, edges="full")
+    if g1 is REFUSED:
+        return
+    g2 = call(Graph.from_points, (pts * scale)[np.argsort(perm)] if pts.size else pts,
+              edges="full")
+    if g2 is REFUSED:
+        return
+    n = pts.shape[0]
+    unary = np.ones((n, n)) if use_unary else None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = call(match_graphs, g1, g2, method=method, node_affinity=unary)
+    if res is REFUSED:
+        return
+    _check_matching_result(res, n, n)
+    if method not in ("hungarian", "sinkhorn") and g1.n_edges > 0 and not caught:
+        check(res.objective > 0, f"objective {res.objective} on graphs with {g1.n_edges} "
+                                 f"edges at scale {scale}: the affinity underflowed silently")
+
+
+@COSTLY
+@given(method=st.sampled_from(["rrwm", "sm", "hungarian", "bogus"]),
+       options=st.dictionaries(st.sampled_from(["maxiter", "max_iter", "tol", "n1", "variant",
+                                                "beta"]),
+                               st.sampled_from([5, -1, 0, np.nan, "x", 1e-6]), max_size=2))
+@example(method="rrwm", options={"maxiter": 5})                      # issue 9 item 10
+def test_match_graphs_options(method, options):
+    """Unknown or bad options are refused at the front door with the accepted ones listed."""
+    from transync import match_graphs
+    from transync.graphs import Graph
+
+    g = Graph.from_points(np.array([[0.0, 0.0], [1.0, 0.2], [0.3, 1.0], [0.9, 0.8]]),
+                          edges="full")
+    res = call(match_graphs, g, g, method=method, node_affinity=np.eye(4), **options)
+    if res is REFUSED:
+        return
+    check(method != "bogus", "accepted method='bogus'")
+    _check_matching_result(res, 4, 4)
+
+
+def _clean_adjacency(n):
+    """Symmetric non-negative weights with a zero diagonal, at a nasty scale."""
+    def build(W, scale):
+        W = np.triu(W, 1)
+        with np.errstate(all="ignore"):
+            return (W + W.T) * scale
+    return st.builds(build, float_arrays((n, n), elements=tame_floats), SCALES)
+
+
+@MEDIUM
+@given(method=st.sampled_from(["rrwm", "sm", "ipfp", "hungarian", "sinkhorn"]),
+       sigma2=st.sampled_from([0.15] * 8 + [0.0, -1.0, np.nan, np.inf, 1e-300, 1e300, "x"]),
+       node_affinity=st.one_of(st.none(), st.none(), float_arrays((4, 4), elements=tame_floats),
+                               float_arrays((4, 4)), any_arrays(max_dims=2)))
+def test_match_graphs_sigma2_and_node_affinity(method, sigma2, node_affinity):
+    from transync import match_graphs
+    from transync.graphs import Graph
+
+    g = Graph.from_points(np.array([[0.0, 0.0], [1.0, 0.2], [0.3, 1.0], [0.9, 0.8]]),
+                          edges="full")
+    res = call(match_graphs, g, g, method=method, sigma2=sigma2, node_affinity=node_affinity)
+    if res is REFUSED:
+        return
+    check(isinstance(sigma2, float) and np.isfinite(sigma2) and sigma2 > 0,
+          f"accepted sigma2={sigma2!r}")
+    if node_affinity is not None:
+        check_finite_array(node_affinity, "accepted node_affinity")
+        check(np.shape(node_affinity) == (4, 4), f"accepted node_affinity of shape "
+                                                 f"{np.shape(node_affinity)}")
+    _check_matching_result(res, 4, 4)
+
+
+@MEDIUM
+@given(adj=st.one_of(st.integers(0, 4).flatmap(lambda n: float_arrays((n, n))), any_arrays(),
+                    *[st.integers(1, 5).flatmap(_clean_adjacency)] * 3),
+       points=st.one_of(st.none(), any_arrays(max_dims=2)),
+       directed=st.booleans())
+def test_graph_construction(adj, points, directed):
+    from transync.graphs import Graph
+
+    g = call(Graph, adj, points=points, directed=directed)
+    if g is REFUSED:
+        return
+    A = np.asarray(g.adjacency)
+    check(A.ndim == 2 and A.shape[0] == A.shape[1], f"adjacency shape {A.shape}")
+    check_finite_array(A, "adjacency")
+    check(g.n_nodes == A.shape[0], "n_nodes")
+    check(bool(np.all(np.diag(A) == 0)), "self-loops accepted")
+    if not directed:
+        check(bool(np.array_equal(A, A.T)), "undirected graph with asymmetric adjacency")
+    if g.points is not None:
+        check(np.shape(g.points)[0] == g.n_nodes, "points do not match the nodes")
+        check_finite_array(g.points, "points")
+
+
+@MEDIUM
+@given(points=st.one_of(st.integers(0, 6).flatmap(lambda n: float_arrays((n, 2))), any_arrays()),
+       edges=st.sampled_from(["delaunay", "full", "knn", "bogus"]),
+       k=st.sampled_from([5, 1, 0, -1, 100]))
+def test_graph_from_points(points, edges, k):
+    from transync.graphs import Graph
+
+    g = call(Graph.from_points, points, edges=edges, k=k)
+    if g is REFUSED:
+        return
+    check_finite_array(points, "accepted points")
+    A = np.asarray(g.adjacency)
+    check(A.shape == (len(points),) * 2, f"adjacency shape {A.shape}")
+    check_finite_array(A, "adjacency")
+
+
+# ------------------------------------------------------------------------------- synchronization
+
+def _check_labels(labels, sizes, d, what="labels"):
+    check(len(labels) == len(sizes), f"{what}: {len(labels)} objects, expected {len(sizes)}")
+    for g, (lab, n) in enumerate(zip(labels, sizes)):
+        lab = np.asarray(lab)
+        check(lab.shape == (n,), f"{what}[{g}]: shape {lab.shape}, expected ({n},)")
+        check_assignment(lab, n, d, f"{what}[{g}]")
+
+
+@pytest.mark.parametrize("method", ["spectral", "orthogonal", "matcheig"])
+@COSTLY
+@given(pw_sizes=pairwise_dicts(), n_universe=N_UNIVERSE, pass_sizes=st.booleans())
+@example(pw_sizes=({(0, 1): np.array([np.nan, 0, 1])}, [3, 3]), n_universe=None,
+         pass_sizes=False)                                           # issue 13 item 6
+@example(pw_sizes=({(0, 1): np.array(["a", "b"])}, [2, 2]), n_universe=None, pass_sizes=False)
+@example(pw_sizes=({(0, 1): np.array([1, 0])}, [2, 2]), n_universe=10**9,
+         pass_sizes=False)                                           # issue 13 item 5
+@example(pw_sizes=({(2, 1): np.array([0]), (0, 1): np.array([-1])}, [1, 1, 1, 0]),
+         n_universe=None, pass_sizes=False)
+def test_synchronize_permutations(method, pw_sizes, n_universe, pass_sizes):
+    from transync import synchronize_permutations
+
+    pw, sizes = pw_sizes
+    res = call(synchronize_permutations, pw, method=method, n_universe=n_universe, max_iter=10,
+               sizes=sizes if pass_sizes else None)
+    if res is REFUSED:
+        return
+    d = res.n_universe
+    check(isinstance(d, (int, np.integer)) and d >= 0, f"n_universe {d!r}")
+    if pass_sizes:
+        check([len(lab) for lab in res.labels] == sizes, "labels do not follow `sizes`")
+    check(d <= max(sum(len(lab) for lab in res.labels), 0) or d == n_universe,
+          f"universe {d} larger than the number of nodes")
+    _check_labels(res.labels, [len(lab) for lab in res.labels], d)
+    for (i, j), obs in pw.items():
+        n_i, n_j = len(res.labels[i]), len(res.labels[j])
+        p = call(res.pairwise, i, j)
+        check(p is not REFUSED, f"pairwise({i}, {j}) refused on an observed pair")
+        check_assignment(p, n_i, n_j, f"pairwise({i}, {j})")
+        if res.cycle_consistent:
+            li, lj = np.asarray(res.labels[i]), np.asarray(res.labels[j])
+            want = np.array([int(np.flatnonzero(lj == u)[0]) if u >= 0 and np.any(lj == u)
+                             else -1 for u in li], dtype=np.int64)
+            check(bool(np.array_equal(p, want)), f"pairwise({i}, {j}) disagrees with labels")
+    check_finite_scalar(res.objective, "objective")
+    check(res.cycle_consistent or method == "matcheig", "cycle_consistent is False")
+
+
+@MEDIUM
+@given(method=st.sampled_from(["spectral", "orthogonal", "matcheig"]),
+       weights=st.one_of(st.none(), float_arrays((3, 3)), float_arrays((3, 3),
+                                                                       elements=tame_floats),
+                         any_arrays(max_dims=2)),
+       mask=st.one_of(st.none(), hnp.arrays(np.bool_, (3, 3)), any_arrays(max_dims=2)))
+def test_synchronize_permutations_weights_and_mask(method, weights, mask):
+    from transync import synchronize_permutations
+
+    pw = {(0, 1): np.array([1, 0, 2]), (1, 2): np.array([2, 0, 1]), (0, 2): np.array([2, 1, 0])}
+    res = call(synchronize_permutations, pw, method=method, weights=weights, mask=mask)
+    if res is REFUSED:
+        return
+    if weights is not None:
+        check_finite_array(weights, "accepted weights")
+        w = np.asarray(weights, dtype=float)
+        check(w.size == 0 or bool(np.all(w >= 0)), "accepted negative weights")
+    _check_labels(res.labels, [3, 3, 3], res.n_universe)
+    check_finite_scalar(res.objective, "objective")
+
+
+@COSTLY
+@given(pw_sizes=pairwise_dicts(soft=True), n_universe=N_UNIVERSE,
+       max_iter=st.sampled_from([20, 3, 1, 0, -1]))
+@example(pw_sizes=({(0, 1): 0.8 * np.eye(3) + 0.2 * np.eye(3)[[1, 0, 2]], (1, 2): np.eye(3)},
+                   [3, 3, 3]), n_universe=None, max_iter=0)          # issue 13 item 16
+def test_synchronize_doubly_stochastic(pw_sizes, n_universe, max_iter):
+    from transync import synchronize_doubly_stochastic
+
+    pw, sizes = pw_sizes
+    res = call(synchronize_doubly_stochastic, pw, n_universe=n_universe, max_iter=max_iter)
+    if res is REFUSED:
+        return
+    w = np.asarray(res.weights, dtype=float)
+    check_finite_array(w, "weights")
+    check(bool(np.all(w >= 0)) and abs(w.sum() - 1) < 1e-6, f"weights {w} not convex")
+    d = res.n_universe
+    _check_labels(res.labels, [len(lab) for lab in res.labels], d)
+    for (i, j), Y in res.blocks.items():
+        Y = np.asarray(Y, dtype=float)
+        check_finite_array(Y, f"block {(i, j)}")
+        check(bool(np.all(Y >= -1e-9)), f"block {(i, j)} has negative entries")
+        check(bool(np.all(Y.sum(0) <= 1 + 1e-6) and np.all(Y.sum(1) <= 1 + 1e-6)),
+              f"block {(i, j)} is not sub-doubly-stochastic")
+        ni, nj = Y.shape
+        if ni == nj == d:
+            check(bool(np.allclose(Y.sum(0), 1, atol=1e-6) and np.allclose(Y.sum(1), 1,
+                                                                           atol=1e-6)),
+                  f"block {(i, j)} is not doubly stochastic (equal sizes, d = n)")
+    if max_iter == 0:
+        check(res.n_iter == 0, "n_iter > max_iter")
+
+
+@MEDIUM
+@given(X=st.one_of(*[st.integers(1, 4).flatmap(
+    lambda n: st.lists(st.tuples(st.permutations(list(range(n))), tame_floats), min_size=1,
+                       max_size=3).map(lambda terms: _mix(terms, n)))] * 3,
+    any_arrays(max_dims=2)),
+    max_terms=st.sampled_from([None] * 8 + [0, 1, -1, 10**9]),
+    tol=st.sampled_from([1e-9] * 8 + [0.0, -1.0, np.nan, 0.5]))
+@example(X=np.full((3, 3), 1 / 3), max_terms=0, tol=1e-9)           # issue 13 item 16
+def test_birkhoff_von_neumann(X, max_terms, tol):
+    from transync import birkhoff_von_neumann
+
+    out = call(birkhoff_von_neumann, X, max_terms=max_terms, tol=tol)
+    if out is REFUSED:
+        return
+    w, P = out
+    X = np.asarray(X, dtype=float)
+    n = X.shape[0]
+    w = np.asarray(w, dtype=float)
+    check_finite_array(w, "weights")
+    check(bool(np.all(w > 0)), f"non-positive weights {w}")
+    check(abs(w.sum() - 1) <= max(n * tol, 1e-6) + 1e-6, f"weights sum to {w.sum()}, not 1")
+    recon = np.zeros((n, n))
+    for wk, p in zip(w, np.asarray(P)):
+        check_assignment(p, n, n, "permutation")
+        check(bool(np.all(p >= 0)), "partial permutation in a BvN decomposition")
+        recon += wk * permutations.assignment_to_matrix(p, n)
+    check(bool(np.allclose(recon, X, atol=1e-5)), "decomposition does not reconstruct X")
+
+
+def _mix(terms, n):
+    w = np.array([t[1] for t in terms]) + 1e-3
+    w = w / w.sum()
+    X = np.zeros((n, n))
+    for wk, (p, _) in zip(w, terms):
+        X[np.arange(n), p] += wk
+    return X
+
+
+MAPS = st.one_of(
+    st.integers(0, 4).flatmap(lambda n: float_arrays((n, n, 3, 3))),
+    st.integers(0, 4).flatmap(lambda n: float_arrays((n, n, 3, 3), elements=tame_floats)),
+    st.integers(0, 4).flatmap(lambda n: st.sampled_from([0.0, np.nan, 1e-300, 1e300]).map(
+        lambda v: np.full((n, n, 3, 3), v))),
+    st.integers(1, 4).flatmap(lambda n: float_arrays((n, n, 2, 2), elements=tame_floats)),
+    any_arrays(max_dims=4),
+)
+
+
+def _planted_maps(n, rng_seed, d=3):
+    rng = np.random.default_rng(rng_seed)
+    M = np.eye(d) + 0.1 * rng.standard_normal((n, d, d))
+    return np.einsum("iab,jbc->ijac", M, np.linalg.inv(M))
+
+
+@pytest.mark.parametrize("fn_name", ["synchronize_linear_maps", "synchronize_homographies"])
+@COSTLY
+@given(T=st.one_of(MAPS, *[st.integers(1, 4).flatmap(
+    lambda n: st.integers(0, 10).map(lambda s: _planted_maps(n, s)))] * 5),
+       reference=st.sampled_from([0] * 6 + [1, -1, 5]), robust=st.booleans(),
+       disconnected=st.sampled_from(["raise", "component"]))
+@example(T=np.zeros((3, 3, 3, 3)), reference=0, robust=False,
+         disconnected="raise")                                       # issue 13 item 4
+@example(T=np.zeros((0, 0, 3, 3)), reference=0, robust=False, disconnected="raise")
+@example(T=np.full((2, 2, 3, 3), np.nan), reference=0, robust=False, disconnected="raise")
+def test_synchronize_maps(fn_name, T, reference, robust, disconnected):
+    fn = getattr(transync, fn_name)
+    res = call(fn, T, reference=reference, robust=robust, disconnected=disconnected)
+    if res is REFUSED:
+        return
+    maps = np.asarray(res.maps, dtype=float)
+    N = maps.shape[0]
+    excluded = set(np.asarray(res.info.get("excluded", []), dtype=int).tolist())
+    keep = [i for i in range(N) if i not in excluded]
+    check(len(keep) > 0, "no object kept")
+    check_finite_array(maps[keep], "maps")
+    check(bool(np.allclose(maps[res.reference], np.eye(maps.shape[-1]), atol=1e-8)),
+          "maps[reference] is not the identity")
+    for i in keep:
+        check(abs(np.linalg.det(maps[i])) > 0, f"maps[{i}] is singular")
+    check_finite_scalar(res.objective, "objective")
+
+
+# ----------------------------------------------------------------------------------- datasets
+
+# mostly legal values, so that a good share of calls reaches the result checks
+BAD_INTS = st.sampled_from([2, 3, 4] * 8 + [-1, 0, 1, 2.5, np.nan, None, "3", 10**9])
+BAD_FRACTIONS = st.sampled_from([0.0, 0.3, 1.0] * 8 + [-0.1, 1.5, np.nan, np.inf, "x"])
+
+
+@MEDIUM
+@given(n_objects=BAD_INTS, n_nodes=BAD_INTS, corruption=BAD_FRACTIONS, visibility=BAD_FRACTIONS,
+       observed=BAD_FRACTIONS, n_universe=N_UNIVERSE)
+def test_make_permutation_collection(n_objects, n_nodes, corruption, visibility, observed,
+                                     n_universe):
+    from transync.datasets import make_permutation_collection
+
+    pc = call(make_permutation_collection, n_objects, n_nodes, corruption=corruption,
+              visibility=visibility, observed=observed, n_universe=n_universe, rng=0)
+    if pc is REFUSED:
+        return
+    check(pc.n_objects == n_objects, "n_objects")
+    sizes = [int(n) for n in pc.sizes]
+    _check_labels(pc.labels, sizes, pc.n_universe, "truth labels")
+    for (i, j), a in pc.pairwise.items():
+        check(0 <= i < n_objects and 0 <= j < n_objects and i != j, f"pair {(i, j)}")
+        check_assignment(a, sizes[i], sizes[j], f"observed {(i, j)}")
+
+
+@COSTLY
+@given(n_graphs=BAD_INTS, n_inliers=BAD_INTS,
+       n_outliers=st.sampled_from([0] * 6 + [1, -1, 2.5]),
+       deformation=BAD_FRACTIONS, density=BAD_FRACTIONS)
+def test_make_graph_collection(n_graphs, n_inliers, n_outliers, deformation, density):
+    from transync.datasets import make_graph_collection
+
+    if isinstance(n_graphs, int) and isinstance(n_inliers, int) and n_graphs * n_inliers > 200:
+        n_graphs = 3
+    gc = call(make_graph_collection, n_graphs, n_inliers, n_outliers, deformation, density, rng=0)
+    if gc is REFUSED:
+        return
+    check(len(gc.graphs) == n_graphs, "number of graphs")
+    for g in gc.graphs:
+        check_finite_array(g.adjacency, "adjacency")
+    _check_labels(gc.labels, [g.n_nodes for g in gc.graphs], gc.n_universe, "truth labels")
+
+
+@MEDIUM
+@given(generator=st.sampled_from(["make_pairwise_problem", "make_point_matching_problem"]),
+       n_inliers=BAD_INTS, n_outliers=st.sampled_from([0] * 6 + [1, -1, 2.5, None]),
+       deformation=BAD_FRACTIONS)
+def test_make_pairwise_problems(generator, n_inliers, n_outliers, deformation):
+    from transync import datasets
+
+    if n_inliers == 10**9:
+        n_inliers = 5
+    pp = call(getattr(datasets, generator), n_inliers, n_outliers, deformation, rng=0)
+    if pp is REFUSED:
+        return
+    n1, n2 = pp.g1.n_nodes, pp.g2.n_nodes
+    check_assignment(pp.truth, n1, n2, "truth")
+    check_finite_array(pp.g1.adjacency, "g1.adjacency")
+
+
+@MEDIUM
+@given(generator=st.sampled_from(["make_noisy_linear_maps", "make_noisy_homographies"]),
+       n=BAD_INTS, noise=BAD_FRACTIONS, outliers=BAD_FRACTIONS, density=BAD_FRACTIONS)
+def test_make_noisy_maps(generator, n, noise, outliers, density):
+    from transync import datasets
+
+    if n == 10**9:
+        n = 4
+    tp = call(getattr(datasets, generator), n, noise=noise, outlier_fraction=outliers,
+              density=density, rng=0)
+    if tp is REFUSED:
+        return
+    check_finite_array(tp.truth, "truth")
+    mask = np.asarray(tp.mask, dtype=bool)
+    check_finite_array(np.asarray(tp.observed)[mask], "observed maps")
+
+
+@COSTLY
+@given(n_views=st.sampled_from([2] * 5 + [1, 0, -1, 2.5]),
+       image_size=st.sampled_from([(64, 48)] * 5 + [(0, 0), (-5, 10), (np.nan, 10), (3, 3),
+                                                     "ab"]),
+       difficulty=st.sampled_from(["easy", "moderate"] * 3 + ["bogus"]),
+       noise=st.sampled_from([2.0, 0.0] * 3 + [-1.0, np.nan]))
+def test_make_planar_scene(n_views, image_size, difficulty, noise):
+    from transync.datasets import make_planar_scene
+
+    sc = call(make_planar_scene, n_views, image_size=image_size, difficulty=difficulty,
+              noise=noise, rng=0)
+    if sc is REFUSED:
+        return
+    check(len(sc.images) == n_views, "number of images")
+    check_finite_array(sc.homographies, "homographies")
+
+
+# ----------------------------------------------------------------------------------- geometry
+
+@CHEAP
+@given(H_ARRAYS)
+def test_normalize_determinant(A):
+    out = call(geometry.normalize_determinant, A)
+    if out is REFUSED:
+        return
+    A = np.asarray(A, dtype=float)
+    check(out.shape == A.shape, "shape changed")
+    if A.ndim < 2 or A.size == 0:
+        return
+    flat_A, flat_out = A.reshape(-1, *A.shape[-2:]), out.reshape(-1, *A.shape[-2:])
+    for a, o in zip(flat_A, flat_out):
+        if not np.all(np.isfinite(a)):
+            check(bool(np.all(np.isnan(o))), f"non-finite input {a.tolist()} came back as "
+                                             f"{o.tolist()} (documented: NaN)")
+            continue
+        sv = np.linalg.svd(a, compute_uv=False)
+        if sv[-1] <= sv[0] * 1e-12:                     # singular in floating point
+            check(bool(np.all(np.isnan(o))), f"singular input {a.tolist()} came back as "
+                                             f"{o.tolist()} (documented: NaN)")
+            continue
+        check_finite_array(o, f"normalize_determinant({a.tolist()})")
+        sign, logdet = np.linalg.slogdet(o)
+        # documented: for even d a negative determinant cannot be scaled to +1 and becomes -1
+        want_sign = 1.0 if a.shape[-1] % 2 else float(np.sign(np.linalg.det(a)))
+        check(sign == want_sign and abs(logdet) < 1e-6, f"normalize_determinant({a.tolist()}) has "
+                                               f"determinant {sign * np.exp(logdet)}, not 1")
+
+
+@CHEAP
+@given(SIZES)
+def test_image_corners_and_normalization_matrix(size):
+    for fn in (geometry.image_corners, geometry.normalization_matrix):
+        out = call(fn, size)
+        if out is REFUSED:
+            continue
+        check_finite_array(out, fn.__name__)
+        check(isinstance(size, tuple) and len(size) == 2 and min(size) >= 1,
+              f"{fn.__name__} accepted size {size!r}")
+
+
+@CHEAP
+@given(H_ARRAYS, st.one_of(st.integers(0, 4).flatmap(lambda k: float_arrays((k, 2))),
+                           any_arrays()))
+def test_transfer_points(H, points):
+    out = call(geometry.transfer_points, H, points)
+    if out is REFUSED:
+        return
+    check(np.shape(out)[-1] == 2, f"output shape {np.shape(out)}")
+
+
+@CHEAP
+@given(st.one_of(st.integers(0, 5).flatmap(lambda k: float_arrays((k, 2))), any_arrays()))
+def test_hartley_normalization(points):
+    out = call(geometry.hartley_normalization, points)
+    if out is REFUSED:
+        return
+    T, x = out
+    check_finite_array(T, "T")
+    check_finite_array(x, "normalized points")
+    check(abs(np.linalg.det(T)) > 0, "singular normalization")
+
+
+@CHEAP
+@given(nasty_floats, st.one_of(nasty_floats, st.sampled_from(["1", None])))
+def test_translation(tx, ty):
+    out = call(geometry.translation, tx, ty)
+    if out is REFUSED:
+        return
+    check_finite_array(out, "translation")
+
+
+def test_harness_flags_low_level_errors():
+    """The harness itself: documented errors pass, low-level ones are violations."""
+    def named():
+        raise ValueError("`x` must be finite, got nan")
+
+    def unnamed():
+        raise ValueError("cannot convert float NaN to integer")
+
+    def index():
+        raise IndexError("index 5 is out of bounds")
+
+    def warns():
+        warnings.warn("overflow encountered", RuntimeWarning)
+        return 1
+
+    assert call(named) is REFUSED
+    for fn, what in ((unnamed, "names no argument"), (index, "undocumented IndexError"),
+                     (warns, "foreign warning RuntimeWarning")):
+        with pytest.raises(ContractViolation, match=re.escape(what)):
+            call(fn)

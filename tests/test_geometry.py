@@ -1,0 +1,85 @@
+"""Plane geometry (transync.geometry): round trips and invariances."""
+
+import numpy as np
+import pytest
+
+from transync.geometry import (
+    hartley_normalization,
+    image_corners,
+    normalization_matrix,
+    normalize_determinant,
+    transfer_points,
+    translation,
+)
+
+
+def _random_homographies(rng, k):
+    H = np.eye(3) + 0.1 * rng.normal(size=(k, 3, 3))
+    H[:, 2, :2] *= 1e-3
+    return H
+
+
+def test_normalize_determinant_projective_class_and_unit_det():
+    rng = np.random.default_rng(0)
+    H = _random_homographies(rng, 5)
+    scales = rng.uniform(-5, 5, 5)
+    N = normalize_determinant(H * scales[:, None, None])
+    np.testing.assert_allclose(np.linalg.det(N), 1.0, rtol=1e-12)
+    # same projective class: identical point transfer
+    pts = rng.uniform(0, 100, (7, 2))
+    np.testing.assert_allclose(transfer_points(N, pts), transfer_points(H, pts), rtol=1e-9)
+    # idempotent; singular maps stay visibly missing
+    np.testing.assert_allclose(normalize_determinant(N), N, rtol=1e-12)
+    assert np.isnan(normalize_determinant(np.zeros((3, 3)))).all()
+
+
+def test_transfer_points_round_trip_and_composition():
+    rng = np.random.default_rng(1)
+    A, B = _random_homographies(rng, 2)
+    pts = rng.uniform(0, 300, (20, 2))
+    np.testing.assert_allclose(transfer_points(np.linalg.inv(A), transfer_points(A, pts)), pts,
+                               atol=1e-9)
+    np.testing.assert_allclose(transfer_points(A @ B, pts),
+                               transfer_points(A, transfer_points(B, pts)), atol=1e-9)
+    # stacks broadcast against the points
+    both = transfer_points(np.stack([A, B]), pts)
+    assert both.shape == (2, 20, 2)
+    np.testing.assert_allclose(both[1], transfer_points(B, pts))
+
+
+def test_translation_and_corners():
+    T = translation(3, -2)
+    np.testing.assert_array_equal(transfer_points(T, image_corners((4, 3))),
+                                  [[3, -2], [6, -2], [6, 0], [3, 0]])
+    np.testing.assert_array_equal(translation(3, -2) @ translation(-3, 2), np.eye(3))
+
+
+def test_hartley_normalization_centred_unit_spread_and_invertible():
+    rng = np.random.default_rng(2)
+    pts = rng.uniform(100, 900, (50, 2)) * [1.0, 0.3]
+    T, x = hartley_normalization(pts)
+    np.testing.assert_allclose(x.mean(axis=0), 0.0, atol=1e-12)
+    assert np.linalg.norm(x, axis=1).mean() == pytest.approx(np.sqrt(2))
+    np.testing.assert_allclose(transfer_points(T, pts), x, atol=1e-12)
+    np.testing.assert_allclose(transfer_points(np.linalg.inv(T), x), pts, atol=1e-9)
+    # invariant to a similarity of the input (translation and scale of the point set)
+    _, y = hartley_normalization(3.0 * pts + [5.0, -7.0])
+    np.testing.assert_allclose(y, x, atol=1e-9)
+    # coincident points: a pure translation
+    T1, x1 = hartley_normalization([[2.0, 3.0], [2.0, 3.0]])
+    np.testing.assert_array_equal(x1, 0.0)
+    np.testing.assert_array_equal(T1[:2, :2], np.eye(2))
+
+
+@pytest.mark.parametrize("bad, match", [(np.zeros((0, 2)), r"shape \(k, 2\) with k >= 1"),
+                                        (np.zeros((3, 3)), r"shape \(k, 2\)"),
+                                        ([[np.nan, 0.0]], "finite")])
+def test_hartley_normalization_refuses_bad_points(bad, match):
+    with pytest.raises(ValueError, match=match):
+        hartley_normalization(bad)
+
+
+def test_normalization_matrix_maps_image_to_unit_box():
+    N = normalization_matrix((640, 480))
+    c = transfer_points(N, image_corners((640, 480)))
+    assert np.abs(c).max() <= 1.0 + 1e-12

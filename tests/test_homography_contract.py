@@ -1,0 +1,284 @@
+"""Homography layer: bad input gets a clear error, the rng contract holds (same seed, same
+answer; OpenCV's global random state untouched), results are frozen, never change type with a
+flag, and pickle (issues 9 and 13)."""
+
+import dataclasses
+import logging
+import pickle
+import threading
+
+import numpy as np
+import pytest
+
+from transync.datasets import make_planar_scene
+from transync.exceptions import DegenerateInputError, UnlinkedViewsWarning
+from transync.homography import (
+    DenseOptions,
+    PlaneSegmentation,
+    chained_homographies,
+    estimate_pairwise_homographies,
+    estimate_plane_homographies,
+    extract_planes,
+    misclassification_error,
+    refine_homography_ecc,
+    segment_plane,
+    segment_plane_evidence,
+    to_reference_homographies,
+)
+
+
+@pytest.fixture(scope="module")
+def small():
+    return make_planar_scene(4, image_size=(200, 150), difficulty="easy", rng=1)
+
+
+FAST = dict(n_features=500, max_iter=1)
+
+
+# ------------------------------------------------------------------------------- options
+@pytest.mark.parametrize("kw, exc, match", [
+    ({"dense_weight": float("nan")}, ValueError, r"`dense_weight` must be finite and > 0, got nan"),
+    ({"canvas_margin": 1e6}, ValueError, r"`canvas_margin` must lie in \[0, 2\]"),
+    ({"n_features": 0}, ValueError, r"`n_features` must be >= 1, got 0"),
+    ({"n_features": 10**12}, ValueError, r"`n_features` must be <= 1000000"),
+    ({"levels": 0}, ValueError, r"`levels` must be >= 1, got 0"),
+    ({"levels": 20}, ValueError, r"`levels` must be <= 8, got 20"),
+    ({"max_step": -1}, ValueError, r"`max_step` must be finite and > 0, got -1"),
+    ({"dense": "yes"}, TypeError, r"`dense` must be True or False, got str 'yes'"),
+    ({"segment": 1}, TypeError, r"`segment` must be True or False"),
+    ({"dense_check": None}, TypeError, r"`dense_check` must be True or False"),
+    ({"max_iter": -1}, ValueError, r"`max_iter` must be >= 0"),
+    ({"tol": float("inf")}, ValueError, r"`tol` must be finite"),
+    ({"dense_target": "median"}, ValueError, r"`dense_target` must be one of"),
+    ({"method": "bogus"}, ValueError, r"`method` must be one of 'ransac'"),
+    ({"threshold": 0}, ValueError, r"`threshold` must be finite and > 0"),
+    ({"n_neighbors": 0}, ValueError, r"`n_neighbors` must be >= 1"),
+    ({"pairs": "some"}, ValueError, r"`pairs` must be one of 'auto', 'all'"),
+    ({"pairs": 3}, TypeError, r"`pairs` must be 'auto', 'all', a list"),
+    ({"reference": 5}, ValueError, r"`reference` must be <= 3, got 5"),
+    ({"rng": "seed"}, TypeError, r"`rng` must be None, an int"),
+    ({"bogus": 1}, TypeError, r"unexpected keyword arguments \['bogus'\]; dense options"),
+])
+def test_pipeline_options_validated(small, kw, exc, match):
+    with pytest.raises(exc, match=match):
+        estimate_plane_homographies(small.images, **kw)
+
+
+def test_dense_options_object_and_keywords():
+    opts = DenseOptions(max_iter=1, dense_weight=2.0)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        opts.max_iter = 3
+    assert pickle.loads(pickle.dumps(opts)) == opts
+    assert DenseOptions(levels=np.int64(3)).levels == 3
+    with pytest.raises(ValueError, match=r"`sparse_tolerance` must be finite and >= 0"):
+        DenseOptions(sparse_tolerance=-0.1)
+
+
+def test_dense_options_equal_to_keywords(small):
+    """``dense=DenseOptions(...)`` and the same fields as keywords are the same call."""
+    kw = dict(n_features=500, rng=0, segment=False, rectify=False)
+    a = estimate_plane_homographies(small.images, dense=DenseOptions(max_iter=1, levels=1), **kw)
+    b = estimate_plane_homographies(small.images, max_iter=1, levels=1, **kw)
+    np.testing.assert_array_equal(a.homographies, b.homographies)
+    assert a.info["options"] == b.info["options"] == DenseOptions(max_iter=1, levels=1)
+
+
+# -------------------------------------------------------------------------------- images
+def test_blank_images_say_no_pair_could_be_matched():
+    with pytest.raises(DegenerateInputError, match=r"no pair of the 3 views could be matched"):
+        estimate_plane_homographies([np.zeros((150, 200), np.uint8)] * 3)
+
+
+@pytest.mark.parametrize("images, exc, match", [
+    ([np.zeros((40, 40), complex)] * 2, TypeError, r"`images\[0\]` must be an image array"),
+    ([np.zeros((40, 40), bool)] * 2, TypeError, r"`images\[0\]` must be an unsigned/integer "
+                                                r"or float image, got dtype bool"),
+    ([np.zeros(40, np.uint8)] * 2, ValueError, r"`images\[0\]` must be a \(H, W\) or \(H, W, C\)"),
+    ([np.zeros((40, 40, 2), np.uint8)] * 2, ValueError, r"with C in \(1, 3, 4\)"),
+    ([np.zeros((40, 40)), np.full((40, 40), np.nan)], ValueError,
+     r"`images\[1\]` must be finite, got NaN"),
+    ([np.zeros((10, 10), np.uint8)] * 2, ValueError,
+     r"`images\[0\]` must be at least 16 x 16 pixels, got shape \(10, 10\)"),
+    ([np.full((40, 40), -3, np.int32)] * 2, ValueError, r"`images\[0\]` must be non-negative"),
+    ([np.zeros((0, 40), np.uint8)] * 2, ValueError, r"`images\[0\]` is empty"),
+    ("a.png", TypeError, r"got a single path"),
+    (5, TypeError, r"`images` must be a list of images or paths, got int"),
+])
+def test_bad_images_refused(images, exc, match):
+    with pytest.raises(exc, match=match):
+        estimate_plane_homographies(images)
+    with pytest.raises(exc, match=match):
+        estimate_pairwise_homographies(images)
+
+
+def test_images_of_different_sizes_are_accepted(small):
+    """Views need not share a size (HPatches): the sizes go with each view."""
+    imgs = [small.images[0], small.images[1][5:, 10:]]
+    pw = estimate_pairwise_homographies(imgs, n_features=500, rng=0)
+    assert pw.mask[0, 1]
+
+
+def test_segment_plane_inputs_checked(small):
+    H = small.homographies
+    with pytest.raises(ValueError, match=r"`window` must be >= 1, got 0"):
+        segment_plane(small.images, H, window=0)
+    with pytest.raises(ValueError, match=r"`homographies` must have shape \(4, 3, 3\) "
+                                         r"\(one per image\), got \(3, 3, 3\)"):
+        segment_plane(small.images, H[:3])
+    Hn = H.copy()
+    Hn[2, 0, 0] = np.nan
+    with pytest.raises(ValueError, match=r"`homographies` must be finite"):
+        segment_plane(small.images, Hn)
+    with pytest.raises(ValueError, match=r"`margin` must lie in \[0, 2\]"):
+        segment_plane(small.images, H, margin=1e6)
+    with pytest.raises(ValueError, match=r"`threshold` must lie in \[0, 1\]"):
+        segment_plane(small.images, H, threshold=2.0)
+    with pytest.raises(TypeError, match="return_evidence"):
+        segment_plane(small.images, H, return_evidence=True)
+
+
+def test_segment_plane_evidence_is_a_result_not_a_flag(small):
+    ev = segment_plane_evidence(small.images, small.homographies, rng=0)
+    assert isinstance(ev, PlaneSegmentation)
+    masks = segment_plane(small.images, small.homographies, rng=0)
+    assert isinstance(masks, list)
+    assert all(np.array_equal(a, b) for a, b in zip(masks, ev.masks))
+    assert ev.probability.shape[0] == 4 and ev.count.max() == 4
+    pickle.loads(pickle.dumps(ev))
+
+
+def test_refine_ecc_inputs_checked(small):
+    im = small.images[0]
+    with pytest.raises(ValueError, match=r"`mask` must have the shape of `image` \(150, 200\)"):
+        refine_homography_ecc(im, im, np.eye(3), mask=np.ones((10, 10), bool))
+    with pytest.raises(ValueError, match=r"`H_init` must have shape \(3, 3\)"):
+        refine_homography_ecc(im, im, np.eye(2))
+    with pytest.raises(ValueError, match=r"`H_init` must be finite"):
+        refine_homography_ecc(im, im, np.full((3, 3), np.nan))
+
+
+# ----------------------------------------------------------------------------- multiplane
+def test_misclassification_error_labels_checked():
+    with pytest.raises(ValueError, match=r"`pred` must hold labels >= 0 \(0 = outlier\), got -5"):
+        misclassification_error([-5, 0], [0, 1])
+    with pytest.raises(ValueError, match=r"`truth` must hold integer labels"):
+        misclassification_error([0, 1], [0, 0.5])
+    with pytest.raises(TypeError, match=r"`pred` must hold integer labels, got dtype <U1"):
+        misclassification_error(np.array(["a", "b"]), [0, 1])
+    # large label values cost nothing: labels are compacted
+    assert misclassification_error([0, 10**12, 10**12], [0, 3, 3]) == 0.0
+
+
+def test_extract_planes_options_checked():
+    x = np.random.default_rng(0).uniform(0, 100, (30, 2))
+    with pytest.raises(ValueError, match=r"`method` must be one of 'ransac'.*got 'bogus'"):
+        extract_planes(x, x, method="bogus")
+    with pytest.raises(ValueError, match=r"`x1` must be finite"):
+        extract_planes(np.full((30, 2), np.nan), x)
+    res = extract_planes(x, x + 1.0, rng=np.random.default_rng(0))   # a Generator works
+    assert len(res.homographies) == 1
+    a = extract_planes(x, x + 1.0, rng=3)
+    b = extract_planes(x, x + 1.0, rng=np.random.default_rng(3))
+    np.testing.assert_array_equal(a.labels, b.labels)
+
+
+# ------------------------------------------------------------------------- baselines, NaN
+def test_baselines_warn_about_views_without_estimate(small):
+    imgs = list(small.images[:3]) + [np.zeros((150, 200), np.uint8)]
+    with pytest.warns(UnlinkedViewsWarning, match=r"to_reference_homographies: views \[3\]"):
+        H = to_reference_homographies(imgs, n_features=500, rng=0)
+    assert np.isnan(H[3]).all() and np.isfinite(H[:3]).all()
+    imgs = [small.images[0], np.zeros((150, 200), np.uint8), small.images[2]]
+    with pytest.warns(UnlinkedViewsWarning, match=r"chained_homographies: views \[1, 2\]"):
+        H = chained_homographies(imgs, n_features=500, rng=0)
+    assert np.isnan(H[1:]).all()
+
+
+def test_pipeline_warns_unlinked_views(small):
+    imgs = list(small.images) + [np.zeros((150, 200), np.uint8)]
+    with pytest.warns(UnlinkedViewsWarning, match=r"views \[4\] could not be linked"):
+        res = estimate_plane_homographies(imgs, rng=0, **FAST)
+    assert np.isnan(res.homographies[4]).all()
+    assert np.isfinite(res.homographies[:4]).all()
+
+
+# ------------------------------------------------------------------------------ rng contract
+def _same(a, b):
+    np.testing.assert_array_equal(a.homographies, b.homographies)
+    np.testing.assert_array_equal(a.sparse_homographies, b.sparse_homographies)
+    assert all(np.array_equal(x, y) for x, y in zip(a.masks, b.masks))
+
+
+def _opencv_noise():
+    import cv2
+
+    cv2.setRNGSeed(12345)
+    out = np.zeros((50, 50), np.float32)
+    cv2.randu(out, 0, 1)
+    m = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 32})
+    d = np.random.default_rng(0).random((200, 128), dtype=np.float32)
+    m.knnMatch(d, d, k=2)
+
+
+def test_same_seed_same_answer_whatever_opencv_does_in_between(small):
+    a = estimate_plane_homographies(small.images, rng=5, **FAST)
+    _opencv_noise()
+    b = estimate_plane_homographies(small.images, rng=5, **FAST)
+    _same(a, b)
+    # an equal Generator, while another thread uses OpenCV's random state
+    t = threading.Thread(target=lambda: [_opencv_noise() for _ in range(20)])
+    t.start()
+    c = estimate_plane_homographies(small.images, rng=np.random.default_rng(5), **FAST)
+    t.join()
+    _same(a, c)
+
+
+def test_pipeline_leaves_opencv_random_state_alone(small):
+    import cv2
+
+    def draw():
+        out = np.zeros(8, np.float32)
+        cv2.randu(out, 0, 1)
+        return out
+
+    cv2.setRNGSeed(7)
+    expected = draw()
+    cv2.setRNGSeed(7)
+    estimate_plane_homographies(small.images, rng=0, **FAST)
+    np.testing.assert_array_equal(draw(), expected)
+
+
+def test_seed_reaches_every_stochastic_stage(small, monkeypatch):
+    """The pairwise, rectified and segmentation stages each get a generator (not None)."""
+    import transync.homography._pipeline as pipe   # white-box: the stage functions
+
+    seen = {}
+    real_pw, real_rect, real_seg = (pipe.estimate_pairwise_homographies,
+                                    pipe.estimate_rectified_pairwise, pipe.segment_plane)
+
+    def spy(name, real):
+        def f(*args, **kw):
+            seen.setdefault(name, []).append(kw.get("rng"))
+            return real(*args, **kw)
+        return f
+
+    monkeypatch.setattr(pipe, "estimate_pairwise_homographies", spy("pairs", real_pw))
+    monkeypatch.setattr(pipe, "estimate_rectified_pairwise", spy("rect", real_rect))
+    monkeypatch.setattr(pipe, "segment_plane", spy("seg", real_seg))
+    estimate_plane_homographies(small.images, rng=0, **FAST)
+    gens = [g for name in ("pairs", "rect", "seg") for g in seen[name]]
+    assert all(isinstance(g, np.random.Generator) for g in gens)
+    assert len({id(g) for g in gens}) == 3      # one child generator per stage
+
+
+# --------------------------------------------------------------------- logging and results
+def test_progress_is_logged_not_printed(small, caplog, capsys):
+    with caplog.at_level(logging.INFO, logger="transync.homography"):
+        res = estimate_plane_homographies(small.images, rng=0, verbose=True, **FAST)
+    assert "round 1: max corner change" in caplog.text
+    assert "sparse pairs: 6 of 6 linked" in caplog.text
+    assert capsys.readouterr().out == ""
+    back = pickle.loads(pickle.dumps(res))
+    np.testing.assert_array_equal(back.homographies, res.homographies)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        res.n_iter = 5

@@ -1,0 +1,399 @@
+"""Bad and degenerate input at every public entry point of matching and graphs (issues 9, 13)."""
+
+from __future__ import annotations
+
+import inspect
+import re
+import warnings
+
+import networkx as nx
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from transync.datasets import make_point_matching_problem
+from transync.exceptions import DegenerateInputError
+from transync.graphs import Graph
+from transync.matching import (
+    METHODS,
+    DenseAffinity,
+    FactorizedAffinity,
+    SeparableAffinity,
+    SparseAffinity,
+    gaussian_edge_affinity,
+    gaussian_node_affinity,
+    hungarian,
+    match_graphs,
+    rrwm,
+    sinkhorn,
+    sm,
+    solver_options,
+)
+from transync.metrics import matching_accuracy
+
+QUADRATIC = ("sm", "rrwm", "ipfp", "ga", "pf")
+
+
+def _valid(assignment, n1, n2):
+    a = np.asarray(assignment)
+    matched = a[a >= 0]
+    return (a.shape == (n1,) and a.dtype.kind == "i" and np.all(a >= -1) and np.all(a < n2)
+            and np.unique(matched).size == matched.size and matched.size == min(n1, n2))
+
+
+# --------------------------------------------------------------------------- front door options
+
+
+@pytest.mark.parametrize("method", list(METHODS))
+def test_unknown_solver_option_names_solver_and_lists_accepted(method, rng):
+    g = Graph.from_points(rng.random((5, 2)), edges="full", node_features=rng.random((5, 3)))
+    accepted = ", ".join(solver_options(method))
+    msg = (f"match_graphs(method='{method}') got unknown solver option(s) 'maxiter'; "
+           f"{method} accepts {accepted}")
+    with pytest.raises(TypeError, match=re.escape(msg)):
+        match_graphs(g, g, method=method, maxiter=5)
+
+
+def test_unknown_option_suggests_close_name_and_refuses_n1(rng):
+    g = Graph.from_points(rng.random((5, 2)), edges="full")
+    with pytest.raises(TypeError, match=r"did you mean 'max_iter' for 'maxiter'\?"):
+        match_graphs(g, g, method="rrwm", maxiter=5)
+    with pytest.raises(TypeError, match=r"unknown solver option\(s\) 'n1'"):
+        match_graphs(g, g, method="sm", n1=5)
+
+
+@pytest.mark.parametrize("method", list(METHODS))
+def test_solver_options_come_from_the_signature(method):
+    params = inspect.signature(METHODS[method]).parameters.values()
+    kw = [p.name for p in params if p.kind is p.KEYWORD_ONLY and p.name not in ("n1", "n2")]
+    assert list(solver_options(method)) == kw and kw
+
+
+def test_accepted_options_pass_through(rng):
+    g1 = Graph.from_points(rng.random((6, 2)), edges="full")
+    res = match_graphs(g1, g1, method="rrwm", max_iter=400, variant="original")
+    assert res.assignment.tolist() == list(range(6))
+
+
+@pytest.mark.parametrize("method", ["hungarian", "sinkhorn"])
+def test_linear_method_on_edge_only_graphs_raises(method, rng):
+    g = Graph.from_points(rng.random((5, 2)), edges="full")
+    with pytest.raises(ValueError, match=f"method='{method}' needs a unary term"):
+        match_graphs(g, g, method=method)
+
+
+# --------------------------------------------------------------------------- numeric scale
+
+
+@pytest.mark.parametrize("method", QUADRATIC)
+def test_huge_coordinates_refused_with_sigma2_hint(method):
+    p = make_point_matching_problem(12, 0, 0.02, edges="full", rng=3)
+    g1 = Graph.from_points(1e9 * p.g1.points, edges="full")
+    g2 = Graph.from_points(1e9 * p.g2.points, edges="full")
+    with pytest.raises(DegenerateInputError, match=r"`sigma2`=0.15 is too small for edge "
+                                                   r"attributes \('length'\).*Set `sigma2`"):
+        match_graphs(g1, g2, method=method)
+
+
+def test_suggested_sigma2_recovers_the_unit_scale_result():
+    p = make_point_matching_problem(12, 0, 0.02, edges="full", rng=3)
+    g1 = Graph.from_points(1e6 * p.g1.points, edges="full")
+    g2 = Graph.from_points(1e6 * p.g2.points, edges="full")
+    with pytest.raises(ValueError, match=r"e\.g\. sigma2=([0-9.e+]+)") as err:   # also a ValueError
+        match_graphs(g1, g2)
+    sigma2 = float(re.search(r"e\.g\. sigma2=([0-9.e+]+)", str(err.value)).group(1))
+    big = match_graphs(g1, g2, sigma2=sigma2)
+    assert big.objective > 0
+    small = match_graphs(p.g1, p.g2, sigma2=sigma2 / 1e12)    # the same problem at unit scale
+    np.testing.assert_array_equal(big.assignment, small.assignment)
+    assert matching_accuracy(big.assignment, p.truth) == 1.0
+
+
+def test_huge_node_features_refused():
+    g1 = Graph.from_points(np.zeros((3, 2)) + [[0, 0], [1, 0], [0, 1]],
+                           node_features=1e9 * np.arange(3.0))
+    g2 = g1.permute([2, 0, 1])
+    g2 = Graph(g2.adjacency, points=g2.points, node_features=g2.node_features + 5e8)
+    with pytest.raises(DegenerateInputError, match=r"`sigma2`=1 is too small for node features"):
+        gaussian_node_affinity(g1, g2)
+    with pytest.raises(DegenerateInputError, match="pass `node_affinity`"):
+        match_graphs(g1, g2, method="hungarian")
+
+
+def test_exact_copies_at_huge_scale_still_match():
+    """Underflow is refused only when the affinity is dead; exact copies keep their edges."""
+    P = 1e9 * np.random.default_rng(5).random((8, 2))
+    g1 = Graph.from_points(P, edges="full")
+    perm = np.random.default_rng(6).permutation(8)
+    res = match_graphs(g1, g1.permute(perm), method="rrwm")
+    assert np.all(perm[res.assignment] == np.arange(8))
+
+
+# --------------------------------------------------------------------------- Affinity constructors
+
+
+def test_dense_affinity_validation():
+    with pytest.raises(ValueError, match=r"`K` must have shape \(n1\*n2, n1\*n2\) = \(9, 9\), "
+                                         r"got \(4, 4\)"):
+        sm(DenseAffinity(np.ones((4, 4)), 3, 3))
+    with pytest.raises(ValueError, match="`K` must be finite, got 81 NaN or infinite entries"):
+        DenseAffinity(np.full((9, 9), np.nan), 3, 3)
+    with pytest.raises(ValueError, match="`K` must be non-negative, got minimum -1"):
+        DenseAffinity(-np.ones((9, 9)), 3, 3)
+    with pytest.raises(TypeError, match="`K` must be real, got complex values"):
+        DenseAffinity(np.ones((9, 9)) + 1j, 3, 3)
+    with pytest.raises(TypeError, match="`K` must be an array, got str"):
+        DenseAffinity("abc", 3, 3)
+    with pytest.raises(ValueError, match="`n1` must be >= 1, got 0"):
+        DenseAffinity(np.ones((0, 0)), 0, 3)
+    with pytest.raises(TypeError, match="`n2` must be an int, got float 3.0"):
+        DenseAffinity(np.ones((9, 9)), 3, 3.0)
+
+
+def test_sparse_affinity_validation():
+    with pytest.raises(ValueError, match=r"= \(9, 9\), got \(4, 4\)"):
+        SparseAffinity(sp.eye(4, format="csr"), 3, 3)
+    K = sp.eye(9, format="csr") * np.nan
+    with pytest.raises(ValueError, match="`K` must be finite"):
+        SparseAffinity(K, 3, 3)
+    with pytest.raises(ValueError, match="must be non-negative"):
+        SparseAffinity(-sp.eye(9, format="csr"), 3, 3)
+    with pytest.raises(TypeError, match="`K` must be a real sparse matrix, got dtype complex128"):
+        SparseAffinity(sp.eye(9, format="csr", dtype=complex), 3, 3)
+    with pytest.raises(TypeError, match="`K` must be a real sparse matrix"):
+        rrwm(sp.eye(9, format="csr", dtype=complex), n1=3, n2=3)
+
+
+def test_factorized_affinity_validation():
+    e = np.array([[0, 1], [1, 0]])
+    FactorizedAffinity(None, np.ones((2, 2)), e, e, 2, 2)          # valid
+    with pytest.raises(ValueError, match=r"`edge` must have shape \(m1, m2\) = \(2, 2\)"):
+        FactorizedAffinity(None, np.ones((3, 2)), e, e, 2, 2)
+    with pytest.raises(ValueError, match=r"`edges1` must hold node indices in \[0, 2\), got "
+                                         r"range \[0, 5\]"):
+        FactorizedAffinity(None, None, [[0, 5]], e, 2, 2)
+    with pytest.raises(TypeError, match="`edges2` must hold integer node indices"):
+        FactorizedAffinity(None, None, e, [[0.5, 1]], 2, 2)
+    with pytest.raises(ValueError, match=r"`edges1` must have shape \(m, 2\)"):
+        FactorizedAffinity(None, None, [0, 1, 1], e, 2, 2)
+    with pytest.raises(ValueError, match="`edge` must be finite"):
+        FactorizedAffinity(None, np.full((2, 2), np.nan), e, e, 2, 2)
+    with pytest.raises(ValueError, match=r"`node` must have shape \(n1, n2\) = \(2, 2\)"):
+        FactorizedAffinity(np.ones((3, 2)), None, e, e, 2, 2)
+    with pytest.raises(ValueError, match="`node` must be non-negative"):
+        FactorizedAffinity(-np.ones((2, 2)), None, e, e, 2, 2)
+
+
+def test_separable_affinity_validation():
+    F, G = np.ones((2, 3, 3)), np.ones((2, 4, 4))
+    assert SeparableAffinity(None, F, G).shape == (3, 4)
+    with pytest.raises(ValueError, match=r"`F` must have shape \(R, n1, n1\)"):
+        SeparableAffinity(None, np.ones((2, 3, 4)), G)
+    with pytest.raises(ValueError, match=r"`G` must have shape \(R, n2, n2\) with R=2"):
+        SeparableAffinity(None, F, np.ones((3, 4, 4)))
+    with pytest.raises(ValueError, match="`F` must have 3 dimensions"):
+        SeparableAffinity(None, np.ones((3, 3)), G)
+    with pytest.raises(ValueError, match="`G` must be finite"):
+        SeparableAffinity(None, F, np.full((2, 4, 4), np.inf))
+    with pytest.raises(ValueError, match=r"`node` must have shape \(n1, n2\) = \(3, 4\)"):
+        SeparableAffinity(np.ones((4, 3)), F, G)
+    with pytest.raises(ValueError, match="`max_error` must be finite and >= 0"):
+        SeparableAffinity(None, F, G, max_error=-1.0)
+
+
+@pytest.mark.parametrize("method", QUADRATIC)
+def test_solver_k_n1_n2_validation(method):
+    solver = METHODS[method]
+    K = np.ones((4, 4))
+    with pytest.raises(TypeError, match="`n1` and `n2` are required when `K` is a matrix"):
+        solver(K)
+    with pytest.raises(ValueError, match=r"must have shape \(n1\*n2, n1\*n2\) = \(9, 9\)"):
+        solver(K, n1=3, n2=3)
+    with pytest.raises(ValueError, match="is an Affinity of shape"):
+        solver(DenseAffinity(K, 2, 2), n1=3, n2=2)
+    with pytest.raises(TypeError, match="`K` must be real"):
+        solver(K + 0j, n1=2, n2=2)
+    with pytest.raises(ValueError, match="`K` must be finite"):
+        solver(np.full((4, 4), np.nan), n1=2, n2=2)
+
+
+@pytest.mark.parametrize("solver", [hungarian, sinkhorn])
+def test_linear_solvers_refuse_complex_and_nan(solver):
+    with pytest.raises(TypeError, match="`scores` must be real"):
+        solver(np.ones((2, 2)) + 1j)
+    with pytest.raises(ValueError, match="`scores` must be finite"):
+        solver(np.array([[1.0, np.nan], [0.0, 1.0]]))
+    with pytest.raises(TypeError, match="`scores` must be an array, got str"):
+        solver("ab")
+
+
+# --------------------------------------------------------------------------- Graph
+
+
+@pytest.mark.parametrize("kwargs, error, msg", [
+    ({"adjacency": np.zeros((2, 3))}, ValueError,
+     r"`adjacency` must be square, got shape \(2, 3\)"),
+    ({"adjacency": np.array([[0, 1], [0, 0.0]])}, ValueError,
+     "must be symmetric for an undirected"),
+    ({"adjacency": np.zeros((0, 0))}, ValueError, "must describe a non-empty graph"),
+    ({"adjacency": np.zeros((2, 2)) + 1j}, TypeError, "`adjacency` must be real"),
+    ({"adjacency": [["a", "b"], ["c", "d"]]}, TypeError, "`adjacency` must be convertible"),
+    ({"adjacency": np.full((2, 2), np.nan)}, ValueError, "`adjacency` must be finite"),
+    ({"adjacency": np.zeros((2, 2)), "points": [[0, np.nan], [1, 1]]}, ValueError,
+     "`points` must be finite"),
+    ({"adjacency": np.zeros((2, 2)), "points": np.zeros((3, 2))}, ValueError,
+     r"`points` must have shape \(2, \*\)"),
+    ({"adjacency": np.zeros((2, 2)), "node_features": np.zeros((3, 4))}, ValueError,
+     r"`node_features` must have shape \(2, \*\)"),
+    ({"adjacency": np.zeros((2, 2)), "node_features": np.zeros((2, 4)) + 1j}, TypeError,
+     "`node_features` must be real"),
+    ({"adjacency": np.zeros((2, 2)), "edge_features": np.zeros((2, 3))}, ValueError,
+     r"`edge_features` must have shape \(2, 2\)"),
+    ({"adjacency": np.zeros((2, 2)), "node_labels": [1, 2, 3]}, ValueError,
+     r"`node_labels` must have shape \(2,\)"),
+    ({"adjacency": np.zeros((2, 2)), "node_labels": [1j, 2]}, TypeError,
+     "`node_labels` must be integer labels, got complex"),
+    ({"adjacency": np.zeros((2, 2)), "node_labels": [np.nan, 2]}, ValueError,
+     "`node_labels` must be finite"),
+    ({"adjacency": np.zeros((2, 2)), "directed": "yes"}, TypeError,
+     "`directed` must be a bool, got str 'yes'"),
+    ({"adjacency": np.zeros((2, 2)), "meta": None}, TypeError, "`meta` must be a dict"),
+])
+def test_graph_constructor_refuses(kwargs, error, msg):
+    with pytest.raises(error, match=msg):
+        Graph(**kwargs)
+
+
+def test_graph_other_entry_points_refuse(rng):
+    g = Graph.from_points(rng.random((4, 2)))
+    with pytest.raises(ValueError, match=r"`perm` must be a permutation of range\(4\) "
+                                         r"\(integers\), got array of shape \(4,\) and "
+                                         r"dtype float"):
+        g.permute([0.5, 1.2, 2.0, 3.0])
+    with pytest.raises(ValueError, match=r"`perm` must be a permutation of range\(4\)"):
+        g.permute([0, 1, 2])
+    with pytest.raises(TypeError, match="`perm` must be real"):
+        g.permute(np.arange(4) + 0j)
+    with pytest.raises(TypeError, match="`G` must be a networkx graph, got ndarray"):
+        Graph.from_networkx(np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="`G` must have at least one node"):
+        Graph.from_networkx(nx.Graph())
+    with pytest.raises(TypeError, match="`points` must be real"):
+        Graph.from_points(np.zeros((3, 2)) + 1j)
+    with pytest.raises(ValueError, match="`points` must hold at least one point, got 0"):
+        Graph.from_points(np.zeros((0, 2)))
+    with pytest.raises(ValueError, match="`points` must be finite"):
+        Graph.from_points([[0, 0], [np.inf, 1]])
+
+
+@pytest.mark.parametrize("P", [np.zeros((4, 2)), np.array([[0, 0], [1, 1], [2, 2], [3, 3.0]]),
+                               np.array([[0, 0], [0, 0], [1, 0], [0, 1.0]])])
+def test_degenerate_delaunay_gives_a_graph(P):
+    g = Graph.from_points(P)                      # repeated or collinear points: joggled
+    assert g.n_nodes == 4 and g.n_edges >= 3
+    assert np.array_equal(g.adjacency, g.adjacency.T) and not np.any(np.diag(g.adjacency))
+
+
+# --------------------------------------------------------------------------- degenerate but legal
+
+CASES = {
+    "one-one": (np.zeros((1, 2)), np.zeros((1, 2))),
+    "one-three": (np.zeros((1, 2)), np.array([[0, 0], [1, 0], [0, 1.0]])),
+    "three-one": (np.array([[0, 0], [1, 0], [0, 1.0]]), np.zeros((1, 2))),
+    "two-identical": (np.zeros((2, 2)), np.zeros((2, 2))),
+    "2v3": (np.array([[0, 0], [1, 0.0]]), np.array([[0, 0], [1, 0], [5, 5.0]])),
+    "6v4": (np.array([[0, 0], [1, 0], [0, 1], [1, 1], [3, 3], [2, 0.5]]),
+            np.array([[0, 0], [1, 0], [0, 1], [1, 1.0]])),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.parametrize("method", list(METHODS))
+def test_degenerate_legal_input_gives_valid_assignment(case, method):
+    P1, P2 = CASES[case]
+    g1 = Graph.from_points(P1, edges="full", node_features=P1)
+    g2 = Graph.from_points(P2, edges="full", node_features=P2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # a ConvergenceWarning is a legal answer here
+        res = match_graphs(g1, g2, method=method)
+    assert _valid(res.assignment, len(P1), len(P2)), res.assignment
+    assert np.isfinite(res.objective)
+
+
+@pytest.mark.parametrize("method", QUADRATIC)
+def test_rectangular_planted_valid_both_ways(method, rng):
+    p = make_point_matching_problem(7, 0, 0.0, edges="full", rng=rng)
+    sub = Graph.from_points(p.g2.points[:5], edges="full")
+    for a, b in ((p.g1, sub), (sub, p.g1)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = match_graphs(a, b, method=method)
+        assert _valid(res.assignment, a.n_nodes, b.n_nodes)
+
+
+def test_points_of_different_dimensions_refused(rng):
+    g2d = Graph.from_points(rng.random((5, 2)), edges="full")
+    g3d = Graph.from_points(rng.random((5, 3)), edges="full")
+    with pytest.raises(ValueError, match="`g1` and `g2` must have points of the same dimension "
+                                         "for attribute='length', got 2 and 3"):
+        match_graphs(g2d, g3d)
+    with pytest.raises(ValueError, match="node points dimensions differ: 2 vs 3"):
+        gaussian_node_affinity(g2d, g3d, attribute="points")
+    with pytest.raises(TypeError, match="`g1` and `g2` must be Graph objects, got ndarray"):
+        gaussian_node_affinity(np.zeros((2, 2)), g2d)
+    # attributes that do not use the points still work
+    aff = gaussian_edge_affinity(g2d, g3d, attribute="weight")
+    assert aff.shape == (5, 5)
+
+
+def test_hungarian_maximize_must_be_bool():
+    with pytest.raises(TypeError, match="`maximize` must be a bool, got str 'no'"):
+        hungarian(np.eye(2), maximize="no")
+    assert hungarian(np.eye(2), maximize=False).assignment.tolist() == [1, 0]
+
+
+def test_overflowing_edge_lengths_refused():
+    g1 = Graph.from_points(1e300 * np.array([[0, 0], [1, 0], [0, 1.0]]), edges="full")
+    g2 = Graph.from_points(np.array([[0, 0], [1, 0], [0, 1.0]]), edges="full")
+    with pytest.raises(ValueError, match="the edge lengths of `g1` overflow"):
+        match_graphs(g1, g2)
+
+
+def test_nearly_symmetric_adjacency_stored_exactly_symmetric():
+    A = np.array([[0, 1, 2], [1, 0, 3], [2, 3 * (1 + 1e-12), 0]])
+    g = Graph(A)
+    assert np.array_equal(g.adjacency, g.adjacency.T)
+    np.testing.assert_allclose(g.adjacency, A, rtol=1e-11)
+    B = np.array([[0, 1.0], [1.0, 0]])
+    assert Graph(B).adjacency[0, 1] == 1.0                 # exact input kept bit for bit
+
+
+@pytest.mark.parametrize("scale", [1e-300, 1e200, 1e306])
+@pytest.mark.parametrize("method", list(METHODS))
+def test_extreme_affinity_scale_same_answer_no_overflow(scale, method):
+    """Every solver ranks matchings by vec(X)^T K vec(X): a positive factor changes nothing."""
+    K = np.ones((4, 4)) + 3 * np.eye(4)
+    K[1, 2] = K[2, 1] = 0.0
+    res = METHODS[method](scale * K, n1=2, n2=2)       # warnings are errors in the test suite
+    assert res.assignment.tolist() == [0, 1]
+    assert res.objective == pytest.approx(10 * scale, rel=1e-12)
+    if method == "sm":
+        ref = METHODS[method](K, n1=2, n2=2).info["eigenvalue"]
+        assert res.info["eigenvalue"] == pytest.approx(scale * ref, rel=1e-9)
+
+
+def test_gaussian_edge_affinity_scalar_options_validated(rng):
+    g = Graph.from_points(rng.random((4, 2)), edges="full")
+    with pytest.raises(ValueError, match="`angle_weight` must be finite and >= 0, got -1.0"):
+        gaussian_edge_affinity(g, g, attribute="length+angle", angle_weight=-1.0)
+    with pytest.raises(ValueError, match="`tol` must be finite and > 0, got nan"):
+        gaussian_edge_affinity(g, g, tol=float("nan"))
+    with pytest.raises(ValueError, match="`sigma2` must be finite and > 0, got 0.0"):
+        match_graphs(g, g, sigma2=0.0)
+
+
+@pytest.mark.parametrize("method", ["hungarian", "sinkhorn", "rrwm"])
+def test_sigma2_checked_for_every_method(method, rng):
+    g = Graph.from_points(rng.random((4, 2)), edges="full")
+    with pytest.raises(TypeError, match="`sigma2` must be a real number, got str 'x'"):
+        match_graphs(g, g, method=method, sigma2="x", node_affinity=np.eye(4))

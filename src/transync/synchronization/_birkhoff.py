@@ -29,6 +29,7 @@ from ..exceptions import ConvergenceWarning
 from ..permutations import MultiMatching
 from . import _spectral as spec
 from ._pairwise_input import check_universe, parse_pairwise
+from ._result import CarriesMatching
 
 __all__ = ["BirkhoffSyncResult", "birkhoff_von_neumann", "synchronize_doubly_stochastic"]
 
@@ -105,7 +106,7 @@ def birkhoff_von_neumann(X, *, tol: float = 1e-9, max_terms: int | None = None):
 
 
 @dataclass(frozen=True)
-class BirkhoffSyncResult:
+class BirkhoffSyncResult(CarriesMatching):
     """Result of :func:`synchronize_doubly_stochastic`.
 
     Attributes
@@ -145,22 +146,6 @@ class BirkhoffSyncResult:
     n_iter: int
     converged: bool
     info: Mapping[str, Any] = field(default_factory=dict)
-
-    @property
-    def labels(self) -> tuple[np.ndarray, ...]:
-        return self.matching.labels
-
-    @property
-    def n_universe(self) -> int:
-        return self.matching.n_universe
-
-    @property
-    def n_objects(self) -> int:
-        return self.matching.n_objects
-
-    @property
-    def sizes(self) -> np.ndarray:
-        return self.matching.sizes
 
     def atom(self, k: int) -> MultiMatching:
         """Atom ``k`` (a consistent configuration) as a :class:`MultiMatching`."""

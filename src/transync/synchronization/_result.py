@@ -14,6 +14,31 @@ from ..permutations import MultiMatching
 __all__ = ["PermutationSyncResult"]
 
 
+class CarriesMatching:
+    """Mixin (private) for results that hold a ``matching: MultiMatching``: its shape attributes."""
+
+    __slots__ = ()
+
+    @property
+    def labels(self) -> tuple[np.ndarray, ...]:
+        """``labels[g][u]``: universe slot of node ``u`` of object ``g`` (``-1`` = not placed)."""
+        return self.matching.labels
+
+    @property
+    def n_universe(self) -> int:
+        """Universe size ``d`` (summed over components when the observation graph is
+        disconnected)."""
+        return self.matching.n_universe
+
+    @property
+    def n_objects(self) -> int:
+        return self.matching.n_objects
+
+    @property
+    def sizes(self) -> np.ndarray:
+        return self.matching.sizes
+
+
 @dataclass(frozen=True)
 class BlockRounding:
     """MatchEIG pairwise maps (private): Hungarian on ``V_i V_j^T`` of row-normalized embeddings.
@@ -47,7 +72,7 @@ class BlockRounding:
 
 
 @dataclass(frozen=True)
-class PermutationSyncResult:
+class PermutationSyncResult(CarriesMatching):
     """Synchronized multi-matching.
 
     Attributes
@@ -86,24 +111,6 @@ class PermutationSyncResult:
     cycle_consistent: bool = True
     info: Mapping[str, Any] = field(default_factory=dict)
     _block_rounding: BlockRounding | None = field(default=None, repr=False, compare=False)
-
-    @property
-    def labels(self) -> tuple[np.ndarray, ...]:
-        return self.matching.labels
-
-    @property
-    def n_universe(self) -> int:
-        """Universe size ``d`` (summed over components when the observation graph is
-        disconnected)."""
-        return self.matching.n_universe
-
-    @property
-    def n_objects(self) -> int:
-        return self.matching.n_objects
-
-    @property
-    def sizes(self) -> np.ndarray:
-        return self.matching.sizes
 
     def pairwise(self, i: int, j: int) -> np.ndarray:
         """Assignment from object ``i`` to object ``j`` (``-1`` = no partner in ``j``)."""

@@ -1,6 +1,6 @@
 """Tests for the real-data loaders (Oxford, HPatches, graf, AdelaideRMF) on fixtures and real data.
 
-Error paths on malformed files: tests/test_datasets_loaders.py.
+Error paths on malformed files: tests/datasets/test_loaders.py.
 """
 
 import numpy as np

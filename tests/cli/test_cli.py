@@ -130,7 +130,7 @@ def bad_inputs(tmp_path):
 @pytest.mark.parametrize("argv, expected", [
     (["sync", "{d}/empty.json"], r"empty\.json: expected a JSON object \{\"pairs\""),
     (["sync", "{d}/broken.json"], r"broken\.json, line 3: not valid JSON"),
-    (["sync", "{d}/badpair.json"], r"badpair\.json: pairs\[0\] must be \[i, j, assignment\]"),
+    (["sync", "{d}/badpair.json"], r"badpair\.json: pairs\[0\] must be \[i, j, map\]"),
     (["demo", "--experiments", "foo", "--out", "{d}/demo"],
      r"unknown experiment 'foo'; choose from homography, pairwise, sync"),
     (["experiment", "nope"], r"unknown experiment 'nope'; choose from"),
@@ -295,3 +295,20 @@ def test_datasets_command(monkeypatch, tmp_path, capsys):
     assert main(["datasets"]) == 0
     out = capsys.readouterr().out
     assert f"data home: {tmp_path}" in out and "graf" in out and "1 files" in out
+
+
+def test_sync_command_takes_matrices_like_the_library(tmp_path):
+    """A pair may be given as an assignment or as a 0/1 matrix, as synchronize_permutations
+    accepts; both forms give the same labels."""
+    from transync.permutations import assignment_to_matrix
+
+    c = make_permutation_collection(5, 6, corruption=0.2, rng=2)
+    as_lists = [[int(i), int(j), np.asarray(a).tolist()] for (i, j), a in c.pairwise.items()]
+    as_mats = [[i, j, assignment_to_matrix(a, 6, dtype=int).tolist()] for i, j, a in as_lists]
+    outs = []
+    for name, pairs in (("lists", as_lists), ("mats", as_mats)):
+        src, out = tmp_path / f"{name}.json", tmp_path / f"{name}-labels.json"
+        src.write_text(json.dumps({"pairs": pairs}))
+        assert main(["sync", str(src), "--out", str(out)]) == 0
+        outs.append(json.loads(out.read_text())["labels"])
+    assert outs[0] == outs[1]

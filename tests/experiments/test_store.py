@@ -284,3 +284,40 @@ def test_run_interrupted_before_any_trial_leaves_no_folder(tmp_path):
     with pytest.raises(KeyboardInterrupt):
         run_experiment(exp, tmp_path / "old", progress=False, plot=False)
     assert (tmp_path / "old").is_dir()
+
+
+def test_refused_run_never_removes_the_running_runs_store(monkeypatch, tmp_path):
+    """Two runs start together on a folder that does not exist yet: the one refused by the lock
+    must not clean up (it would delete the store of the run that holds the folder)."""
+    import transync.experiments._runner as runner   # white-box: interleave the two runs
+
+    out = tmp_path / "race"
+    real_prepare = runner._prepare_folder
+    holder = {}
+
+    def prepare_then_other_run_takes_the_folder(folder):
+        real_prepare(folder)
+        if holder:                             # the store prepares its folder too
+            return
+        holder["busy"] = True
+        lock = runner._FolderLock(folder)      # the other run: holds the lock, empty store
+        lock.__enter__()
+        holder["lock"] = lock
+        holder["store"] = runner.ExperimentStore(folder / "results.sqlite")
+
+    monkeypatch.setattr(runner, "_prepare_folder", prepare_then_other_run_takes_the_folder)
+    with pytest.raises(ExperimentStoreError, match="another run"):
+        run_experiment(_exp(), out, progress=False, plot=False)
+    assert (out / "results.sqlite").exists()
+    holder["store"].close()
+    holder["lock"].__exit__(None, None, None)
+    monkeypatch.setattr(runner, "_prepare_folder", real_prepare)
+    report = run_experiment(_exp(), out, progress=False, plot=False)
+    assert report.n_new == len(report.records) > 0 and report.n_other == 0
+
+
+def test_trials_of_other_seeds_are_counted_not_reported(tmp_path):
+    first = run_experiment(_exp(), tmp_path / "s", progress=False, plot=False)
+    second = run_experiment(_exp(), tmp_path / "s", seed=1, progress=False, plot=False)
+    assert second.n_new == len(second.records) == len(first.records)
+    assert second.n_other == len(first.records)

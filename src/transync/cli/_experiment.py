@@ -49,6 +49,9 @@ def _cmd_experiment(args) -> int:
                             progress=not args.no_progress)
     print(f"{report.n_new} new trials ({report.n_failed} failed) in {report.seconds:.1f} s; "
           f"{len(report.records)} stored in {out / 'results.sqlite'}")
+    if report.n_other:
+        print(f"({report.n_other} other stored trials of this experiment, from other "
+              "configurations, seeds or an older transync, are kept but not reported)")
     print(f"summary: {out / 'summary.md'}  plot: {report.figure}")
     for path in report.extra_files:
         print(f"also: {path}")

@@ -17,6 +17,9 @@ RANSAC = ["ransac", "lmeds", "rho", "usac_default", "usac_magsac", "usac_accurat
 def _check_images(paths) -> None:
     import cv2
 
+    # the CLI owns its process: OpenCV's own warnings on damaged files would break the one-line
+    # error contract (the failure itself is reported below, naming the file)
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     if len(paths) < 2:
         raise CLIError(f"need at least 2 images, got {len(paths)}")
     for path in paths:
@@ -43,8 +46,12 @@ def _estimate(args):
     try:
         return estimate_plane_homographies(list(args.images), **options)
     except DegenerateInputError as exc:
-        raise CLIError(f"no two of the {len(args.images)} images could be related ({exc}); do "
-                       "the images show a common plane?") from exc
+        raise CLIError(f"the {len(args.images)} images could not be related: {exc}") from exc
+    except (ValueError, TypeError) as exc:
+        msg = str(exc)
+        for k, name in enumerate(args.images):   # name the files the user gave, not indices
+            msg = msg.replace(f"`images[{k}]`", str(name))
+        raise CLIError(msg) from exc
 
 
 def _cmd_homography(args) -> int:

@@ -138,7 +138,7 @@ def _read_pairs(path: str) -> dict:
         raise CLIError(f"{path}: not a JSON text file") from None
     except json.JSONDecodeError as exc:
         raise CLIError(f"{path}, line {exc.lineno}: not valid JSON ({exc.msg})") from None
-    form = '{"pairs": [[i, j, assignment], ...]}'
+    form = '{"pairs": [[i, j, assignment or 0/1 matrix], ...]}'
     if not isinstance(data, dict) or "pairs" not in data:
         got = f"an object with keys {sorted(data)}" if isinstance(data, dict) else \
             type(data).__name__
@@ -148,13 +148,19 @@ def _read_pairs(path: str) -> dict:
         raise CLIError(f"{path}: \"pairs\" must be a non-empty list {form}")
     pairs = {}
     for k, entry in enumerate(entries):
-        ok = (isinstance(entry, list) and len(entry) == 3
-              and all(isinstance(v, int) and not isinstance(v, bool) for v in entry[:2])
-              and isinstance(entry[2], list)
-              and all(isinstance(v, int) and not isinstance(v, bool) for v in entry[2]))
+        def ints(v):
+            return isinstance(v, list) and all(
+                isinstance(x, int) and not isinstance(x, bool) for x in v)
+
+        ok = (isinstance(entry, list) and len(entry) == 3 and ints(entry[:2])
+              and (ints(entry[2]) or (isinstance(entry[2], list) and entry[2]
+                                      and all(ints(row) for row in entry[2])
+                                      and len({len(row) for row in entry[2]}) == 1)))
         if not ok:
-            raise CLIError(f"{path}: pairs[{k}] must be [i, j, assignment] with integers i, j "
-                           f"and a list of integers, got {json.dumps(entry)[:80]}")
+            raise CLIError(f"{path}: pairs[{k}] must be [i, j, map] with integers i, j and, as "
+                           "the map, an assignment (a list of integers, -1 = unmatched) or a 0/1 "
+                           f"matrix (a list of equal-length integer rows), got "
+                           f"{json.dumps(entry)[:80]}")
         i, j, a = entry
         if (i, j) in pairs:
             raise CLIError(f"{path}: pairs[{k}] repeats the pair ({i}, {j})")

@@ -38,7 +38,10 @@ def _cache_home() -> Path:
 
 def _candidates() -> list[Path]:
     """The fallback folders, in order (``TRANSYNC_DATA`` excluded)."""
-    out = [Path.cwd() / ".." / "shared" / "data"]
+    try:
+        out = [Path.cwd() / ".." / "shared" / "data"]
+    except OSError:              # the working directory was removed
+        out = []
     root = _checkout_root()
     if root is not None:
         out.append(root / ".." / "shared" / "data")

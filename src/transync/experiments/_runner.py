@@ -35,6 +35,7 @@ Examples
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
 import math
@@ -105,6 +106,7 @@ class ExperimentReport:
     figure: Path | None
     seconds: float
     extra_files: tuple = ()
+    n_other: int = 0
 
 
 def _config_key(sweep: str, config: Mapping, seed: int) -> str:
@@ -166,6 +168,10 @@ class ExperimentStore:
                 raise ExperimentStoreError(
                     f"cannot write the experiment store {self.path} ({msg}): the folder "
                     f"{self.path.parent} or the file is not writable") from exc
+            if "full" in msg or "disk I/O" in msg:
+                raise ExperimentStoreError(
+                    f"cannot write the experiment store {self.path} ({msg}): is the disk full? "
+                    "The stored trials are intact; free space and rerun to resume") from exc
             if isinstance(exc, sqlite3.OperationalError) and "locked" in msg:
                 raise ExperimentStoreError(
                     f"the experiment store {self.path} is locked by another process ({msg})"
@@ -302,8 +308,13 @@ def _try_lock(fh) -> bool:
     try:  # a POSIX record lock: owned by this process, not inherited by forked workers
         fcntl.lockf(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
         return True
-    except OSError:
-        return False
+    except OSError as exc:
+        if exc.errno in (errno.EAGAIN, errno.EACCES):
+            return False                  # held by another run
+        raise ExperimentStoreError(
+            f"cannot lock the output folder {Path(fh.name).parent}: the file system does not "
+            f"support locks ({exc.strerror or exc}); choose an output folder on a local disk"
+        ) from exc
 
 
 def _worker_init(parent_pid: int) -> None:
@@ -321,14 +332,25 @@ def _worker_init(parent_pid: int) -> None:
             libc.prctl(1, signal.SIGKILL, 0, 0, 0)       # PR_SET_PDEATHSIG = 1
         except (OSError, AttributeError):  # pragma: no cover - no libc
             pass
-    ppid = os.getppid()
-    if ppid != parent_pid and os.name == "posix" and ppid == 1:  # parent died already
+    def parent_gone() -> bool:
+        # re-parented (to init or a subreaper), or the parent process no longer exists
+        if os.getppid() == parent_pid:
+            return False
+        try:
+            os.kill(parent_pid, 0)
+        except ProcessLookupError:
+            return True
+        except OSError:
+            return False
+        return False
+
+    if parent_gone():  # parent died before this worker started
         os._exit(1)
 
     def watch():
         while True:
             time.sleep(0.5)
-            if os.getppid() != ppid:
+            if parent_gone():
                 os._exit(1)
 
     threading.Thread(target=watch, name="transync-parent-watch", daemon=True).start()
@@ -407,18 +429,32 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
     t_start = time.perf_counter()
     try:
         _prepare_folder(out)
-        with _FolderLock(out):
-            store = ExperimentStore(out / "results.sqlite")
-            try:
-                todo, keys = _plan(experiment, store, n_trials, seed)
-                n_failed = _execute(experiment, store, todo, workers, progress)
-                records = store.records(experiment.name, keys)
-            finally:
-                store.close()
-    except BaseException:
-        if created:  # a run that failed before storing anything leaves no empty folder behind
-            _remove_if_empty(out)
+    except ExperimentStoreError:
+        if created:  # made by this call but unusable: leave nothing behind
+            with contextlib.suppress(OSError):
+                out.rmdir()
         raise
+    remove_folder = False
+    try:
+        # Clean-up happens only while this run holds the lock: a run refused because another
+        # holds the folder never touches that run's files.
+        with _FolderLock(out):
+            try:
+                store = ExperimentStore(out / "results.sqlite")
+                try:
+                    todo, keys, n_other = _plan(experiment, store, n_trials, seed)
+                    n_failed = _execute(experiment, store, todo, workers, progress)
+                    records = store.records(experiment.name, keys)
+                finally:
+                    store.close()
+            except BaseException:
+                # a run that created the folder and stored nothing leaves no folder behind
+                remove_folder = created and _remove_store_if_empty(out)
+                raise
+    finally:
+        if remove_folder:  # after the lock file is gone; fails harmlessly if a newcomer is in
+            with contextlib.suppress(OSError):
+                out.rmdir()
     summary = summarize(experiment, records)
     _write_summary(summary, out)
     figure = None
@@ -430,11 +466,12 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
         if experiment.finish is not None:
             extra = tuple(Path(p) for p in experiment.finish(records, summary, out))
     return ExperimentReport(experiment.name, records, summary, len(todo), n_failed, out, figure,
-                            time.perf_counter() - t_start, extra)
+                            time.perf_counter() - t_start, extra, n_other)
 
 
-def _remove_if_empty(out: Path) -> None:
-    """Remove ``out`` (created by this run) when it holds no stored trial."""
+def _remove_store_if_empty(out: Path) -> bool:
+    """Remove the store in ``out`` (a folder this run created and still locks) when it holds no
+    trial; True when the folder may then be removed."""
     db = out / "results.sqlite"
     if db.exists():
         try:
@@ -444,18 +481,19 @@ def _remove_if_empty(out: Path) -> None:
             finally:
                 con.close()
         except sqlite3.Error:
-            return
+            return False
         if n:
-            return
+            return False
         for name in ("results.sqlite", "results.sqlite-journal"):
             with contextlib.suppress(OSError):
                 (out / name).unlink()
-    with contextlib.suppress(OSError):
-        out.rmdir()
+    return True
 
 
 def _plan(experiment: Experiment, store: ExperimentStore, n_trials: int, seed: int):
-    """The trials still to run, and the configuration keys of this run."""
+    """The trials still to run, the configuration keys of this run, and how many stored trials
+    of this experiment belong to other configurations or seeds (or to a store written before the
+    seed entered the key): they are kept, not reported."""
     finished = store.done(experiment.name)
     todo, keys = [], set()
     for sw in experiment.sweeps:
@@ -466,7 +504,8 @@ def _plan(experiment: Experiment, store: ExperimentStore, n_trials: int, seed: i
                 if (key, t) not in finished:
                     todo.append((sw.name, key, t, config,
                                  _trial_seed(experiment.name, sw.name, value, t, seed)))
-    return todo, keys
+    n_other = sum(1 for key, _t in finished if key not in keys)
+    return todo, keys, n_other
 
 
 def _execute(experiment: Experiment, store: ExperimentStore, todo: list, workers: int,

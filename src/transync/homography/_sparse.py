@@ -121,18 +121,33 @@ def load_images(images) -> list:
 
 
 def to_gray(image) -> np.ndarray:
-    """Grey-level uint8 version of an image (RGB assumed for 3 channels; floats in [0, 1] or 255)."""
-    arr = np.asarray(image)
+    """Grey-level uint8 version of an image (RGB assumed for 3 or 4 channels).
+
+    Intensity scale by dtype: uint8 as is; uint16 divided by 257; floats with maximum <= 2 are
+    taken as [0, 1] (overshoot from interpolation is clipped), other floats as [0, 255]; other
+    integer types as 8-bit when their maximum is <= 255, else rescaled to their maximum.
+
+    >>> import numpy as np
+    >>> to_gray(np.full((2, 2, 3), 0.5)).tolist()
+    [[128, 128], [128, 128]]
+    """
+    image = arr = np.asarray(image)
+    if arr.dtype == np.uint8:
+        if arr.ndim == 3:
+            arr = arr[..., 0] if arr.shape[2] == 1 else cv2.cvtColor(
+                np.ascontiguousarray(arr[..., :3]), cv2.COLOR_RGB2GRAY)
+        return np.ascontiguousarray(arr)
+    arr = arr.astype(np.float32)
+    top = float(arr.max()) if arr.size else 0.0
+    if image.dtype == np.uint16:
+        arr /= 257.0
+    elif image.dtype.kind == "f" and top <= 2.0:
+        arr *= 255.0
+    elif top > 255.0:
+        arr *= 255.0 / top
     if arr.ndim == 3:
         arr = arr[..., 0] if arr.shape[2] == 1 else cv2.cvtColor(
             np.ascontiguousarray(arr[..., :3]), cv2.COLOR_RGB2GRAY)
-    if arr.dtype == np.uint8:
-        return np.ascontiguousarray(arr)
-    arr = arr.astype(np.float64)
-    if arr.dtype.kind == "f" and np.nanmax(arr) <= 1.0 + 1e-9:
-        arr = arr * 255.0
-    elif np.asarray(image).dtype == np.uint16:
-        arr = arr / 257.0
     return np.clip(np.round(arr), 0, 255).astype(np.uint8)
 
 
@@ -146,14 +161,19 @@ def sift_features(gray, *, n_features=4000):
     return pts, desc
 
 
-def _ratio_matches(desc_i, desc_j, ratio, matcher):
+def _ratio_matches(desc_i, desc_j, ratio, seed):
     """Lowe's ratio-test matches ``(index in i, index in j)`` of the descriptors of view j.
 
-    ``matcher`` is an exact (brute-force) matcher: the result does not depend on any random
-    state (FLANN's randomized trees draw from OpenCV's global generator).
+    Nearest neighbours come from FLANN's randomized kd-trees (4 trees, 64 checks), whose random
+    choices draw from OpenCV's random generator. That generator is thread-local: this function
+    runs only in pool threads owned by :func:`estimate_pairwise_homographies` (never in the
+    caller's thread) and seeds it with the pair's own ``seed`` before every match, so the result
+    depends on the pair's seed alone and the caller's OpenCV random state is never touched.
     """
     if len(desc_i) < 2 or len(desc_j) < 2:
         return np.zeros((0, 2), int)
+    cv2.setRNGSeed(int(seed))
+    matcher = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 64})
     knn = matcher.knnMatch(desc_j, desc_i, k=2)
     good = [(m[0].trainIdx, m[0].queryIdx) for m in knn
             if len(m) == 2 and m[0].distance < ratio * m[1].distance]
@@ -264,7 +284,7 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
         ``"lmeds"``, ``"rho"`` or a USAC variant: ``"usac_default"``, ``"usac_magsac"``,
         ``"usac_accurate"``, ``"usac_prosac"``, ``"usac_fast"``.
     ratio : float, default=0.8
-        Lowe's ratio test, in (0, 1]. Nearest neighbours are exact (brute force).
+        Lowe's ratio test, in (0, 1]. Nearest neighbours from FLANN, seeded per pair.
     threshold : float, default=3.0
         Reprojection threshold in pixels.
     max_iter : int, default=2000
@@ -314,10 +334,9 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
     gens = _pair_seeds(rng, len(pairs))
 
     def fit(k, i, j):
-        matcher = cv2.BFMatcher(cv2.NORM_L2)
         pi, di = features[i]
         pj, dj = features[j]
-        m = _ratio_matches(di, dj, ratio, matcher)
+        m = _ratio_matches(di, dj, ratio, gens[k].integers(2**31 - 1))
         if len(m) < max(min_inliers, 4):
             return None, f"{len(m)} ratio-test matches"
         src = pj[m[:, 1]]
@@ -329,13 +348,11 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
         return (Hij, dst, src, inl), None
 
     jobs = [(k, int(i), int(j)) for k, (i, j) in enumerate(pairs)]
-    workers = min(len(jobs), os.cpu_count() or 1, 4)
-    if workers > 1 and len(jobs) >= 8:
-        # OpenCV's matching and RANSAC release the GIL: threads use every core
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            outcomes = list(pool.map(lambda job: fit(*job), jobs))
-    else:
-        outcomes = [fit(*job) for job in jobs]
+    # OpenCV's matching and RANSAC release the GIL: threads use every core. Always pool threads,
+    # even for one job: the per-pair seeding of OpenCV's (thread-local) generator stays in them.
+    workers = max(1, min(len(jobs), os.cpu_count() or 1, 4))
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        outcomes = list(pool.map(lambda job: fit(*job), jobs))
     H = np.full((n, n, 3, 3), np.nan)
     mask = np.zeros((n, n), dtype=bool)
     weights = np.zeros((n, n))

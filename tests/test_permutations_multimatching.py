@@ -143,3 +143,15 @@ def test_converters_bound_their_outputs():
         assignment_to_matrix(np.arange(20000), 10**5)
     with pytest.raises(TypeError, match="`n2` must be an int"):
         assignment_to_matrix(np.array([0]), 2.5)
+
+
+def test_pairs_given_in_one_direction_only_with_unequal_sizes():
+    """Regression: maps given only as (j, i) were inverted with the wrong target size."""
+    from transync.permutations import MultiMatching, cycle_inconsistency
+
+    m = MultiMatching([np.array([0, 1, 2]), np.array([2, 1])])
+    assert m.accuracy({(1, 0): np.array([2, 1])}) == 1.0
+    assert m.accuracy({(0, 1): np.array([-1, 1, 0])}) == 1.0
+    rep = cycle_inconsistency({(1, 0): np.array([2, 1]), (1, 2): np.array([0, 1]),
+                               (0, 2): np.array([-1, 1, 0])})
+    assert rep["n_triangles"] == 1 and rep["inconsistent_triangles"] == 0.0

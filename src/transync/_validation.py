@@ -49,7 +49,11 @@ def check_array(x, name: str, *, ndim: int | Sequence[int] | None = None, dtype=
     """Convert ``x`` to an array of ``dtype`` and check its number of dimensions and finiteness."""
     if x is None:
         raise TypeError(f"`{name}` must be an array, got None")
-    if np.iscomplexobj(x) and np.dtype(dtype).kind != "c":
+    try:
+        is_complex = np.iscomplexobj(x)
+    except (TypeError, ValueError):     # ragged nesting: reported below
+        is_complex = False
+    if is_complex and np.dtype(dtype).kind != "c":
         raise TypeError(f"`{name}` must be real, got complex values ({_describe(x)})")
     if isinstance(x, (str, bytes)):
         raise TypeError(f"`{name}` must be an array, got {type(x).__name__} {x!r:.40}")

@@ -144,7 +144,11 @@ class Graph:
     def permute(self, perm) -> Graph:
         """Relabel nodes: node ``u`` of the result is node ``perm[u]`` of this graph."""
         perm = check_array(perm, "perm", dtype=None)
-        if perm.dtype.kind not in "iu" or perm.shape != (self.n_nodes,) or not np.array_equal(
+        if perm.dtype.kind == "f" and np.all(np.isfinite(perm)) and np.all(perm == np.round(perm)):
+            perm = perm.astype(np.int64)                  # integer-valued floats are indices
+        if perm.dtype.kind not in "iu":
+            raise TypeError(f"`perm` must hold integer node indices, got {_describe_array(perm)}")
+        if perm.shape != (self.n_nodes,) or not np.array_equal(
                 np.sort(perm), np.arange(self.n_nodes)):
             raise ValueError(f"`perm` must be a permutation of range({self.n_nodes}) (integers), "
                              f"got {_describe_array(perm)}")

@@ -239,7 +239,7 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
             canon[(i, j)] = a
     for (i, j), a in arrays.items():
         if i > j and (j, i) not in canon:
-            canon[(j, i)] = invert(a, int(size_arr[i]))
+            canon[(j, i)] = invert(a, int(size_arr[j]))      # a maps i -> j
     pairs = np.array(list(canon.keys()), dtype=np.int64).reshape(-1, 2)
     maps = np.full((len(canon), n_max), UNMATCHED, dtype=np.int64)
     for q, a in enumerate(canon.values()):
@@ -392,6 +392,7 @@ class MultiMatching:
     n_universe: int | None = None
     _padded: np.ndarray = field(init=False, repr=False)
     _inv: np.ndarray | None = field(init=False, repr=False, default=None)
+    _sizes: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
         labels = self.labels
@@ -431,6 +432,9 @@ class MultiMatching:
         object.__setattr__(self, "labels", checked)
         object.__setattr__(self, "n_universe", int(d))
         object.__setattr__(self, "_padded", compact)
+        sizes = np.array([lab.shape[0] for lab in checked], dtype=np.int64)
+        sizes.flags.writeable = False
+        object.__setattr__(self, "_sizes", sizes)
 
     @classmethod
     def from_labels(cls, labels, n_universe: int | None = None) -> MultiMatching:
@@ -455,8 +459,8 @@ class MultiMatching:
 
     @property
     def sizes(self) -> np.ndarray:
-        """Number of nodes of every object, ``(n_objects,)`` int."""
-        return np.array([lab.shape[0] for lab in self.labels], dtype=np.int64)
+        """Number of nodes of every object, ``(n_objects,)`` int (read-only)."""
+        return self._sizes
 
     def _object(self, g, name: str) -> int:
         g = check_int(g, name)
@@ -479,12 +483,7 @@ class MultiMatching:
     def pairwise(self, i: int, j: int) -> np.ndarray:
         """Assignment from object ``i`` to object ``j`` (``-1`` = no partner in ``j``)."""
         i, j = self._object(i, "i"), self._object(j, "j")
-        sizes = self.sizes
-        inv = np.full(int(self._padded.max(initial=-1)) + 2, UNMATCHED, dtype=np.int64)
-        lab_j = self._padded[j, : sizes[j]]
-        placed = lab_j >= 0
-        inv[lab_j[placed]] = np.flatnonzero(placed)
-        return inv[self._padded[i, : sizes[i]]]           # label -1 -> inv[-1] = -1
+        return self._inverse()[j, self._padded[i, : self._sizes[i]]]   # slot -1 -> column -1
 
     def _pairs(self, pairs) -> np.ndarray:
         if pairs is None:
@@ -584,7 +583,7 @@ class MultiMatching:
                                      n2=int(sizes[j]))
             elif (j, i) in maps:
                 a = invert(check_assignment(maps[(j, i)], f"other[{(j, i)}]", n1=int(sizes[j]),
-                                            n2=int(sizes[i])), int(sizes[j]))
+                                            n2=int(sizes[i])), int(sizes[i]))
             else:
                 continue
             out[p, : a.shape[0]] = a

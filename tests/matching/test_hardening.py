@@ -266,10 +266,10 @@ def test_graph_constructor_refuses(kwargs, error, msg):
 
 def test_graph_other_entry_points_refuse(rng):
     g = Graph.from_points(rng.random((4, 2)))
-    with pytest.raises(ValueError, match=r"`perm` must be a permutation of range\(4\) "
-                                         r"\(integers\), got array of shape \(4,\) and "
-                                         r"dtype float"):
+    with pytest.raises(TypeError, match=r"`perm` must hold integer node indices"):
         g.permute([0.5, 1.2, 2.0, 3.0])
+    assert np.array_equal(g.permute([3.0, 2.0, 1.0, 0.0]).adjacency,
+                          g.permute([3, 2, 1, 0]).adjacency)     # integer-valued floats: indices
     with pytest.raises(ValueError, match=r"`perm` must be a permutation of range\(4\)"):
         g.permute([0, 1, 2])
     with pytest.raises(TypeError, match="`perm` must be real"):

@@ -203,3 +203,19 @@ def test_matrix_free_branch_matches_dense(rng):
     d, m = out["dense"], out["matrix_free"]
     np.testing.assert_array_equal(np.asarray(d.labels), np.asarray(m.labels))
     assert m.objective == pytest.approx(d.objective, rel=0.05)
+
+
+def test_block_is_the_weighted_sum_of_the_atoms_maps():
+    """``block(i, j)`` (vectorized over atoms) equals sum_k w_k P_ij^k built atom by atom."""
+    from transync.datasets import make_permutation_collection
+    from transync.permutations import assignment_to_matrix
+    from transync.synchronization import synchronize_doubly_stochastic
+
+    c = make_permutation_collection(6, 5, corruption=0.4, rng=3)
+    with pytest.warns(ConvergenceWarning):           # a few iterations leave several atoms
+        res = synchronize_doubly_stochastic(c.pairwise, max_iter=10)
+    assert res.weights.size >= 2
+    for i, j in [(0, 1), (3, 2), (5, 0), (2, 2)]:
+        want = sum(w * assignment_to_matrix(res.atom(k).pairwise(i, j), 5)
+                   for k, w in enumerate(res.weights))
+        np.testing.assert_allclose(res.block(i, j), want, atol=1e-12)

@@ -266,8 +266,11 @@ def test_sizes_are_validated_and_bounded():
     pw = {(0, 1): np.array([1, 0])}
     with pytest.raises(ValueError, match="`sizes` must be <= 100000000 nodes per object"):
         synchronize_permutations(pw, sizes=np.array([2, 2, 10**12]))
+    with pytest.raises(TypeError, match="`sizes` must hold integers"):
+        synchronize_permutations(pw, sizes=np.array([2.0, 2.5]))
+    assert synchronize_permutations(pw, sizes=np.array([2.0, 2.0])).n_objects == 2
     with pytest.raises(ValueError, match="`sizes` must be a 1-d array of positive ints"):
-        synchronize_permutations(pw, sizes=np.array([2.0, 2.0]))
+        synchronize_permutations(pw, sizes=np.array([2, 0]))
     with pytest.raises(ValueError, match=r"`sizes` must have an entry for every object \(>= 2\)"):
         synchronize_permutations(pw, sizes=np.array([2]))
 

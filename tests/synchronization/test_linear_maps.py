@@ -176,3 +176,18 @@ def test_bad_input():
         synchronize_linear_maps(np.broadcast_to(np.eye(4), (3, 3, 4, 4)), group="SO")
     with pytest.raises(ValueError, match="image_size"):
         synchronize_homographies(T, image_size=(640,))
+
+
+def test_triples_are_accepted_like_dicts():
+    """Pairwise maps as a list of (i, j, map) triples, as the other synchronizers accept."""
+    from transync.synchronization import synchronize_homographies
+
+    A = np.array([[1.0, 0.1, 2.0], [0.0, 1.0, 1.0], [0.0, 0.0, 1.0]])
+    triples = [(0, 1, A), (1, 2, np.eye(3)), (0, 2, A)]
+    as_dict = {(i, j): M for i, j, M in triples}
+    for fn in (synchronize_linear_maps, synchronize_homographies):
+        np.testing.assert_allclose(fn(triples).maps, fn(as_dict).maps, atol=1e-12)
+    with pytest.raises(ValueError, match=r"`H\[1\]` repeats the pair \(0, 1\)"):
+        synchronize_homographies([(0, 1, A), (0, 1, A)])
+    with pytest.raises(TypeError, match="`H` keys must be pairs"):
+        synchronize_homographies({0: np.eye(3)})

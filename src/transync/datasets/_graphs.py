@@ -97,6 +97,15 @@ def _sym_mask(rng, n, p):
     return M | M.T
 
 
+def _check_pair_sizes(n_inliers, n_outliers, deformation):
+    """The sizes and deformation of a two-graph problem, validated."""
+    n_in = check_int(n_inliers, "n_inliers", minimum=1)
+    n_out = check_int(n_outliers, "n_outliers", minimum=0)
+    sigma = check_positive(deformation, "deformation", allow_zero=True)
+    _check_size(2, n_in + n_out)
+    return n_in, n_out, sigma
+
+
 def make_pairwise_problem(n_inliers: int = 20, n_outliers: int = 0, deformation: float = 0.0,
                           density: float = 1.0, *, shuffle: bool = True,
                           rng=None) -> PairwiseProblem:
@@ -121,12 +130,9 @@ def make_pairwise_problem(n_inliers: int = 20, n_outliers: int = 0, deformation:
         Graphs carry their attributes as ``edge_features``; the Cho affinity is
         ``gaussian_edge_affinity(g1, g2, sigma2=0.15)``.
     """
-    n_in = check_int(n_inliers, "n_inliers", minimum=1)
-    n_out = check_int(n_outliers, "n_outliers", minimum=0)
-    sigma = check_positive(deformation, "deformation", allow_zero=True)
+    n_in, n_out, sigma = _check_pair_sizes(n_inliers, n_outliers, deformation)
     rho = check_probability(density, "density")
     shuffle = _check_bool(shuffle, "shuffle")
-    _check_size(2, n_in + n_out)
     rng = as_generator(rng)
     n = n_in + n_out
     base = _sym_uniform(rng, n_in)
@@ -166,12 +172,9 @@ def make_point_matching_problem(n_inliers: int = 20, n_outliers: int = 0,
     standard deviation of the Gaussian jitter added to each point of the copy; ``n_outliers``
     uniform random points are added to both sets.
     """
-    n_in = check_int(n_inliers, "n_inliers", minimum=1)
-    n_out = check_int(n_outliers, "n_outliers", minimum=0)
-    sigma = check_positive(deformation, "deformation", allow_zero=True)
+    n_in, n_out, sigma = _check_pair_sizes(n_inliers, n_outliers, deformation)
     rotate = _check_bool(rotate, "rotate")
     shuffle = _check_bool(shuffle, "shuffle")
-    _check_size(2, n_in + n_out)
     rng = as_generator(rng)
     P = rng.random((n_in, 2))
     theta = rng.uniform(0, 2 * np.pi) if rotate else 0.0

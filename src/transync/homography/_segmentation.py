@@ -179,7 +179,6 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
     mu_m = _box(med, window)
     var_m = np.maximum(_box(med * med, window) - mu_m ** 2, 0)
     tex = np.log1p(np.sqrt(var_m))
-    feats, probs_shape = [], []
     zs, rs = [], []
     for i in range(n):
         wi = np.where(valid[i], warped[i], med)   # windows at the view border see the consensus

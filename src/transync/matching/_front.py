@@ -20,6 +20,7 @@ import inspect
 
 from ..graphs import Graph
 from .._validation import check_choice, check_positive
+from ..exceptions import DegenerateInputError
 from ._affinity import as_affinity, gaussian_edge_affinity, gaussian_node_affinity
 from ._ga import ga
 from ._ipfp import ipfp
@@ -128,7 +129,14 @@ def match_graphs(g1: Graph, g2: Graph, *, method: str = "rrwm", affinity=None,
                 raise ValueError(f"method={method!r} needs a unary term: pass `node_affinity` "
                                  "(shape (n1, n2)), an `affinity` with a diagonal, or graphs with "
                                  "`node_features`")
-            node_affinity = gaussian_node_affinity(g1, g2)
+            try:
+                node_affinity = gaussian_node_affinity(g1, g2)
+            except DegenerateInputError as exc:   # `sigma2` is the edge bandwidth: not here
+                raise DegenerateInputError(
+                    f"method={method!r} scores nodes with gaussian_node_affinity(g1, g2) "
+                    f"(bandwidth 1.0), which underflows on these node features: pass "
+                    f"`node_affinity=gaussian_node_affinity(g1, g2, sigma2=...)` with a larger "
+                    f"bandwidth ({exc})") from None
         from .._validation import check_array
 
         S = check_array(node_affinity, "node_affinity", ndim=2)

@@ -79,16 +79,15 @@ class RRWMStepper(_BaseStepper):
 
     method = "rrwm"
     variant = ""
-    _variants: dict[str, type] = {}
 
-    def __new__(cls, affinity=None, *args, variant: str = "original", **kwargs):
+    def __new__(cls, affinity=None, *args, variant: str | None = None, **kwargs):
         if cls is RRWMStepper:
-            cls = cls._variants[check_choice(variant, "variant", VARIANTS)]
+            cls = _VARIANT_CLASSES[check_choice("original" if variant is None else variant,
+                                                "variant", VARIANTS)]
+        elif variant is not None and variant != cls.variant:   # (None: unpickling, copies)
+            raise ValueError(f"{cls.__name__} implements variant={cls.variant!r}, got "
+                             f"variant={variant!r}")
         return super().__new__(cls)
-
-    def __init_subclass__(cls, **kwargs):
-        super().__init_subclass__(**kwargs)
-        RRWMStepper._variants[cls.variant] = cls
 
     def __init__(self, affinity, *, n1: int | None = None, n2: int | None = None,
                  variant: str = "original", c: float | None = None,
@@ -314,3 +313,10 @@ def rrwm(K, *, n1: int | None = None, n2: int | None = None, variant: str = "ori
     return _run(RRWMStepper(K, n1=n1, n2=n2, variant=variant, c=c, amplification=amplification,
                             max_iter=max_iter, tol=tol, sinkhorn_tol=sinkhorn_tol,
                             sinkhorn_max_iter=sinkhorn_max_iter))
+
+
+# variant name -> stepper class (explicit: subclasses elsewhere never replace a variant)
+_VARIANT_CLASSES: dict[str, type] = {
+    "original": _OriginalRRWMStepper,
+    "pygmtools": _PygmtoolsRRWMStepper,
+}

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
 from .._validation import check_array
@@ -59,12 +61,13 @@ def corner_error(H_est, H_true, *, image_size) -> np.ndarray:
     Returns
     -------
     ndarray of shape (N,) (or a float for single homographies)
-        ``inf`` where a corner is sent to infinity by one homography and not the other.
+        ``inf`` where an estimate is not finite or singular, or a corner is sent to infinity by
+        one homography and not the other: a failed estimate counts as infinitely wrong.
 
     Raises
     ------
     ValueError
-        Non-finite or singular homographies, shapes that disagree, a bad ``image_size``.
+        A non-finite or singular ``H_true``, shapes that disagree, a bad ``image_size``.
 
     Examples
     --------
@@ -73,7 +76,7 @@ def corner_error(H_est, H_true, *, image_size) -> np.ndarray:
     >>> float(corner_error(H, H2, image_size=(640, 480)))
     0.5
     """
-    He = _homographies(H_est, "H_est", (2, 3))
+    He = check_array(H_est, "H_est", ndim=(2, 3), finite=False)  # a failed estimate: inf error
     Ht = _homographies(H_true, "H_true", (2, 3))
     single = He.ndim == 2
     if single:
@@ -117,14 +120,19 @@ def pairwise_corner_error(H_est, H_true, *, image_size, min_overlap=0.05) -> np.
     """
     import cv2
 
-    He = _homographies(H_est, "H_est", 3)
+    He = check_array(H_est, "H_est", ndim=3, finite=False)      # a failed estimate: inf error
     Ht = _homographies(H_true, "H_true", 3)
     if He.shape != Ht.shape:
         raise ValueError(f"`H_est` and `H_true` must both have shape (N, 3, 3), got "
                          f"{He.shape} and {Ht.shape}")
     n = len(He)
     sizes = _sizes(image_size, n)
-    inv_e, inv_t = np.linalg.inv(He), np.linalg.inv(Ht)
+    inv_t = np.linalg.inv(Ht)
+    inv_e = np.full_like(He, np.nan)
+    for k, Hk in enumerate(He):            # singular or non-finite estimates stay NaN
+        if np.all(np.isfinite(Hk)):
+            with contextlib.suppress(np.linalg.LinAlgError):
+                inv_e[k] = np.linalg.inv(Hk)
     out = []
     for i in range(n):
         ci = _corners(sizes[i]).astype(np.float32)

@@ -156,13 +156,20 @@ class BirkhoffSyncResult(CarriesMatching):
 
     def block(self, i: int, j: int) -> np.ndarray:
         """Soft consistent block ``Y_ij`` (``n_i x n_j``) for any pair (identity if ``i == j``)."""
-        self.matching.pairwise(i, j)                      # validates i and j
+        self.matching.pairwise(i, j)                      # validates i and j (cheap)
+        i, j = int(i), int(j)
         sizes = self.sizes
-        Y = np.zeros((sizes[i], sizes[j]))
-        for k, w in enumerate(self.weights):
-            a = self.atom(k).pairwise(i, j)
-            r = np.flatnonzero(a >= 0)
-            Y[r, a[r]] += w
+        ni, nj = int(sizes[i]), int(sizes[j])
+        K = self.atoms.shape[0]
+        # one inverse table per atom (slot -> node of object j; the extra last column is slot -1)
+        inv = np.full((K, self.n_universe + 1), -1, dtype=np.int64)
+        lab_j = self.atoms[:, j, :nj]
+        k_idx, u = np.nonzero(lab_j >= 0)
+        inv[k_idx, lab_j[k_idx, u]] = u
+        a = np.take_along_axis(inv, self.atoms[:, i, :ni], axis=1)   # (K, n_i) maps i -> j
+        Y = np.zeros((ni, nj))
+        k_idx, r = np.nonzero(a >= 0)
+        np.add.at(Y, (r, a[k_idx, r]), np.asarray(self.weights, dtype=float)[k_idx])
         return Y
 
     def pairwise(self, i: int, j: int) -> np.ndarray:
@@ -294,7 +301,6 @@ def _project_simplex(v: np.ndarray) -> np.ndarray:
 
 def _estimate_universe_soft(X, w, pairs, sizes, solver, rng):
     """Eigengap of the degree-normalized soft block matrix (identity diagonal blocks)."""
-    N = sizes.size
     n_max = int(sizes.max())
     off = np.concatenate([[0], np.cumsum(sizes)])
     M = int(off[-1])

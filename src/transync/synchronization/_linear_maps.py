@@ -27,6 +27,7 @@ residual) plus hard rejection of pairs far beyond that scale.
 
 from __future__ import annotations
 
+import numbers
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -145,13 +146,30 @@ _MAX_ND = 20000   # the null-space method factorizes an (N d) x (N d) matrix
 _MAX_SCALE = 1e100  # observed maps with singular values beyond [1e-100, 1e100] overflow
 
 
+def _triples_as_dict(T, name: str):
+    """A list of ``(i, j, map)`` triples as ``{(i, j): map}``; anything else unchanged."""
+    if isinstance(T, (list, tuple)) and T and all(
+            isinstance(e, (list, tuple)) and len(e) == 3 and isinstance(e[0], numbers.Integral)
+            and isinstance(e[1], numbers.Integral) for e in T):
+        out = {}
+        for k, (i, j, M) in enumerate(T):
+            if (i, j) in out:
+                raise ValueError(f"`{name}[{k}]` repeats the pair {(int(i), int(j))}")
+            out[(i, j)] = M
+        return out
+    return T
+
+
 def _parse_input(T, mask, n_objects):
     """Dense ``(N, N, d, d)`` maps and the observed entries, from an array, a dict or triples.
 
     ``mask`` has the meaning of every synchronization function (see
     ``_pairwise_input``): it selects pairs; a dense array is read in each masked direction.
     """
-    if isinstance(T, np.ndarray) or not isinstance(T, Mapping) and np.ndim(T) == 4:
+    T = _triples_as_dict(T, "T")
+    if not isinstance(T, (np.ndarray, Mapping)):
+        T = check_array(T, "T", finite=False)
+    if isinstance(T, np.ndarray):
         T = check_array(T, "T", ndim=4, finite=False)
         n, n2, d, d2 = T.shape
         if n != n2 or d != d2 or d == 0:
@@ -285,7 +303,8 @@ def _pair_residuals(T, obs, maps, kind):
     r = np.full(obs.shape, np.nan)
     T = np.where(obs[:, :, None, None], T, 0.0)
     if kind == "corner":
-        r[obs] = _residual(normalize_determinant(T[obs]), normalize_determinant(est[obs]), kind)
+        r[obs] = _residual(normalize_determinant(T[obs], singular_tol=0),
+                           normalize_determinant(est[obs], singular_tol=0), kind)
     else:
         r[obs] = _residual(T[obs], est[obs], kind)
     return r
@@ -305,7 +324,8 @@ def _cycle_scores(T, obs, kind):
         valid = obs[ks][:, js] & (ks[:, None] != js[None, :])
         ref = np.broadcast_to(T[i, js][None], P.shape)
         if kind == "corner":
-            res = _residual(normalize_determinant(P), normalize_determinant(ref), kind)
+            res = _residual(normalize_determinant(P, singular_tol=0),
+                            normalize_determinant(ref, singular_tol=0), kind)
         else:
             res = _residual(P, ref, kind)
         res = np.where(valid, res, np.nan)
@@ -626,9 +646,13 @@ def synchronize_homographies(H, *, mask=None, weights=None, reference=0, robust=
     >>> bool(corner_error(res.maps, prob.truth, image_size=prob.image_size).max() < 1e-6)
     True
     """
+    H = _triples_as_dict(H, "H")
     if isinstance(H, Mapping):
         if not H:
             raise ValueError("`H` must contain at least one pair, got an empty dict")
+        if not all(isinstance(key, tuple) and len(key) == 2 for key in H):
+            raise TypeError("`H` keys must be pairs (i, j) of view indices, got "
+                            f"{next(k for k in H if not (isinstance(k, tuple) and len(k) == 2))!r}")
         n = max(check_int(k, "H key", minimum=0) for key in H for k in key) + 1
         _check_size(n, 3)
     else:

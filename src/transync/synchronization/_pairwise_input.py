@@ -243,8 +243,12 @@ def _check_sizes_arg(sizes, pairwise):
         sizes = np.full(pairwise.shape[0], pairwise.shape[2], dtype=np.int64)
     if sizes is None:
         return None
-    fixed = np.asarray(sizes)
-    if fixed.ndim != 1 or fixed.dtype.kind not in "iu" or (fixed.size and fixed.min() < 1):
+    fixed = check_array(sizes, "sizes", dtype=None)
+    if fixed.dtype.kind == "f" and np.all(fixed == np.round(fixed)):
+        fixed = fixed.astype(np.int64)                    # integer-valued floats are sizes
+    if fixed.dtype.kind not in "iu":
+        raise TypeError(f"`sizes` must hold integers, got dtype {fixed.dtype}")
+    if fixed.ndim != 1 or (fixed.size and fixed.min() < 1):
         raise ValueError(f"`sizes` must be a 1-d array of positive ints, got {sizes!r:.80}")
     if fixed.size and fixed.max() > MAX_NODES:
         raise ValueError(f"`sizes` must be <= {MAX_NODES} nodes per object, got "
@@ -260,9 +264,6 @@ class _Values:
 
     items: list | None
     stacked: np.ndarray | None = None
-
-    def __getitem__(self, q):
-        return self.items[q]
 
 
 def _observation_arrays(pairwise, mask, name):

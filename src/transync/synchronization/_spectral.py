@@ -3,9 +3,8 @@
 * ``block_matrix``: the sparse ``(M, M)`` block matrix ``T`` (``M = sum n_i``) with blocks
   ``w_ij P_ij`` and ``w_ij P_ij^T`` for observed pairs and identity blocks on the diagonal, built
   once from the stacked assignments (every block is a gather: ``(P_ij V)[u] = V_j[a_ij[u]]``).
-* ``top_eigenpairs``: leading eigenpairs of the degree-normalized ``D^-1/2 T D^-1/2``, by dense
-  ``eigh`` for small ``M`` or matrix-free (restarted block Krylov with Rayleigh-Ritz; repeated
-  eigenvalues, which consistent input always has, need a block method).
+* ``block_krylov_eigs``: leading eigenpairs, matrix-free (restarted block Krylov with
+  Rayleigh-Ritz; repeated eigenvalues, which consistent input always has, need a block method).
 * ``round_to_universe``: rows -> universe slots (pivoted QR picks one row per slot, a Procrustes
   rotation aligns the slots with the axes, then rectangular Hungarian per object, then a few
   Procrustes/Hungarian refinements).
@@ -96,14 +95,6 @@ def block_matrix(stk: StackedPairs, *, normalize: bool = True, dtype=np.float64,
     if indptr[-1] < 2**31 - 1:
         indptr = indptr.astype(idx_dtype)
     return sp.csr_matrix((data.astype(dtype, copy=False), indices, indptr), shape=(M, M))
-
-
-def normalized(T: sp.csr_matrix) -> tuple[sp.csr_matrix, np.ndarray]:
-    """``D^-1/2 T D^-1/2`` with ``D`` the absolute row sums; returns it and ``D^-1/2``."""
-    deg = np.asarray(abs(T).sum(axis=1)).ravel()
-    dinv = 1.0 / np.sqrt(np.maximum(deg, 1e-300))
-    A = sp.diags(dinv) @ T @ sp.diags(dinv)
-    return A.tocsr(), dinv
 
 
 def reference_start(stk: StackedPairs, b: int, directed_obs, rng) -> np.ndarray:
@@ -201,18 +192,6 @@ def block_krylov_eigs(matmat, M: int, k: int, *, k_values: int | None = None,
             converged = True
             break
     return w[:kv], V[:, :k], n_prod, it, converged
-
-
-def top_eigenpairs(A, k: int, *, solver: str, tol: float = 1e-6, rng=None):
-    """Top-``k`` eigenpairs (descending) of the symmetric ``A``; returns ``vals, vecs, n, ok``."""
-    M = A.shape[0]
-    k = min(k, M)
-    if solver == "dense":
-        Ad = A.toarray() if sp.issparse(A) else np.asarray(A)
-        w, U = sla.eigh(Ad, subset_by_index=[M - k, M - 1])
-        return w[::-1], U[:, ::-1], 1, True
-    vals, vecs, n_prod, _, ok = block_krylov_eigs(lambda X: A @ X, M, k, tol=tol, rng=rng)
-    return vals, vecs, n_prod, ok
 
 
 def estimate_universe(vals: np.ndarray, n_max: int) -> tuple[int, str]:

@@ -216,9 +216,12 @@ def _load(path):
 @pytest.mark.parametrize("workers", ["1", "2"])
 def test_ctrl_c_stops_cleanly_and_says_how_to_resume(tmp_path, slow_script, workers):
     out = tmp_path / "out"
+    # a terminal's process: SIGINT at its default, even when the test suite itself runs in the
+    # background of a non-interactive shell (which starts its jobs with SIGINT ignored)
     proc = subprocess.Popen([sys.executable, str(slow_script), "cli", "--out", str(out),
                              "--workers", workers], cwd=tmp_path, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         _wait_for_rows(out / "results.sqlite", 3, proc)
         workers = _children(proc.pid)

@@ -29,6 +29,10 @@ _LAZY = {
     "load_graf": "._image_loaders",
     "load_hpatches_sequence": "._image_loaders",
     "load_oxford_sequence": "._image_loaders",
+    "LANDMARK_AFFINITY": "._cmu",
+    "LandmarkSequence": "._cmu",
+    "load_cmu_sequence": "._cmu",
+    "load_willow_class": "._willow",
 }
 
 __all__ = [

@@ -114,6 +114,11 @@ class LandmarkSequence:
     def n_landmarks(self) -> int:
         return int(self.points.shape[1])
 
+    def __repr__(self) -> str:
+        images = "with images" if self.image_paths is not None else "no images"
+        return (f"LandmarkSequence(name={self.name!r}, n_frames={self.n_frames}, "
+                f"n_landmarks={self.n_landmarks}, {images}, source={str(self.source)!r})")
+
     def normalized_points(self, frames=None, *, normalize: str = "auto") -> np.ndarray:
         """Landmarks of ``frames`` (default: all) divided by a diagonal: (len, n_landmarks, 2).
 

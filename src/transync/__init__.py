@@ -5,6 +5,7 @@ Front doors (keyword-only options, ``method=`` strings, frozen dataclass results
 * :func:`match_graphs` — pairwise graph matching (hungarian, sinkhorn, sm, rrwm, ipfp, ga, pf);
 * :func:`synchronize_permutations` — consistent multi-matchings from pairwise assignments;
 * :func:`synchronize_doubly_stochastic` — Birkhoff-polytope synchronization of soft matchings;
+* :func:`match_collection` — multi-graph matching: S-GA, S-RRWM, S-PF, offline sync, CAO;
 * :func:`synchronize_linear_maps` / :func:`synchronize_homographies` — invertible maps, SL(3);
 * :func:`estimate_plane_homographies` — consistent plane homographies and masks across views.
 
@@ -33,6 +34,8 @@ _LAZY = {
                                       "synchronize_doubly_stochastic"),
     "synchronize_linear_maps": ("transync.synchronization", "synchronize_linear_maps"),
     "synchronize_homographies": ("transync.synchronization", "synchronize_homographies"),
+    "match_collection": ("transync.multigraph", "match_collection"),
+    "MultiMatchingResult": ("transync.multigraph", "MultiMatchingResult"),
     "estimate_plane_homographies": ("transync.homography", "estimate_plane_homographies"),
     "PlaneAlignmentResult": ("transync.homography", "PlaneAlignmentResult"),
     "DenseOptions": ("transync.homography", "DenseOptions"),
@@ -42,6 +45,7 @@ _LAZY = {
     "birkhoff_von_neumann": ("transync.synchronization", "birkhoff_von_neumann"),
     "ConvergenceWarning": ("transync.exceptions", "ConvergenceWarning"),
     "DegenerateInputError": ("transync.exceptions", "DegenerateInputError"),
+    "ExecutorError": ("transync.exceptions", "ExecutorError"),
     "datasets": ("transync.datasets", None),
     "experiments": ("transync.experiments", None),
     "geometry": ("transync.geometry", None),
@@ -49,6 +53,7 @@ _LAZY = {
     "homography": ("transync.homography", None),
     "matching": ("transync.matching", None),
     "metrics": ("transync.metrics", None),
+    "multigraph": ("transync.multigraph", None),
     "permutations": ("transync.permutations", None),
     "synchronization": ("transync.synchronization", None),
 }

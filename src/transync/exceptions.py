@@ -5,6 +5,7 @@ from __future__ import annotations
 __all__ = [
     "ConvergenceWarning",
     "DegenerateInputError",
+    "ExecutorError",
     "ExperimentStoreError",
     "TransyncError",
     "UnlinkedViewsWarning",
@@ -21,6 +22,14 @@ class DegenerateInputError(TransyncError, ValueError):
 
 class ConvergenceWarning(UserWarning):
     """An iterative method stopped at its iteration limit before meeting its tolerance."""
+
+
+class ExecutorError(TransyncError, RuntimeError):
+    """An executor could not run the work: dead or unreachable scheduler, lost worker, timeout.
+
+    Raised instead of hanging. An exception raised by the work itself is not wrapped: it keeps
+    its type (with a note naming the chunk it came from).
+    """
 
 
 class ExperimentStoreError(TransyncError):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import inspect
 import time
 from pathlib import Path
 
@@ -18,8 +19,14 @@ def _registry() -> dict:
     return REGISTRY
 
 
-def _build(name: str, *, quick: bool):
-    return importlib.import_module(_registry()[name]).build(quick=quick)
+def _build(name: str, *, quick: bool, data=None):
+    build = importlib.import_module(_registry()[name]).build
+    if data is None:
+        return build(quick=quick)
+    if "data" not in inspect.signature(build).parameters:
+        raise CLIError(f"experiment {name!r} generates its data and takes no --data; --data is "
+                       "for the experiments on real data sets (e.g. cmu)")
+    return build(quick=quick, data=data)
 
 
 def _check_names(names, what: str) -> None:
@@ -41,7 +48,7 @@ def _cmd_experiment(args) -> int:
             print(f"{name:14s} {doc[0] if doc else ''}")
         return 0
     _check_names([args.name], "experiment")
-    exp = _build(args.name, quick=args.quick)
+    exp = _build(args.name, quick=args.quick, data=args.data)
     out = Path(args.out or f"results/{args.name}{'-quick' if args.quick else ''}")
     args.interrupt_hint = (f"finished trials are saved in {out / 'results.sqlite'}; run the "
                            "same command again to resume")
@@ -125,6 +132,9 @@ def add_parsers(sub) -> None:
     p.add_argument("--list", action="store_true", help="list the experiments")
     p.add_argument("--quick", action="store_true", help="small version (about a minute)")
     p.add_argument("--out", help="output folder (default: results/NAME)")
+    p.add_argument("--data", metavar="PATH",
+                   help="data folder of the experiments on real data (cmu: any folder in the "
+                        "CMU layout; default: TRANSYNC_DATA's cmu-house)")
     p.add_argument("--trials", type=positive_int, help="trials per configuration")
     p.add_argument("--workers", type=positive_int, default=1, help="processes")
     p.add_argument("--seed", type=int, default=0,

@@ -19,6 +19,8 @@ REGISTRY = {
     "pairwise": "transync.experiments.pairwise",
     "homography": "transync.experiments.homography",
     "sync": "transync.experiments.sync",
+    "multigraph": "transync.experiments.multigraph",
+    "cmu": "transync.experiments.cmu",
 }
 
 __all__ = ["REGISTRY", "Experiment", "ExperimentReport", "ExperimentStore", "Sweep", "mean_se",

@@ -54,6 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._progress import progress_bar
 from .._validation import check_int
 from ..exceptions import ExperimentStoreError
 
@@ -512,7 +513,8 @@ def _execute(experiment: Experiment, store: ExperimentStore, todo: list, workers
              progress: bool) -> int:
     """Run ``todo`` serially or on a process pool, storing each trial as it finishes."""
     n_failed = 0
-    bar = _progress(len(todo), experiment.name, progress)
+    bar = progress_bar(len(todo), f"experiment {experiment.name}", enabled=progress,
+                       unit="trial")
     try:
         if workers == 1 or len(todo) <= 1:
             for sw_name, key, t, config, s in todo:
@@ -548,22 +550,6 @@ def _execute(experiment: Experiment, store: ExperimentStore, todo: list, workers
         return n_failed
     finally:
         bar.close()
-
-
-class _NoBar:
-    def update(self, n):
-        pass
-
-    def close(self):
-        pass
-
-
-def _progress(total: int, name: str, enabled: bool):
-    if not enabled or total == 0:
-        return _NoBar()
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc=f"experiment {name}", unit="trial", dynamic_ncols=True)
 
 
 def mean_se(values) -> tuple[float, float, int]:

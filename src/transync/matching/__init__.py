@@ -4,10 +4,12 @@ from ._affinity import (
     Affinity,
     DenseAffinity,
     FactorizedAffinity,
+    GaussianEdgeFactors,
     SeparableAffinity,
     SparseAffinity,
     as_affinity,
     gaussian_edge_affinity,
+    gaussian_edge_factors,
     gaussian_node_affinity,
 )
 from ._front import METHODS, match_graphs, solver_options
@@ -17,6 +19,7 @@ from ._linear import hungarian, sinkhorn
 from ._pf import PFStepper, pf
 from ._result import MatchingResult
 from ._rrwm import RRWMStepper, rrwm
+from ._sinkhorn import sinkhorn_augmented_batch, sinkhorn_batch, sinkhorn_normalize
 from ._sm import SMStepper, sm
 from ._stepwise import Stepper
 
@@ -24,10 +27,12 @@ __all__ = [
     "Affinity",
     "DenseAffinity",
     "FactorizedAffinity",
+    "GaussianEdgeFactors",
     "SeparableAffinity",
     "SparseAffinity",
     "as_affinity",
     "gaussian_edge_affinity",
+    "gaussian_edge_factors",
     "gaussian_node_affinity",
     "GAStepper",
     "IPFPStepper",
@@ -44,6 +49,9 @@ __all__ = [
     "pf",
     "rrwm",
     "sinkhorn",
+    "sinkhorn_augmented_batch",
+    "sinkhorn_batch",
+    "sinkhorn_normalize",
     "sm",
     "solver_options",
 ]

@@ -42,7 +42,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import logsumexp
 
-__all__ = ["SinkhornOutput", "sinkhorn_normalize"]
+__all__ = ["SinkhornOutput", "sinkhorn_augmented_batch", "sinkhorn_batch", "sinkhorn_normalize"]
 
 DOMAINS = ("log", "scaling", "augmented")
 SLACKS = ("mass", "none", "augmented")
@@ -94,36 +94,6 @@ class _LogDomain:
 
     def matrix(self):
         return np.exp(self.f[:, None] + self.L + self.g[None, :])
-
-
-class _ScalingDomain:
-    """Scalings ``u`` (rows) and ``v`` (columns) of ``A`` with ``rows <= cols``."""
-
-    keeps_tested_rows = False
-    tests_last_row = False
-
-    def __init__(self, A, slack: float, v0=None):
-        self.A = A
-        self.slack = slack
-        self.v = np.ones(A.shape[1]) if v0 is None or v0.shape != (A.shape[1],) else v0
-        self.u = None
-        self._Av = None
-
-    def row_candidate(self):
-        self._Av = self.A @ self.v
-
-    def row_error(self) -> float:
-        return float(np.max(np.abs(self.u * self._Av - 1.0)))
-
-    def apply_row(self):
-        self.u = 1.0 / self._Av
-
-    def col(self):
-        uA = self.u @ self.A
-        self.v = 1.0 / (uA + self.slack / self.v.sum()) if self.slack else 1.0 / uA
-
-    def matrix(self):
-        return (self.u[:, None] * self.A) * self.v[None, :]
 
 
 class _AugmentedDomain:
@@ -204,7 +174,7 @@ def sinkhorn_normalize(M: np.ndarray, *, domain: str = "log", slack: str = "mass
     if domain == "log":
         dom = _LogDomain(K, mass)
     elif domain == "scaling":
-        dom = _ScalingDomain(K, mass, warm_start)
+        dom = None
     elif domain == "augmented":
         dom = _AugmentedDomain(M)
     else:
@@ -213,14 +183,63 @@ def sinkhorn_normalize(M: np.ndarray, *, domain: str = "log", slack: str = "mass
         n_half, tol = int(half_sweeps), None
     else:
         n_half = 2 * int(max_iter) + (domain != "augmented")
-    n_sweeps, err, converged = _alternate(dom, n_half=n_half, tol=tol, check_every=check_every)
-    X = dom.matrix()
-    v = dom.v if domain == "scaling" else None
+    if dom is None:
+        v0 = warm_start if warm_start is not None and warm_start.shape == (K.shape[1],) else None
+        X, v, n_sweeps, err, converged = _scaling_loop(K, mass, v0, n_half=n_half, tol=tol,
+                                                       check_every=check_every)
+    else:
+        n_sweeps, err, converged = _alternate(dom, n_half=n_half, tol=tol,
+                                              check_every=check_every)
+        X, v = dom.matrix(), None
     return SinkhornOutput(X.T if transposed else X, n_sweeps, err, converged, v)
 
 
+def _scaling_loop(A, slack: float, v0, *, n_half: int, tol: float | None, check_every: int):
+    """The scaling domain: scalings ``u`` (rows) and ``v`` (columns) of ``A`` with rows <= cols.
+
+    The half-sweeps of :func:`_alternate` (rows even, columns odd; the tolerance tested before a
+    row update, never before the final one; when met, the last accepted sweep is kept, columns
+    exact), written out for speed: RRWM runs thousands of sweeps on small matrices per solve,
+    where the cost is the calls, not the arithmetic. The vectors live in preallocated buffers and
+    every operation is the one of the plain formulation (``np.dot(A, v, out=)`` is ``A @ v`` bit
+    for bit, ``reciprocal`` is ``1.0 / x``), so the iterates are the same to the last bit.
+    Returns ``(X, v, n_sweeps, error, converged)``.
+    """
+    dot, recip, mul = np.dot, np.reciprocal, np.multiply
+    A = np.asarray(A, dtype=float)      # (``out=`` buffers need the operands' dtype)
+    n1, n2 = A.shape
+    v = np.ones(n2) if v0 is None else np.array(v0, dtype=float)
+    Av, u, uA, t = np.empty(n1), np.empty(n1), np.empty(n2), np.empty(n1)
+    n_sweeps, err, converged = 0, np.inf, False
+    check = tol is not None
+    # half-sweep 0 (rows; never tested), then pairs (columns i, rows i + 1)
+    if n_half > 0:
+        dot(A, v, out=Av)
+        recip(Av, out=u)
+    for i in range(1, n_half, 2):
+        dot(u, A, out=uA)
+        if slack:
+            uA += slack / v.sum()
+        recip(uA, out=v)
+        n_sweeps += 1
+        if i + 1 == n_half:
+            break
+        dot(A, v, out=Av)
+        if check and (n_sweeps + 1) % check_every == 0 and i + 2 != n_half:
+            mul(u, Av, out=t)
+            # max |t - 1| exactly: rounding of t - 1 is monotone in t
+            err = float(max(t.max() - 1.0, 1.0 - t.min()))
+            if err < tol:
+                converged = True
+                break
+        recip(Av, out=u)
+    X = (u[:, None] * A) * v[None, :]
+    return X, v, n_sweeps, err, converged
+
+
 def _alternate(dom, *, n_half: int, tol: float | None, check_every: int):
-    """The loop shared by every domain: half-sweep ``i`` normalises rows (even) or columns (odd)."""
+    """The loop of the log and augmented domains: half-sweep ``i`` normalises rows (even) or
+    columns (odd). The scaling domain runs the same schedule in :func:`_scaling_loop`."""
     n_sweeps, err, converged = 0, np.inf, False
     for i in range(n_half):
         if i % 2:
@@ -239,3 +258,97 @@ def _alternate(dom, *, n_half: int, tol: float | None, check_every: int):
                 break
         dom.apply_row()
     return n_sweeps, err, converged
+
+
+# --------------------------------------------------------------------------- batched Sinkhorn
+# Stacks of matrices for the lock-step multi-graph solvers: a batched transcription of
+# `_alternate` (scaling and augmented domains), each matrix frozen once its own test passes so
+# that it gets exactly the iterate of the 2-D `sinkhorn_normalize` call.
+
+
+def _sinkhorn_scaling(A, *, slack_mass: float, tol, max_iter: int = 1000,
+                      half_sweeps: int | None = None, check_every: int = 1):
+    """``diag(u) A diag(v)`` for a stack ``A`` of shape (b, r, c), ``r <= c``.
+
+    Returns ``(X, n_sweeps (b,), converged (b,))``.
+    """
+    b, r, c = A.shape
+    v = np.ones((b, c))
+    u = np.empty((b, r))
+    n_sweeps = np.zeros(b, np.int64)
+    converged = np.zeros(b, bool)
+    if half_sweeps is not None:
+        n_half, tol = int(half_sweeps), None
+    else:
+        n_half = 2 * int(max_iter) + 1
+    act = np.arange(b)
+    Aa, ua, va = A, u, v                       # compacted views of the active matrices
+    sweeps = 0
+    for i in range(n_half):
+        if i % 2:
+            uA = np.matmul(ua[:, None, :], Aa)[:, 0, :]
+            if slack_mass:
+                va = 1.0 / (uA + slack_mass / va.sum(1, keepdims=True))
+            else:
+                va = 1.0 / uA
+            sweeps += 1
+            continue
+        Av = np.matmul(Aa, va[:, :, None])[:, :, 0]
+        last = i == n_half - 1
+        if tol is not None and i and (sweeps + 1) % check_every == 0 and not last:
+            err = np.abs(ua * Av - 1.0).max(1)
+            done = err < tol
+            if done.any():
+                idx = act[done]
+                u[idx], v[idx] = ua[done], va[done]
+                n_sweeps[idx] = sweeps
+                converged[idx] = True
+                keep = ~done
+                act, Aa, ua, va, Av = act[keep], Aa[keep], ua[keep], va[keep], Av[keep]
+                if not len(act):
+                    break
+        ua = 1.0 / Av
+    if len(act):
+        u[act], v[act] = ua, va
+        n_sweeps[act] = sweeps
+    return (u[:, :, None] * A) * v[:, None, :], n_sweeps, converged
+
+
+def sinkhorn_batch(A, *, slack: str, **kw):
+    """Scaling-domain Sinkhorn of a stack ``A`` of (n1, n2) kernels; transposes when ``n1 > n2``.
+
+    ``slack="mass"`` or ``"none"`` as :func:`sinkhorn_normalize`; keywords ``tol``,
+    ``max_iter``, ``half_sweeps``, ``check_every`` as there. Every matrix gets exactly the iterate
+    of its own 2-D call. Returns ``(X, n_sweeps (b,), converged (b,))``.
+    """
+    transposed = A.shape[1] > A.shape[2]
+    K = np.swapaxes(A, 1, 2) if transposed else A
+    mass = float(K.shape[2] - K.shape[1]) if slack == "mass" else 0.0
+    X, n_sweeps, conv = _sinkhorn_scaling(np.ascontiguousarray(K), slack_mass=mass, **kw)
+    return (np.swapaxes(X, 1, 2) if transposed else X), n_sweeps, conv
+
+
+def sinkhorn_augmented_batch(M, *, tol: float, max_iter: int, which=None) -> None:
+    """Gold & Rangarajan's slack Sinkhorn of ``M[which]`` (b, n1 + 1, n2 + 1), in place."""
+    idx = np.arange(len(M)) if which is None else np.asarray(which)
+    if not len(idx):
+        return
+    n1, n2 = M.shape[1] - 1, M.shape[2] - 1
+    Ma = M[idx]
+    old = None
+    for i in range(2 * int(max_iter)):
+        if i % 2:
+            Ma[:, :, :n2] /= Ma[:, :, :n2].sum(1, keepdims=True)
+            continue
+        if i:
+            err = np.abs(Ma[:, :n1, :n2] - old).sum((1, 2))
+            done = err < tol
+            if done.any():
+                M[idx[done]] = Ma[done]
+                keep = ~done
+                idx, Ma = idx[keep], Ma[keep]
+                if not len(idx):
+                    return
+        old = Ma[:, :n1, :n2].copy()
+        Ma[:, :n1] /= Ma[:, :n1].sum(2, keepdims=True)
+    M[idx] = Ma

@@ -26,12 +26,12 @@ The public functions (:func:`~transync.matching.rrwm` etc.) are a thin loop over
 
 from __future__ import annotations
 
-import contextlib
 import warnings
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from .._blas import blas_limit
 from .._validation import check_array
 from ..exceptions import ConvergenceWarning
 from ..permutations import assignment_to_matrix, solve_lap
@@ -143,25 +143,9 @@ class _BaseStepper:
 # Below this many candidate pairs (n1 * n2) the solvers' matrix products are small: BLAS threads
 # buy little, and on a busy machine (or under the experiment runner's worker processes) their
 # spin-waiting makes each product up to 20x slower. Such loops run single-threaded.
-SINGLE_THREAD_BELOW = 200 * 200
-_CONTROLLER = None
-
-
-def _blas_limit(size: int):
-    """Context limiting BLAS to one thread for small problems (no-op otherwise)."""
-    global _CONTROLLER
-    if size >= SINGLE_THREAD_BELOW:
-        return contextlib.nullcontext()
-    if _CONTROLLER is None:
-        from threadpoolctl import ThreadpoolController
-
-        _CONTROLLER = ThreadpoolController()
-    return _CONTROLLER.limit(limits=1, user_api="blas")
-
-
 def _run(stepper) -> MatchingResult:
     """Thin loop of the public functions: step until done, warn if not converged."""
-    with _blas_limit(stepper.n1 * stepper.n2):
+    with blas_limit(stepper.n1 * stepper.n2):
         while not stepper.done:
             stepper.step()
     if not stepper.converged:

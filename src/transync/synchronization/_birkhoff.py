@@ -8,9 +8,16 @@ permutations ``P_i^k``):
           \\| X_{ij} - \\textstyle\\sum_k \\alpha_k S_{k,ij} \\|_F^2 ,
 
 by conditional gradient (Frank-Wolfe) with column generation: "solving for k-hat" is a
-permutation synchronization on the residual (spectral start, then Gauss-Seidel Hungarian sweeps),
-"solving for alpha" is the exact line search of the quadratic, optionally followed by a fully
-corrective re-optimization of all weights on the simplex (projected gradient).
+permutation synchronization on the residual (Gauss-Seidel Hungarian sweeps from a spectral start
+and from warm starts), "solving for alpha" is the exact line search of the quadratic (pairwise
+Frank-Wolfe step), or a fully corrective re-optimization of all weights on the simplex
+(active-set QP on the Gram matrix of the atoms).
+
+Vectorized throughout (issue #10): the observed pairs are directed edges sorted by source object,
+so one object's Gauss-Seidel update is one row gather over its incident blocks plus one
+Hungarian per start configuration (all starts in lock-step); maps, blocks and Gram rows of the
+atoms are batched gathers; the weight problem lives on the ``K x K`` Gram matrix, never on the
+``(P, n, n)`` blocks.
 """
 
 from __future__ import annotations
@@ -105,6 +112,12 @@ def birkhoff_von_neumann(X, *, tol: float = 1e-9, max_terms: int | None = None):
     return np.asarray(weights), np.asarray(perms, dtype=np.int64).reshape(-1, n)
 
 
+#: Warm start: at most this many atoms of ``init`` (the heaviest) are kept.
+WARM_MAX_ATOMS = 32
+#: Atoms whose weight falls to or below this value are dropped (weights renormalized).
+_DROP = 1e-12
+
+
 @dataclass(frozen=True)
 class BirkhoffSyncResult(CarriesMatching):
     """Result of :func:`synchronize_doubly_stochastic`.
@@ -115,7 +128,7 @@ class BirkhoffSyncResult(CarriesMatching):
         Consistent soft blocks ``Y_ij = sum_k weights[k] X_i^k X_j^kT`` for the observed pairs
         (``i < j``). With equal sizes and ``n_universe = n`` every block is doubly stochastic;
         in the partial (multi-simplex) model rows and columns sum to at most 1.
-        ``block(i, j)`` gives any pair.
+        ``block(i, j)`` gives any pair, ``stacked_blocks(pairs)`` many pairs at once.
     atoms : (K, N, n_max) int ndarray
         Consistent configurations as universe labels: ``atoms[k, g, u]`` is the slot of node ``u``
         of object ``g`` (``-1`` = padding beyond ``n_g``); canonical gauge: slots numbered in
@@ -128,13 +141,15 @@ class BirkhoffSyncResult(CarriesMatching):
     objective : float
         Final ``1/2 sum_{(i,j) observed} w_ij ||X_ij - Y_ij||_F^2`` (pairs counted once).
     objective_history : ndarray
-        Objective after the initialization and after every iteration (non-increasing).
+        Objective after the initialization (the re-fitted ``init`` for a warm start) and after
+        every iteration (non-increasing).
     n_iter : int
     converged : bool
         The Frank-Wolfe gap fell below ``tol * sum w_ij ||X_ij||^2``.
     info : dict
         ``"gap_history"``, ``"n_atoms"``, ``"fully_corrective"``, ``"solver"`` (eigensolver of
-        the k-hat step), ``"n_universe"``, ``"n_universe_rule"``...
+        the k-hat step), ``"n_universe"``, ``"n_universe_rule"``, ``"warm_start"`` (atoms
+        taken from ``init``, or None)...
     """
 
     blocks: Mapping[tuple[int, int], np.ndarray]
@@ -159,18 +174,48 @@ class BirkhoffSyncResult(CarriesMatching):
         self.matching.pairwise(i, j)                      # validates i and j (cheap)
         i, j = int(i), int(j)
         sizes = self.sizes
-        ni, nj = int(sizes[i]), int(sizes[j])
-        K = self.atoms.shape[0]
-        # one inverse table per atom (slot -> node of object j; the extra last column is slot -1)
-        inv = np.full((K, self.n_universe + 1), -1, dtype=np.int64)
-        lab_j = self.atoms[:, j, :nj]
-        k_idx, u = np.nonzero(lab_j >= 0)
-        inv[k_idx, lab_j[k_idx, u]] = u
-        a = np.take_along_axis(inv, self.atoms[:, i, :ni], axis=1)   # (K, n_i) maps i -> j
-        Y = np.zeros((ni, nj))
-        k_idx, r = np.nonzero(a >= 0)
-        np.add.at(Y, (r, a[k_idx, r]), np.asarray(self.weights, dtype=float)[k_idx])
-        return Y
+        return self.stacked_blocks(np.array([[i, j]]))[0, : sizes[i], : sizes[j]]
+
+    def stacked_blocks(self, pairs) -> np.ndarray:
+        """Soft consistent blocks of many pairs at once, stacked in the order of ``pairs``.
+
+        Parameters
+        ----------
+        pairs : (P, 2) int array_like
+            Object pairs ``(i, j)`` (any order; ``i == j`` gives the identity, ``i > j`` the
+            transpose of ``(j, i)``).
+
+        Returns
+        -------
+        (P, n_max, n_max) ndarray
+            ``out[p, :n_i, :n_j] = block(i, j)`` for ``pairs[p] = (i, j)``, zero padded beyond
+            the objects' sizes (no padding when all objects have the same size). One vectorized
+            gather over atoms and pairs; no Python loop over pairs.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from transync.synchronization import synchronize_doubly_stochastic
+        >>> I, S = np.eye(3), np.eye(3)[[1, 0, 2]]
+        >>> X = {(0, 1): 0.8 * I + 0.2 * S, (1, 2): I, (0, 2): 0.8 * I + 0.2 * S}
+        >>> res = synchronize_doubly_stochastic(X, fully_corrective=True)
+        >>> Y = res.stacked_blocks([[0, 1], [0, 2], [2, 1]])
+        >>> Y.shape, bool(np.allclose(Y[0], X[(0, 1)])), bool(np.allclose(Y[2], I))
+        ((3, 3, 3), True, True)
+        """
+        arr = check_array(pairs, "pairs", ndim=(1, 2))
+        if arr.ndim == 1 and arr.size in (0, 2):
+            arr = arr.reshape(-1, 2)
+        N = self.n_objects
+        if arr.ndim != 2 or arr.shape[1] != 2 or not np.all(arr == np.round(arr)):
+            raise ValueError(f"`pairs` must be a (P, 2) array of object indices, got shape "
+                             f"{np.shape(pairs)}")
+        arr = arr.astype(np.int64)
+        if arr.size and (arr.min() < 0 or arr.max() >= N):
+            raise ValueError(f"`pairs` must hold object indices in [0, {N}), got "
+                             f"{int(arr.min())} .. {int(arr.max())}")
+        return _stack_atoms(self.atoms, np.asarray(self.weights, dtype=float), arr,
+                            self.n_universe)
 
     def pairwise(self, i: int, j: int) -> np.ndarray:
         """The MAP consistent assignment from object ``i`` to object ``j`` (``-1`` unmatched)."""
@@ -182,16 +227,46 @@ class BirkhoffSyncResult(CarriesMatching):
         return sum(w * self.atom(k).to_matrix() for k, w in enumerate(self.weights))
 
 
+# ----------------------------------------------------------------------------------------------
+# configurations held as padded labels (N, n_max): maps and blocks, vectorized
+# ----------------------------------------------------------------------------------------------
+
+def _inverse(labels: np.ndarray, d: int, fill: int) -> np.ndarray:
+    """``inv[..., g, a]`` = node of object ``g`` in slot ``a`` (``fill`` if none); the extra
+    last column (slot ``-1``, padding) is ``fill``. ``labels``: (..., N, n_max)."""
+    inv = np.full(labels.shape[:-1] + (d + 1,), fill, dtype=np.int64)
+    idx = np.nonzero(labels >= 0)
+    inv[idx[:-1] + (labels[idx],)] = idx[-1]
+    return inv
+
+
+def _maps_of(labels: np.ndarray, pairs: np.ndarray, d: int) -> np.ndarray:
+    """Maps ``i -> j`` of configurations ``labels`` (..., N, n_max) on ``pairs``:
+    (..., P, n_max), ``-1`` unmatched / padding."""
+    inv = _inverse(labels, d, -1)                         # (..., N, d + 1)
+    src = labels[..., pairs[:, 0], :]                     # (..., P, n_max), -1 -> column d
+    return np.take_along_axis(inv[..., pairs[:, 1], :], np.where(src >= 0, src, d), axis=-1)
+
+
+def _stack_atoms(atoms, weights, pairs, d) -> np.ndarray:
+    """``sum_k weights[k] * P_ij^k`` for every pair, (P, n_max, n_max)."""
+    n_max = atoms.shape[2]
+    maps = _maps_of(atoms, pairs, d) if atoms.shape[0] else np.zeros((0, len(pairs), n_max),
+                                                                     dtype=np.int64)
+    return _blocks_of_maps(maps, weights, len(pairs), n_max)
+
+
+def _blocks_of_maps(maps, weights, P, n_max) -> np.ndarray:
+    """Dense ``(P, n_max, n_max)`` blocks ``sum_k weights[k] * onehot(maps[k])``."""
+    k, q, u = np.nonzero(maps >= 0)
+    flat = (q * n_max + u) * n_max + maps[k, q, u]
+    return np.bincount(flat, weights=np.asarray(weights, dtype=float)[k],
+                       minlength=P * n_max * n_max).reshape(P, n_max, n_max)
+
+
 def _matching(labels: np.ndarray, sizes: np.ndarray, d: int) -> MultiMatching:
     """The configuration held as padded ``labels`` (N, n_max) as a :class:`MultiMatching`."""
     return MultiMatching([labels[g, : sizes[g]] for g in range(sizes.size)], d)
-
-
-def _pair_maps(labels: np.ndarray, pairs: np.ndarray, d: int) -> np.ndarray:
-    """(Q, n_max) maps i -> j (``-1`` unmatched / padding) of padded ``labels`` (N, n_max).
-
-    Padding entries are unplaced nodes of the :class:`MultiMatching`, so they map to -1."""
-    return MultiMatching(list(labels), d).pairwise_array(pairs)
 
 
 def _canonical(labels: np.ndarray, d: int) -> np.ndarray:
@@ -213,84 +288,6 @@ def _masked_take(B: np.ndarray, maps: np.ndarray) -> np.ndarray:
     return np.where(maps >= 0, vals, 0.0)
 
 
-def _vertex_score(G, w, pairs, labels, d) -> float:
-    return float((_masked_take(G, _pair_maps(labels, pairs, d)).sum(1) * w).sum())
-
-
-def _lmo(G, w, pairs, sizes, d, sweeps, rng, solver):
-    """argmax over consistent (partial) configurations of <G, X X^T> (solving for k-hat).
-
-    Spectral start (top-``d`` eigenvectors of the weighted block matrix of ``G``; dense ``eigh``
-    or matrix-free block Krylov), rounding into ``d`` slots, then at most ``sweeps``
-    Gauss-Seidel sweeps ``X_g <- Hungarian(sum_j w_gj G_gj X_j)`` (rectangular ``n_g x d``: the
-    exact block maximizer, so the score never decreases).
-    """
-    N = sizes.size
-    n_max = int(sizes.max())
-    off = np.concatenate([[0], np.cumsum(sizes)])
-    M = int(off[-1])
-    wG = G * w[:, None, None]
-    # row index of (g, u) in the stacked order, M (a zero row) for padding
-    pad_index = np.full((N, n_max), M, dtype=np.int64)
-    for g in range(N):
-        pad_index[g, : sizes[g]] = off[g] + np.arange(sizes[g])
-    valid = pad_index < M
-
-    def matmat(V):
-        Vp = np.vstack([V, np.zeros((1, V.shape[1]))])[pad_index]       # (N, n_max, k)
-        out = np.zeros_like(Vp)
-        np.add.at(out, pairs[:, 0], np.einsum("quv,qvk->quk", wG, Vp[pairs[:, 1]]))
-        np.add.at(out, pairs[:, 1], np.einsum("quv,quk->qvk", wG, Vp[pairs[:, 0]]))
-        return out[valid]
-
-    k = min(d, M)
-    use = solver if solver != "auto" else ("dense" if M <= spec.DENSE_MAX else "matrix_free")
-    if use == "dense":
-        B = np.zeros((M, M))
-        for q, (i, j) in enumerate(pairs):
-            B[off[i]:off[i + 1], off[j]:off[j + 1]] += wG[q][: sizes[i], : sizes[j]]
-            B[off[j]:off[j + 1], off[i]:off[i + 1]] += wG[q][: sizes[i], : sizes[j]].T
-        _, U = sla.eigh(B, subset_by_index=[M - k, M - 1])
-        U = U[:, ::-1]
-    else:
-        _, U, _, _, _ = spec.block_krylov_eigs(matmat, M, k, rng=rng)
-    lab_list = spec.round_to_universe(U, sizes, d, refine=1)
-    labels = np.full((N, n_max), -1, dtype=np.int64)
-    for g, lab in enumerate(lab_list):
-        labels[g, : sizes[g]] = lab
-    best = _vertex_score(G, w, pairs, labels, d)
-    for _ in range(sweeps):
-        changed = False
-        for g in range(N):
-            n_g = int(sizes[g])
-            S = np.zeros((n_g, d + 1))                    # column d collects padding (-1)
-            for q in np.flatnonzero(pairs[:, 0] == g):
-                j = pairs[q, 1]
-                # (G_gj X_j)[u, a] = G_gj[u, v] for the node v of j in slot a
-                np.add.at(S.T, labels[j], wG[q][:n_g].T)
-            for q in np.flatnonzero(pairs[:, 1] == g):
-                i = pairs[q, 0]
-                np.add.at(S.T, labels[i], wG[q][:, :n_g])
-            S = S[:, :d]
-            cur = labels[g, :n_g]
-            S[np.arange(n_g), cur] += 1e-12 * (np.abs(S).max() + 1.0)   # keep current on ties
-            r, c = linear_sum_assignment(S, maximize=True)
-            new = np.full(n_g, -1, dtype=np.int64)
-            new[r] = c
-            if not np.array_equal(new, cur):
-                old = cur.copy()
-                labels[g, :n_g] = new
-                score = _vertex_score(G, w, pairs, labels, d)
-                if score > best + 1e-12 * max(abs(best), 1.0):
-                    best = score
-                    changed = True
-                else:
-                    labels[g, :n_g] = old
-        if not changed:
-            break
-    return _canonical(labels, d), best
-
-
 def _project_simplex(v: np.ndarray) -> np.ndarray:
     u = np.sort(v)[::-1]
     css = np.cumsum(u) - 1
@@ -299,43 +296,177 @@ def _project_simplex(v: np.ndarray) -> np.ndarray:
     return np.maximum(v - css[rho] / (rho + 1), 0)
 
 
-def _estimate_universe_soft(X, w, pairs, sizes, solver, rng):
-    """Eigengap of the degree-normalized soft block matrix (identity diagonal blocks)."""
-    n_max = int(sizes.max())
-    off = np.concatenate([[0], np.cumsum(sizes)])
-    M = int(off[-1])
-    B = np.eye(M)
-    for q, (i, j) in enumerate(pairs):
-        blk = w[q] * X[q][: sizes[i], : sizes[j]]
-        B[off[i]:off[i + 1], off[j]:off[j + 1]] += blk
-        B[off[j]:off[j + 1], off[i]:off[i + 1]] += blk.T
-    deg = B.sum(1)
-    dinv = 1.0 / np.sqrt(np.maximum(deg, 1e-300))
-    B = dinv[:, None] * B * dinv[None, :]
-    k = min(M, 2 * n_max + 10)
-    while True:
-        vals = sla.eigh(B, eigvals_only=True, subset_by_index=[M - k, M - 1])[::-1]
-        d, rule = spec.estimate_universe(vals, n_max)
-        if not (d >= vals.size - 1 or vals[-1] > 0.5 * vals[0]) or k >= M:
-            return d, rule, vals
-        k = min(M, 2 * k)
+# ----------------------------------------------------------------------------------------------
+# solving for k-hat: the linear minimization oracle
+# ----------------------------------------------------------------------------------------------
 
+class _Oracle:
+    """argmax over consistent (partial) configurations of ``<G, X X^T>`` (solving for k-hat).
+
+    The observed pairs as directed edges sorted by source object, so that every object's
+    incident blocks are one contiguous slice: the Gauss-Seidel update of object ``g`` is one
+    batched gather over its edges plus one Hungarian; the block operator of the matrix-free
+    eigensolver is one batched ``matmul`` plus one ``reduceat``.
+    """
+
+    def __init__(self, pairs, sizes, d, *, sweeps, rng, solver):
+        self.pairs, self.sizes, self.d = pairs, sizes, d
+        self.sweeps, self.rng = sweeps, rng
+        N, P = sizes.size, pairs.shape[0]
+        self.N, self.n_max = N, int(sizes.max())
+        src = np.concatenate([pairs[:, 0], pairs[:, 1]])
+        order = np.argsort(src, kind="stable")
+        self.dst = np.concatenate([pairs[:, 1], pairs[:, 0]])[order]
+        self.q = np.concatenate([np.arange(P), np.arange(P)])[order]
+        self.transposed = order >= P
+        self.ptr = np.searchsorted(src[order], np.arange(N + 1))
+        off = np.concatenate([[0], np.cumsum(sizes)])
+        self.M = int(off[-1])
+        self.valid = np.arange(self.n_max)[None, :] < sizes[:, None]          # (N, n_max)
+        self.use = solver if solver != "auto" else (
+            "dense" if self.M <= spec.DENSE_MAX else "matrix_free")
+        self._V = None                                    # warm eigenvectors (matrix-free)
+        self.col_base = np.arange(int(np.diff(self.ptr).max(initial=0))) * (self.n_max + 1)
+        self.nodes = [np.arange(n_g) for n_g in sizes.tolist()]
+
+    def directed(self, wG: np.ndarray) -> np.ndarray:
+        """(2P, n_max, n_max + 1): edge ``e`` = block from ``src`` to ``dst`` (zero last column)."""
+        D = np.zeros((self.q.size, self.n_max, self.n_max + 1))
+        t = self.transposed
+        D[~t, :, : self.n_max] = wG[self.q[~t]]
+        D[t, :, : self.n_max] = wG[self.q[t]].transpose(0, 2, 1)
+        return D
+
+    def spectral(self, wG, D) -> np.ndarray:
+        """Top-``d`` eigenvectors of the block matrix of ``wG`` rounded into ``d`` slots."""
+        N, n = self.N, self.n_max
+        k = min(self.d, self.M)
+        pi, pj = self.pairs[:, 0], self.pairs[:, 1]
+        if self.use == "dense":
+            B4 = np.zeros((N, n, N, n))
+            B4[pi, :, pj, :] = wG
+            B4[pj, :, pi, :] = wG.transpose(0, 2, 1)
+            flat = self.valid.ravel()
+            B = B4.reshape(N * n, N * n)
+            if not flat.all():
+                B = B[np.ix_(flat, flat)]
+            _, U = sla.eigh(B, subset_by_index=[self.M - k, self.M - 1])
+            U = U[:, ::-1]
+        else:
+            ptr, dst, Dm = self.ptr, self.dst, D[:, :, :n]
+            starts = np.minimum(ptr[:-1], Dm.shape[0])
+            empty = ptr[:-1] == ptr[1:]
+
+            def matmat(V):
+                Vp = np.zeros((N, n, V.shape[1]))
+                Vp[self.valid] = V
+                T = np.matmul(Dm, Vp[dst])                              # (2P, n, k)
+                T = np.concatenate([T, np.zeros((1,) + T.shape[1:])])
+                out = np.add.reduceat(T, starts, axis=0)
+                out[empty] = 0.0
+                return out[self.valid]
+
+            _, U, _, _, _ = spec.block_krylov_eigs(matmat, self.M, k, V0=self._V, rng=self.rng)
+            self._V = U
+        lab_list = spec.round_to_universe(U, self.sizes, self.d, refine=1)
+        labels = np.full((N, n), -1, dtype=np.int64)
+        for g, lab in enumerate(lab_list):
+            labels[g, : self.sizes[g]] = lab
+        return labels
+
+    def sweep(self, F, wG, labels):
+        """At most ``sweeps`` Gauss-Seidel sweeps ``X_g <- Hungarian(sum_j w_gj G_gj X_j)``
+        (rectangular ``n_g x d``: the exact block maximizer, so the score never decreases), run
+        in lock-step for a stack of start configurations ``labels`` (C, N, n_max).
+
+        ``F[g]`` holds object ``g``'s incident blocks transposed and stacked,
+        ``(deg_g * (n + 1), n_g)``, so ``sum_j G_gj X_j`` of every start is one row gather and
+        one sum; only the Hungarian runs per start. An object is revisited only when one of its
+        neighbours changed (in that start)."""
+        d, n = self.d, self.n_max
+        labels = labels.copy()
+        C = labels.shape[0]
+        inv = _inverse(labels, d, n)[:, :, :d]            # node in slot, n (zero row) if none
+        eps = 1e-12 * (np.abs(wG).max(initial=0.0) * self.col_base.size + 1.0)
+        dirty = np.broadcast_to(np.diff(self.ptr) > 0, (C, self.N)).copy()
+        for _ in range(self.sweeps):
+            if not dirty.any():
+                break
+            for g in np.flatnonzero(dirty.any(0)).tolist():
+                cs = np.flatnonzero(dirty[:, g])
+                dirty[cs, g] = False
+                lo, hi = self.ptr[g], self.ptr[g + 1]
+                deg, n_g = hi - lo, int(self.sizes[g])
+                rows = (inv[cs[:, None], self.dst[lo:hi]] + self.col_base[:deg, None]).ravel()
+                S = F[g][rows].reshape(cs.size, deg, d, n_g).sum(1)          # (c, d, n_g)
+                cur = labels[cs, g, :n_g]
+                nodes = self.nodes[g]
+                S[np.arange(cs.size)[:, None], cur, nodes] += eps   # keep current slots on ties
+                for k, c in enumerate(cs.tolist()):
+                    _, col = linear_sum_assignment(S[k].T, maximize=True)  # all rows assigned
+                    if not np.array_equal(col, cur[k]):   # strictly better (ties keep cur)
+                        inv[c, g, cur[k]] = n
+                        inv[c, g, col] = nodes
+                        labels[c, g, :n_g] = col
+                        dirty[c, self.dst[lo:hi]] = True
+        maps = _maps_of(labels, self.pairs, d)                            # (C, P, n_max)
+        vals = np.take_along_axis(wG[None], np.maximum(maps, 0)[..., None], axis=3)[..., 0]
+        return labels, np.where(maps >= 0, vals, 0.0).sum((1, 2))
+
+    def __call__(self, G, w, starts=(), spectral=True):
+        """Configurations (canonical labels) and their scores ``<G, X X^T>_w``, best first:
+        the spectral start (``spectral``) and the given ``starts``, each improved by the
+        sweeps; duplicates removed."""
+        wG = G * w[:, None, None]
+        D = self.directed(wG)
+        cands = ([self.spectral(wG, D)] if spectral else []) + list(starts)
+        F = [D[lo:hi, : self.sizes[g]].transpose(0, 2, 1).reshape(-1, self.sizes[g])
+             for g, (lo, hi) in enumerate(zip(self.ptr[:-1], self.ptr[1:]))]
+        labels, scores = self.sweep(F, wG, np.stack(cands))
+        out, seen = [], set()
+        for c in np.argsort(-scores, kind="stable").tolist():
+            lab = _canonical(labels[c], self.d)
+            key = lab.tobytes()
+            if key not in seen:
+                seen.add(key)
+                out.append((lab, float(scores[c])))
+        return out
+
+
+# ----------------------------------------------------------------------------------------------
+# the front door
+# ----------------------------------------------------------------------------------------------
 
 def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter: int = 20,
                                   n_universe: int | None = None, inner_sweeps: int = 10,
                                   tol: float = 1e-6, fully_corrective: bool = False,
-                                  solver: str = "auto", rng=None) -> BirkhoffSyncResult:
+                                  solver: str = "auto", init=None,
+                                  rng=None) -> BirkhoffSyncResult:
     """Project soft pairwise matches onto the hull of consistent permutation configurations.
 
     Conditional gradient of ALGORITHMS.md §4.2: start from the permutation synchronization of
     the input (one atom of weight 1); at every iteration the residual ``G = X - Y`` on the
     observed pairs defines a new vertex ``U`` maximizing ``<G, U U^T>`` ("solving for k-hat":
-    spectral start, then at most ``inner_sweeps`` Gauss-Seidel sweeps
-    ``P_i <- Hungarian(sum_j w_ij G_ij P_j)``); the step toward it is the exact minimizer of the
-    quadratic on the segment ("solving for alpha"); with ``fully_corrective`` all atom weights are
-    then re-optimized on the simplex by projected gradient. Stops when the Frank-Wolfe gap
-    ``<G, U U^T - Y>`` is below ``tol * sum w_ij ||X_ij||^2``, or after ``max_iter`` iterations
-    (``ConvergenceWarning``).
+    at most ``inner_sweeps`` Gauss-Seidel sweeps ``P_i <- Hungarian(sum_j w_ij G_ij P_j)``, run
+    from the heaviest atom, and on the first iteration of a cold start also from the spectral
+    rounding of ``G``; the best result is the vertex). "Solving for
+    alpha": the exact minimizer of the quadratic along the better of the Frank-Wolfe direction
+    ``U U^T - Y`` and the pairwise direction that moves weight from the active atom least
+    aligned with the residual to ``U``; with ``fully_corrective`` every improving start's vertex
+    joins the active set (eight heaviest atoms as starts) and all atom weights are re-optimized
+    exactly on the simplex. Atoms whose weight vanishes are dropped. Stops when the Frank-Wolfe
+    gap ``<G, U U^T - Y>`` is below ``tol * sum w_ij ||X_ij||^2``, or after ``max_iter``
+    iterations (``ConvergenceWarning``). The k-hat step is a heuristic, so "converged" means
+    that it found no improving vertex; noisy input usually needs hundreds of atoms to close
+    the gap, and a few iterations (warm-started across calls) are the intended use.
+
+    **Warm start** (``init``, for repeated calls on slowly changing input, e.g. the
+    synchronization points of an online solver): the atoms of a previous result on the same
+    objects and universe replace the spectral initialization. At most ``WARM_MAX_ATOMS`` (32)
+    of them, the heaviest, are kept; their weights are first re-fitted to the new input (the
+    fully corrective re-optimization on the simplex, started from the old weights), atoms whose
+    weight vanishes are dropped. The k-hat steps then start from those atoms only (no spectral
+    rounding), which keeps a warm call cheap at large ``N``.
 
     Objects of different sizes (or ``n_universe`` larger than the objects) use the multi-simplex
     model of ALGORITHMS.md §5: every node goes to exactly one of ``d`` universe slots, every slot
@@ -353,25 +484,42 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
     ----------
     pairwise : dict {(i, j): (n_i, n_j) soft matrix or assignment}
         Soft matches ``X_ij`` of node ``u`` of ``i`` with node ``v`` of ``j``; ``(j, i)`` is the
-        transpose. Both given: their weighted average is used.
+        transpose. Both given: their weighted average is used. Also an iterable of
+        ``(i, j, X_ij)`` triples or a dense ``(N, N, n, n)`` array (see
+        :func:`synchronize_permutations`); stacked blocks ``X`` (P, n, n) of ``pairs`` (P, 2)
+        pass cheaply as ``dict(zip(map(tuple, pairs.tolist()), X))``.
     mask, weights : see :func:`synchronize_permutations`.
     max_iter : int, default=20
         Frank-Wolfe iterations. ``0`` returns the initialization: the consistent configuration
-        closest to the input (one atom of weight 1, ``n_iter=0``), not a projection.
+        closest to the input (one atom of weight 1, ``n_iter=0``), not a projection; with
+        ``init``, the re-fitted atoms of ``init``.
     n_universe : int, optional
         Universe size ``d >= max n_i``. Default: ``n`` for equal sizes, otherwise the eigengap of
-        the degree-normalized soft block matrix (``info["n_universe_rule"]``).
+        the degree-normalized soft block matrix (``info["n_universe_rule"]``); with ``init``,
+        the universe of ``init``.
     inner_sweeps : int, default=10
     tol : float, default=1e-6
     fully_corrective : bool, default=False
     solver : {"auto", "dense", "matrix_free"}, default="auto"
         Eigensolver of the k-hat step: dense ``eigh`` when ``sum n_i <= 2000`` under ``"auto"``,
-        else matrix-free block Krylov on the residual block operator.
+        else matrix-free block Krylov on the residual block operator (warm-started from the
+        previous iteration's eigenvectors).
+    init : BirkhoffSyncResult, optional
+        A previous result on the same number of objects, the same object sizes and the same
+        universe size (any observed pairs): warm start, see above.
     rng : None, int or numpy.random.Generator
 
     Returns
     -------
     BirkhoffSyncResult
+
+    Raises
+    ------
+    TypeError
+        ``init`` is not a :class:`BirkhoffSyncResult`.
+    ValueError
+        Blocks that are not (sub-)doubly stochastic, a bad ``n_universe``, or an ``init`` with
+        another number of objects, other sizes or another universe.
 
     Examples
     --------
@@ -384,39 +532,76 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
     (2, [0.8, 0.2])
     >>> bool(np.allclose(res.blocks[(0, 1)], X[(0, 1)]))
     True
+
+    A warm start from that result converges at once:
+
+    >>> X2 = {(0, 1): 0.7 * I + 0.3 * S, (1, 2): I, (0, 2): 0.7 * I + 0.3 * S}
+    >>> res2 = synchronize_doubly_stochastic(X2, init=res)
+    >>> res2.n_iter, np.round(res2.weights, 3).tolist()
+    (0, [0.7, 0.3])
     """
     max_iter = check_int(max_iter, "max_iter", minimum=0)
     inner_sweeps = check_int(inner_sweeps, "inner_sweeps", minimum=0)
     tol = check_positive(tol, "tol")
     check_choice(solver, "solver", ("auto", "dense", "matrix_free"))
+    if init is not None and not isinstance(init, BirkhoffSyncResult):
+        raise TypeError("`init` must be a BirkhoffSyncResult (a previous result of "
+                        f"synchronize_doubly_stochastic) or None, got {type(init).__name__}")
     gen = as_generator(rng)
     stk = parse_pairwise(pairwise, mask=mask, weights=weights, soft=True)
     sizes = stk.sizes
     n_max = int(sizes.max())
     n_universe = check_universe(n_universe, sizes)
+    if init is not None:
+        _check_init(init, sizes, n_universe)
+        if n_universe is None:
+            n_universe = int(init.n_universe)
     full = bool(np.all(sizes == sizes[0])) and n_universe in (None, n_max)
     _check_soft_blocks(stk.soft, full)
     pairs, w, X = _merge_observations(stk)
     info: dict = {"fully_corrective": fully_corrective, "pairs": pairs}
     d = _choose_universe(n_universe, full, X, w, pairs, sizes, solver, gen, info)
-    M = int(sizes.sum())
-    info["solver"] = solver if solver != "auto" else (
-        "dense" if M <= spec.DENSE_MAX else "matrix_free")
     fw = _FrankWolfe(X, w, pairs, sizes, d, inner_sweeps=inner_sweeps, rng=gen, solver=solver)
-    atoms, alpha, Y, history, gaps, it, converged = fw.run(max_iter, tol, fully_corrective)
+    info["solver"] = fw.oracle.use
+    start = start_w = None
+    if init is not None:
+        order = np.argsort(-np.asarray(init.weights), kind="stable")[:WARM_MAX_ATOMS]
+        start, start_w = np.asarray(init.atoms)[order], np.asarray(init.weights)[order]
+    info["warm_start"] = None if init is None else int(start.shape[0])
+    atoms, alpha, Y, history, gaps, it, converged = fw.run(max_iter, tol, fully_corrective,
+                                                           start, start_w)
     if not converged and max_iter > 0:
         warnings.warn(f"synchronize_doubly_stochastic stopped after max_iter={max_iter} "
                       f"iterations with Frank-Wolfe gap {gaps[-1]:.3g} > tol * ||X||^2",
                       ConvergenceWarning, stacklevel=2)
-    atoms_arr = np.asarray(atoms, dtype=np.int64)
     best = int(np.argmax(alpha))
-    blocks = {(int(i), int(j)): Y[q][: sizes[i], : sizes[j]].copy()
+    blocks = {(int(i), int(j)): Y[q][: sizes[i], : sizes[j]]
               for q, (i, j) in enumerate(pairs.tolist())}
-    info.update({"gap_history": np.asarray(gaps), "n_atoms": len(atoms)})
-    matching = _matching(atoms_arr[best], sizes, d)
-    return BirkhoffSyncResult(blocks=blocks, atoms=atoms_arr, weights=alpha, matching=matching,
+    info.update({"gap_history": np.asarray(gaps), "n_atoms": int(atoms.shape[0])})
+    matching = _matching(atoms[best], sizes, d)
+    return BirkhoffSyncResult(blocks=blocks, atoms=atoms, weights=alpha, matching=matching,
                               objective=history[-1], objective_history=np.asarray(history),
                               n_iter=it, converged=converged, info=info)
+
+
+def _check_init(init: BirkhoffSyncResult, sizes: np.ndarray, n_universe) -> None:
+    """``init`` must describe the same objects (count, sizes) in the same universe."""
+    N = sizes.size
+    if init.n_objects != N:
+        raise ValueError(f"`init` must be a result on the same objects: it has {init.n_objects} "
+                         f"objects, `pairwise` has {N}")
+    if not np.array_equal(init.sizes, sizes):
+        g = int(np.flatnonzero(init.sizes != sizes)[0])
+        raise ValueError(f"`init` must be a result on objects of the same sizes: object {g} has "
+                         f"{int(init.sizes[g])} nodes in `init`, {int(sizes[g])} in `pairwise`")
+    if n_universe is not None and n_universe != init.n_universe:
+        raise ValueError(f"`init` must be a result in the same universe: its n_universe is "
+                         f"{init.n_universe}, got n_universe={n_universe}")
+    atoms, wts = np.asarray(init.atoms), np.asarray(init.weights)
+    if (atoms.ndim != 3 or atoms.shape[:2] != (wts.size, N) or atoms.shape[2] != sizes.max()
+            or wts.size == 0):
+        raise ValueError(f"`init` has inconsistent atoms {atoms.shape} and weights {wts.shape} "
+                         f"for {N} objects of at most {int(sizes.max())} nodes")
 
 
 def _check_soft_blocks(Xq: np.ndarray, full: bool) -> None:
@@ -445,6 +630,10 @@ def _merge_observations(stk):
     uniq, inverse = np.unique(key, return_inverse=True)
     pairs = np.column_stack([uniq // N, uniq % N])
     w = np.bincount(inverse, weights=stk.weights, minlength=uniq.size)
+    if uniq.size == key.size:                             # no duplicates: a permutation
+        X = np.empty((uniq.size, n_max, n_max))
+        X[inverse] = stk.soft
+        return pairs, w, X
     X = np.zeros((uniq.size, n_max, n_max))
     np.add.at(X, inverse, stk.soft * stk.weights[:, None, None])
     X /= np.maximum(w, 1e-300)[:, None, None]
@@ -466,91 +655,214 @@ def _choose_universe(n_universe, full, X, w, pairs, sizes, solver, gen, info) ->
     return d
 
 
+def _estimate_universe_soft(X, w, pairs, sizes, solver, rng):
+    """Eigengap of the degree-normalized soft block matrix (identity diagonal blocks)."""
+    n_max = int(sizes.max())
+    off = np.concatenate([[0], np.cumsum(sizes)])
+    M = int(off[-1])
+    B = np.eye(M)
+    for q, (i, j) in enumerate(pairs):
+        blk = w[q] * X[q][: sizes[i], : sizes[j]]
+        B[off[i]:off[i + 1], off[j]:off[j + 1]] += blk
+        B[off[j]:off[j + 1], off[i]:off[i + 1]] += blk.T
+    deg = B.sum(1)
+    dinv = 1.0 / np.sqrt(np.maximum(deg, 1e-300))
+    B = dinv[:, None] * B * dinv[None, :]
+    k = min(M, 2 * n_max + 10)
+    while True:
+        vals = sla.eigh(B, eigvals_only=True, subset_by_index=[M - k, M - 1])[::-1]
+        d, rule = spec.estimate_universe(vals, n_max)
+        if not (d >= vals.size - 1 or vals[-1] > 0.5 * vals[0]) or k >= M:
+            return d, rule, vals
+        k = min(M, 2 * k)
+
+
 class _FrankWolfe:
-    """Conditional gradient with column generation on the consistent configurations (§4.2)."""
+    """Conditional gradient with column generation on the consistent configurations (§4.2).
+
+    The active atoms are held as stacked maps ``(K, P, n_max)``; the Gram matrix
+    ``A_kl = <S_k, S_l>_w`` and ``b_k = <X, S_k>_w`` of the weight problem are updated one row
+    per new atom, so a weight step costs ``O(K^2)`` (pairwise) or ``O(K^3)`` (fully
+    corrective), independent of the number of pairs.
+    """
 
     def __init__(self, X, w, pairs, sizes, d, *, inner_sweeps, rng, solver):
         self.X, self.w, self.pairs, self.sizes, self.d = X, w, pairs, sizes, d
-        self.inner_sweeps, self.rng, self.solver = inner_sweeps, rng, solver
-        self.qi = np.arange(pairs.shape[0])[:, None]
-        self.ui = np.arange(X.shape[1])[None, :]
+        self.P, self.n = X.shape[0], X.shape[1]
+        self.oracle = _Oracle(pairs, sizes, d, sweeps=inner_sweeps, rng=rng, solver=solver)
 
     def objective(self, Y) -> float:
         return 0.5 * float((self.w * ((self.X - Y) ** 2).sum((1, 2))).sum())
 
-    def lmo(self, G):
-        lab, _ = _lmo(G, self.w, self.pairs, self.sizes, self.d, self.inner_sweeps, self.rng,
-                      self.solver)
-        return lab
+    def blocks(self, maps, alpha) -> np.ndarray:
+        return _blocks_of_maps(maps, alpha, self.P, self.n)
 
-    def add_maps(self, Y, maps, weight=1.0):
-        ok = maps >= 0
-        Y[np.broadcast_to(self.qi, maps.shape)[ok], np.broadcast_to(self.ui, maps.shape)[ok],
-          maps[ok]] += weight
-        return Y
+    def gram(self, maps_new, maps_all):
+        """``(<S_new, S_k>_w for k, <X, S_new>_w)`` for ``maps_new`` (m, P, n) against
+        ``maps_all`` (K, P, n)."""
+        same = (maps_new[:, None] == maps_all[None]) & (maps_new[:, None] >= 0)
+        A = same.sum(3) @ self.w                                          # (m, K)
+        b = np.array([(_masked_take(self.X, m).sum(1) * self.w).sum() for m in maps_new])
+        return A, b
 
-    def run(self, max_iter, tol, fully_corrective):
+    def run(self, max_iter, tol, fully_corrective, start=None, start_weights=None):
         X, w = self.X, self.w
         norm_x = float((w * (X ** 2).sum((1, 2))).sum())
-        lab0 = self.lmo(X)
-        atoms, maps_list = [lab0], [_pair_maps(lab0, self.pairs, self.d)]
-        alpha = np.array([1.0])
-        Y = self.add_maps(np.zeros_like(X), maps_list[0])
+        if start is None:
+            lab0 = self.oracle(X, w)[0][0]
+            labs = lab0[None]
+            alpha = np.array([1.0])
+        else:
+            labs = np.stack([_canonical(a, self.d) for a in start])
+            _, keep = np.unique(labs.reshape(labs.shape[0], -1), axis=0, return_index=True)
+            keep = np.sort(keep)                          # duplicates merged (heaviest first)
+            labs = labs[keep]
+            alpha = np.full(keep.size, 1.0 / keep.size)
+            if start_weights is not None:
+                a0 = np.asarray(start_weights, dtype=float)[keep]
+                if a0.sum() > 0:
+                    alpha = a0 / a0.sum()
+        maps = _maps_of(labs, self.pairs, self.d)                         # (K, P, n)
+        A, b = self.gram(maps, maps)
+        if start is not None and labs.shape[0] > 1:
+            alpha = _reoptimize(alpha, A, b)
+        labs, maps, alpha, A, b = _drop(labs, maps, alpha, A, b)
+        Y = self.blocks(maps, alpha)
         history, gaps = [self.objective(Y)], []
         converged = False
         it = 0
         for it in range(1, max_iter + 1):
             G = X - Y
-            lab = self.lmo(G)
-            maps_hat = _pair_maps(lab, self.pairs, self.d)
-            D = self.add_maps(np.zeros_like(X), maps_hat) - Y
+            heavy = np.argsort(-alpha, kind="stable")[: 8 if fully_corrective else 1]
+            starts = list(labs[heavy])
+            found = self.oracle(G, w, starts, spectral=it == 1 and start is None)
+            lab = found[0][0]
+            maps_hat = _maps_of(lab, self.pairs, self.d)
+            S_hat = self.blocks(maps_hat[None], [1.0])
+            D = S_hat - Y
             gap = float((w * (G * D).sum((1, 2))).sum())
             gaps.append(gap)
             if gap <= tol * max(norm_x, 1e-300):
                 converged = True
                 it -= 1
                 break
-            dd = float((w * (D ** 2).sum((1, 2))).sum())
-            gamma = float(np.clip(gap / dd, 0.0, 1.0)) if dd > 0 else 0.0
-            alpha = alpha * (1 - gamma)
-            found = next((k for k, a in enumerate(atoms) if np.array_equal(a, lab)), None)
-            if found is None:
-                atoms.append(lab)
-                maps_list.append(maps_hat)
-                alpha = np.append(alpha, gamma)
+            # fully corrective: every improving candidate vertex joins the active set
+            extra = [c for c, _ in found[1:]] if fully_corrective else []
+            h = None
+            for c_lab in [lab] + extra:
+                k = np.flatnonzero((labs == c_lab).all((1, 2)))
+                if k.size:
+                    h = int(k[0]) if h is None else h
+                    continue
+                c_maps = maps_hat if c_lab is lab else _maps_of(c_lab, self.pairs, self.d)
+                a_new, b_new = self.gram(c_maps[None], maps)
+                if c_lab is not lab and b_new[0] - a_new[0] @ alpha <= alpha @ (b - A @ alpha):
+                    continue                              # not an improving direction
+                aa = float((c_maps >= 0).sum(1) @ w)
+                A = np.block([[A, a_new.T], [a_new, np.array([[aa]])]])
+                b = np.append(b, b_new)
+                labs = np.concatenate([labs, c_lab[None]])
+                maps = np.concatenate([maps, c_maps[None]])
+                alpha = np.append(alpha, 0.0)
+                h = alpha.size - 1 if h is None else h
+            if fully_corrective:
+                alpha = _reoptimize(_fw_step(alpha, h, A, b), A, b)
             else:
-                alpha[found] += gamma
-            if fully_corrective and len(atoms) > 1:
-                alpha = self.reoptimize(alpha, maps_list)
-            keep = alpha > 1e-14
-            atoms = [a for a, k in zip(atoms, keep) if k]
-            maps_list = [m for m, k in zip(maps_list, keep) if k]
-            alpha = alpha[keep] / alpha[keep].sum()
-            Y = np.zeros_like(X)
-            for a, m in zip(alpha, maps_list):
-                self.add_maps(Y, m, a)
+                alpha = _pairwise_step(alpha, h, A, b)
+            labs, maps, alpha, A, b = _drop(labs, maps, alpha, A, b)
+            Y = self.blocks(maps, alpha)
             history.append(self.objective(Y))
-        return atoms, alpha, Y, history, gaps, it, converged
+        return labs, alpha, Y, history, gaps, it, converged
 
-    def reoptimize(self, alpha, maps_list):
-        """Fully corrective step: all atom weights re-optimized on the simplex (projected
-        gradient); kept only when the objective does not increase."""
-        X, w = self.X, self.w
-        K = len(maps_list)
-        A = np.empty((K, K))
-        b = np.empty(K)
-        for k in range(K):
-            b[k] = float((w * _masked_take(X, maps_list[k]).sum(1)).sum())
-            for m in range(k, K):
-                same = (maps_list[k] == maps_list[m]) & (maps_list[k] >= 0)
-                A[k, m] = A[m, k] = float((w * same.sum(1)).sum())
-        L = max(np.linalg.eigvalsh(A)[-1], 1e-12)
-        f_old = 0.5 * alpha @ A @ alpha - b @ alpha
-        a_new = alpha.copy()
-        for _ in range(500):
-            a_next = _project_simplex(a_new - (A @ a_new - b) / L)
-            if np.abs(a_next - a_new).max() < 1e-12:
-                a_new = a_next
-                break
-            a_new = a_next
-        return a_new if 0.5 * a_new @ A @ a_new - b @ a_new <= f_old else alpha
+
+def _fw_step(alpha, h, A, b):
+    """Frank-Wolfe step toward atom ``h`` with exact line search on ``1/2 a^T A a - b^T a``."""
+    g = b - A @ alpha                                     # <G, S_k>: residual . atom k
+    gap = g[h] - g @ alpha
+    dd = A[h, h] - 2 * (A[h] @ alpha) + alpha @ A @ alpha
+    gamma = float(np.clip(gap / dd, 0.0, 1.0)) if dd > 0 else 0.0
+    out = alpha * (1 - gamma)
+    out[h] += gamma
+    return out
+
+
+def _pairwise_step(alpha, h, A, b):
+    """Pairwise Frank-Wolfe step: weight moves from the active atom least aligned with the
+    residual (the away atom) to atom ``h``, exact line search capped by the away weight; a plain
+    Frank-Wolfe step when that one decreases the objective more."""
+    g = b - A @ alpha
+    active = np.flatnonzero(alpha > 0)
+    a = int(active[np.argmin(g[active])])
+    dd = A[h, h] + A[a, a] - 2 * A[h, a]
+    cand = [_fw_step(alpha, h, A, b)]
+    if a != h and dd > 0:
+        gamma = float(np.clip((g[h] - g[a]) / dd, 0.0, alpha[a]))
+        out = alpha.copy()
+        out[h] += gamma
+        out[a] -= gamma
+        cand.append(out)
+
+    def f(x):
+        return 0.5 * x @ A @ x - b @ x
+
+    return min(cand, key=f)
+
+
+def _drop(labs, maps, alpha, A, b):
+    """Atoms of vanishing weight removed, weights renormalized."""
+    keep = alpha > _DROP
+    if keep.all():
+        return labs, maps, alpha / alpha.sum(), A, b
+    return labs[keep], maps[keep], alpha[keep] / alpha[keep].sum(), A[np.ix_(keep, keep)], b[keep]
+
+
+def _reoptimize(alpha, A, b):
+    """Fully corrective step: all atom weights re-optimized on the simplex for
+    ``1/2 a^T A a - b^T a`` (``A`` PSD, small), by a primal active-set method started from
+    ``alpha`` (finite; equality-constrained KKT solves on the support, least squares when ``A``
+    is singular); kept only when the objective does not increase."""
+    K = alpha.size
+
+    def f(a):
+        return 0.5 * a @ A @ a - b @ a
+
+    f_old = f(alpha)
+    x = alpha.copy()
+    scale = max(float(np.abs(A).max()), float(np.abs(b).max()), 1e-300)
+    support = x > 0
+    for _ in range(4 * K + 10):
+        S = np.flatnonzero(support)
+        m = S.size
+        kkt = np.zeros((m + 1, m + 1))
+        kkt[:m, :m] = A[np.ix_(S, S)]
+        kkt[:m, m] = kkt[m, :m] = 1.0
+        rhs = np.append(b[S], 1.0)
+        try:
+            sol = np.linalg.solve(kkt, rhs)
+            if not np.allclose(kkt @ sol, rhs, rtol=1e-9, atol=1e-9 * scale):
+                raise np.linalg.LinAlgError
+        except np.linalg.LinAlgError:                     # singular: least squares
+            sol = np.linalg.lstsq(kkt, rhs, rcond=None)[0]
+        z = sol[:m]
+        if z.min() < -1e-15:                              # blocked: walk to the boundary
+            d = z - x[S]
+            neg = d < 0
+            t = np.min(-x[S][neg] / d[neg]) if neg.any() else 1.0
+            t = min(max(t, 0.0), 1.0)
+            x[S] = np.maximum(x[S] + t * d, 0.0)
+            x /= x.sum()
+            support = x > 1e-15
+            continue
+        x = np.zeros(K)
+        x[S] = z
+        x /= x.sum()
+        g = A @ x - b
+        mu = g[S].mean()
+        out = np.flatnonzero(~support)
+        if not out.size:
+            break
+        k = out[np.argmin(g[out])]
+        if g[k] >= mu - 1e-12 * scale:                   # KKT: no atom outside improves
+            break
+        support[k] = True
+    return x if f(x) <= f_old else alpha

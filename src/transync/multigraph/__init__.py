@@ -1,0 +1,43 @@
+"""Multi-graph matching (thesis ch. 6): synchronized solvers, offline synchronization, CAO.
+
+Front door :func:`match_collection`; result :class:`MultiMatchingResult`. The pieces are public
+for users who assemble their own pipeline: :class:`PairAffinities` (batched affinities of the
+matched pairs), :func:`run_lockstep` (the lock-step solvers), :func:`cao` and the executors
+:func:`map_chunks` / :func:`split_chunks`. Names load on first use.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_LAZY = {
+    "PairAffinities": "._affinity",
+    "CAOOutcome": "._cao",
+    "cao": "._cao",
+    "map_chunks": "._executors",
+    "split_chunks": "._executors",
+    "CAO_VARIANTS": "._front",
+    "ONLINE_SOLVERS": "._front",
+    "SOLVERS": "._front",
+    "SYNCS": "._front",
+    "match_collection": "._front",
+    "LockstepOutcome": "._lockstep",
+    "run_lockstep": "._lockstep",
+    "MultiMatchingResult": "._result",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    try:
+        module = _LAZY[name]
+    except KeyError:
+        raise AttributeError(f"module 'transync.multigraph' has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))

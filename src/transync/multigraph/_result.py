@@ -1,0 +1,135 @@
+"""Result of multi-graph matching: every pair's final map, universe labels when consistent."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..permutations import MultiMatching, assignment_to_matrix
+
+__all__ = ["MultiMatchingResult"]
+
+
+@dataclass(frozen=True)
+class MultiMatchingResult:
+    """Node correspondences among ``N`` graphs of ``n`` nodes, from :func:`match_collection`.
+
+    Attributes
+    ----------
+    pairs : ndarray of shape (P, 2)
+        The matched pairs ``(i, j)``, ``i < j``.
+    assignments : ndarray of shape (P, n)
+        ``assignments[p][u]`` is the node of graph ``pairs[p, 1]`` matched to node ``u`` of graph
+        ``pairs[p, 0]``.
+    matching : MultiMatching or None
+        Universe labels when the output is cycle-consistent by construction (every synchronized
+        method), else ``None`` (plain pairwise matching, CAO): then only the observed pairs have
+        maps. The type of the result never depends on the method.
+    scores : ndarray of shape (P,)
+        Affinity score ``x^T K x`` of every pair's final map.
+    total_score : float
+        ``scores.sum()``.
+    consistency : float
+        ``1 - cycle_error`` of the output maps over the triangles of observed pairs (1.0 for a
+        consistent output).
+    input_consistency : float
+        The same for the maps of the pairwise stage, before synchronization or CAO.
+    timings : dict
+        Seconds per stage (``"affinity"``, ``"pairwise"``, ``"sync"``, ``"cao"``, ``"total"``).
+    solver, sync, mode : str or None
+        The method, as run.
+    n_iter : int
+        Outer iterations of the pairwise (lock-step) stage.
+    converged : bool
+        Whether every pairwise solver met its stopping criterion.
+    info : dict
+        Details per stage (number of synchronization calls, CAO history ...).
+    """
+
+    pairs: np.ndarray
+    assignments: np.ndarray
+    matching: MultiMatching | None
+    scores: np.ndarray
+    total_score: float
+    consistency: float
+    input_consistency: float
+    timings: dict
+    solver: str
+    sync: str | None
+    mode: str
+    n_iter: int
+    converged: bool
+    n_graphs: int
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.assignments.shape[1])
+
+    def _index(self) -> dict[tuple[int, int], int]:
+        return {(int(i), int(j)): p for p, (i, j) in enumerate(self.pairs.tolist())}
+
+    def pairwise(self, i: int, j: int) -> np.ndarray:
+        """The map from graph ``i`` to graph ``j`` (``i != j``): ``(n,)`` node indices of ``j``.
+
+        From the universe labels when the output is consistent (every pair, observed or not),
+        otherwise from the observed pair (inverted for ``i > j``).
+        """
+        N = self.n_graphs
+        for name, g in (("i", i), ("j", j)):
+            if isinstance(g, bool) or not isinstance(g, (int, np.integer)) or not 0 <= g < N:
+                raise ValueError(f"`{name}` must be a graph index in [0, {N}), got {g!r}")
+        if i == j:
+            return np.arange(self.n_nodes)
+        if self.matching is not None:
+            return self.matching.pairwise(int(i), int(j))
+        a, b = (int(i), int(j)) if i < j else (int(j), int(i))
+        p = self._index().get((a, b))
+        if p is None:
+            raise ValueError(f"pair ({i}, {j}) was not matched: the output is not consistent "
+                             "(no universe labels), so only the pairs in `pairs` have maps")
+        m = self.assignments[p]
+        if i < j:
+            return m.copy()
+        inv = np.full(self.n_nodes, -1, dtype=np.int64)
+        ok = m >= 0
+        inv[m[ok]] = np.flatnonzero(ok)
+        return inv
+
+    def pairwise_dict(self) -> dict[tuple[int, int], np.ndarray]:
+        """``{(i, j): assignment}`` over the matched pairs (the input of the metrics)."""
+        return {(int(i), int(j)): self.assignments[p].copy()
+                for p, (i, j) in enumerate(self.pairs.tolist())}
+
+    def to_matrix(self) -> np.ndarray:
+        """``(N n, N n)`` 0/1 block matrix of all pairwise maps (identity blocks on the diagonal;
+        blocks of unmatched pairs are zero when the output is not consistent)."""
+        N, n = self.n_graphs, self.n_nodes
+        if self.matching is not None:
+            return self.matching.to_matrix()
+        M = np.zeros((N * n, N * n))
+        for g in range(N):
+            M[g * n:(g + 1) * n, g * n:(g + 1) * n] = np.eye(n)
+        for p, (i, j) in enumerate(self.pairs.tolist()):
+            B = assignment_to_matrix(self.assignments[p], n)
+            M[i * n:(i + 1) * n, j * n:(j + 1) * n] = B
+            M[j * n:(j + 1) * n, i * n:(i + 1) * n] = B.T
+        return M
+
+    def accuracy(self, truth) -> float:
+        """Fraction of the true correspondences recovered, over the matched pairs.
+
+        ``truth``: a :class:`~transync.permutations.MultiMatching` (or labels, or a generator's
+        ``.ground_truth``). The same number as
+        ``transync.metrics.multimatching_accuracy(self.pairwise_dict(), truth, pairs=self.pairs)``.
+        """
+        truth = getattr(truth, "ground_truth", truth)
+        return MultiMatching.from_labels(truth).accuracy(self.pairwise_dict(), pairs=self.pairs)
+
+    def __repr__(self) -> str:
+        return (f"MultiMatchingResult(solver={self.solver!r}, sync={self.sync!r}, "
+                f"mode={self.mode!r}, n_graphs={self.n_graphs}, n_nodes={self.n_nodes}, "
+                f"n_pairs={len(self.pairs)}, consistency={self.consistency:.3f}, "
+                f"total_score={self.total_score:.4g})")

@@ -1,0 +1,95 @@
+"""The `cmu` experiment (thesis Table 6.1) on a tiny sequence in the CMU layout that the tests
+write: quick mode through the command line, the table, the data-folder errors."""
+
+import numpy as np
+import pytest
+
+from transync.cli import main
+from transync.experiments import REGISTRY, run_experiment
+from transync.experiments.cmu import METHODS, build, frame_gaps, load_sequence, trial
+
+N_FRAMES, N_LANDMARKS = 8, 10
+
+
+def _write_sequence(root, name="toy", n_frames=N_FRAMES, jitter=0.3):
+    """Landmarks in pixels, slowly translated and jittered from frame to frame."""
+    rng = np.random.default_rng(7)
+    base = rng.uniform(0, 300, size=(N_LANDMARKS, 2))
+    label = root / "label"
+    label.mkdir(parents=True)
+    for k in range(n_frames):
+        P = base + 2.0 * k + rng.normal(0, jitter, base.shape)
+        (label / f"{name}{k + 1}").write_text("".join(f"{x:.6f} {y:.6f}\n" for x, y in P))
+    return root
+
+
+@pytest.fixture()
+def sequence(tmp_path):
+    return _write_sequence(tmp_path / "seq")
+
+
+def test_registered_and_builds_on_the_folder(sequence):
+    assert REGISTRY["cmu"] == "transync.experiments.cmu"
+    exp = build(quick=True, data=sequence)
+    (sw,) = exp.sweeps
+    assert exp.name == "cmu" and tuple(sw.methods) == METHODS and len(METHODS) == 7
+    assert sw.base["data"] == str(sequence.resolve()) and sw.base["n_frames"] == 4
+    assert sw.values == [1, 2]                       # 4 frames fit 7 positions apart at most 2
+    full = build(data=sequence)
+    assert full.trials >= 20 and full.sweeps[0].base["n_frames"] == N_FRAMES
+    assert full.sweeps[0].values == [1]
+
+
+def test_frame_gaps():
+    assert frame_gaps(111, 20) == [1, 2, 3, 4, 5]
+    assert frame_gaps(101, 20, count=3) == [1, 3, 5]
+    assert frame_gaps(5, 5) == [1]
+    with pytest.raises(ValueError, match="n_frames"):
+        frame_gaps(5, 6)
+
+
+def test_missing_folder_names_path_and_transync_data(tmp_path, monkeypatch):
+    missing = tmp_path / "nowhere"
+    with pytest.raises(FileNotFoundError, match="TRANSYNC_DATA") as info:
+        build(quick=True, data=missing)
+    assert str(missing) in str(info.value)
+    monkeypatch.setenv("TRANSYNC_DATA", str(tmp_path))          # no cmu-house in it
+    with pytest.raises(FileNotFoundError, match="TRANSYNC_DATA") as info:
+        load_sequence()
+    assert str(tmp_path / "cmu-house") in str(info.value)
+
+
+def test_cli_errors_are_one_line(tmp_path, capsys):
+    assert main(["experiment", "cmu", "--quick", "--data", str(tmp_path / "nowhere"),
+                 "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "TRANSYNC_DATA" in err and "nowhere" in err
+    assert not (tmp_path / "out").exists()
+    assert main(["experiment", "sync", "--quick", "--data", str(tmp_path)]) == 2
+    assert "takes no --data" in capsys.readouterr().err
+
+
+def test_trial_spreads_frames(sequence):
+    cfg = dict(data=str(sequence), sequence="toy", n_frames=4, gap=2, method="S-RRWM")
+    out = trial(cfg, np.random.default_rng(0))
+    assert out["first_frame"] in (0.0, 1.0)           # 4 frames 2 apart span 7 of 8 positions
+    assert out["accuracy"] == 1.0 and out["consistency"] == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="need 10 frames"):
+        trial(dict(cfg, gap=3), np.random.default_rng(0))
+
+
+def test_quick_run_through_the_cli(tmp_path, capsys):
+    sequence = _write_sequence(tmp_path / "short", n_frames=5)     # 4 frames: gap 1 only
+    out = tmp_path / "out"
+    assert main(["experiment", "cmu", "--quick", "--data", str(sequence), "--out", str(out),
+                 "--no-progress", "--trials", "1"]) == 0
+    assert "table_6_1.md" in capsys.readouterr().out
+    table = (out / "table_6_1.md").read_text()
+    for m in METHODS:
+        assert f"| {m} |" in table
+    assert (out / "table_6_1.png").stat().st_size > 0 and (out / "cmu.png").exists()
+    again = run_experiment(build(quick=True, data=sequence), out, trials=1, progress=False,
+                           plot=False)
+    assert again.n_new == 0 and len(again.records) == len(METHODS)
+    acc = [r["metrics"]["accuracy"] for r in again.records]
+    assert min(acc) > 0.9                               # sub-pixel jitter: an easy sequence

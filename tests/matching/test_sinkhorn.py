@@ -231,3 +231,45 @@ def test_assignments_unchanged_by_consolidation(case, method):
     assignment, objective = RECORDED[case][method]
     assert res.assignment.tolist() == assignment
     assert res.objective == pytest.approx(objective, abs=1e-8)
+
+
+@pytest.mark.parametrize("kwargs, exc, match", [
+    ({"half_sweeps": 0}, ValueError, "half_sweeps"),
+    ({"slack": "bogus"}, ValueError, "slack"),
+    ({"domain": "augmented"}, ValueError, "domain"),
+    ({"tol": -1.0}, ValueError, "tol"),
+])
+def test_sinkhorn_batch_refuses_bad_options(kwargs, exc, match):
+    from transync.matching import sinkhorn_batch
+
+    with pytest.raises(exc, match=match):
+        sinkhorn_batch(np.ones((2, 3, 3)), **kwargs)
+
+
+def test_sinkhorn_batch_refuses_kernels_it_cannot_normalise():
+    from transync.matching import sinkhorn_augmented_batch, sinkhorn_batch
+
+    with pytest.raises(ValueError, match="all-zero row or column"):
+        sinkhorn_batch(np.zeros((1, 2, 2)), slack="none", tol=1e-6)
+    with pytest.raises(ValueError, match="non-negative"):
+        sinkhorn_batch(-np.ones((1, 2, 2)))
+    with pytest.raises(ValueError, match="shape"):
+        sinkhorn_batch(np.ones((2, 2)))
+    with pytest.raises(ValueError, match="writable float ndarray"):
+        sinkhorn_augmented_batch(np.ones((2, 3)), tol=1e-3, max_iter=10)
+
+
+def test_sinkhorn_batch_equals_the_two_dimensional_call():
+    from transync.matching import sinkhorn_batch
+
+    A = np.random.default_rng(1).random((5, 4, 6)) + 0.05
+    X, sweeps, ok = sinkhorn_batch(A, tol=1e-8, check_every=2)
+    for k in range(5):
+        ref = sinkhorn_normalize(A[k], domain="scaling", tol=1e-8, check_every=2)
+        np.testing.assert_allclose(X[k], ref.X, atol=1e-12)
+        assert sweeps[k] == ref.n_sweeps and ok[k] == ref.converged
+    L = np.log(A)
+    Xl = sinkhorn_batch(L, domain="log", half_sweeps=9)[0]
+    for k in range(5):
+        ref = sinkhorn_normalize(L[k], domain="log", half_sweeps=9)
+        np.testing.assert_allclose(Xl[k], ref.X, atol=1e-12)

@@ -9,6 +9,7 @@ import pytest
 
 from transync import match_collection
 from transync.datasets import make_graph_collection
+from transync.exceptions import ConvergenceWarning
 from transync.graphs import Graph
 from transync.matching import gaussian_edge_affinity
 from transync.metrics import multimatching_accuracy
@@ -16,6 +17,9 @@ from transync.multigraph import MultiMatchingResult
 from transync.permutations import cycle_inconsistency
 
 AFF = functools.partial(gaussian_edge_affinity, sigma2=0.05)
+# RRWM (pygmtools' variant, 50 iterations) often stops at its budget on noisy problems; the
+# warning is tested on its own below
+pytestmark = pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
 
 METHODS = [
     dict(solver="rrwm", sync="birkhoff", mode="online"),
@@ -224,3 +228,53 @@ def test_affinity_of_the_wrong_kind_is_refused():
     p = make_graph_collection(n_graphs=3, n_inliers=5, rng=0)
     with pytest.raises(TypeError, match="must return a transync.matching.Affinity"):
         match_collection(p.graphs, affinity=lambda a, b: np.ones((25, 25)), progress=False)
+
+
+def test_default_affinity_on_sparse_and_delaunay_graphs():
+    p = make_graph_collection(n_graphs=4, n_inliers=10, density=0.3, deformation=0.0, rng=0)
+    res = match_collection(p.graphs, progress=False)    # edges differ per graph: hard, but runs
+    assert res.consistency == 1.0
+    assert np.all(np.sort(res.assignments, axis=1) == np.arange(10))
+    rng = np.random.default_rng(0)
+    pts = rng.random((30, 2))
+    perms = [rng.permutation(30) for _ in range(4)]
+    graphs = [Graph.from_points(pts[q], edges="delaunay") for q in perms]
+    res = match_collection(graphs, progress=False)
+    assert res.accuracy([np.asarray(q) for q in perms]) == 1.0   # label of node u: point q[u]
+
+
+def test_unconverged_pairs_warn_once():
+    p = make_graph_collection(n_graphs=4, n_inliers=8, deformation=0.2, rng=0)
+    with pytest.warns(ConvergenceWarning, match="did not converge") as rec:
+        res = match_collection(p.graphs, sync=None, affinity=AFF, options={"max_iter": 1},
+                               progress=False)
+    assert len(rec) == 1 and res.converged is False
+
+
+@pytest.mark.parametrize("kwargs, exc, match", [
+    ({"affinity": np.zeros((5, 5, 16, 16))}, ValueError, "blocks for 5 graphs, but 3"),
+    ({"affinity": {(0, 7): np.zeros((16, 16))}}, ValueError, "graph 7, but there are only 3"),
+    ({"affinity": {("a", "b"): np.zeros((16, 16))}}, TypeError, "keys"),
+    ({"affinity": {(0, 1): np.ones((16, 16))}}, ValueError, r"`affinity` has no block for pair"),
+    ({"sync": None, "sync_every": 3}, ValueError, "sync_every"),
+    ({"mode": "offline", "damping": 0.5}, ValueError, "damping"),
+    ({"refine": "no"}, TypeError, "refine"),
+    ({"options": {"maxiter": 3}}, TypeError, "`options` has unknown option.*'maxiter'"),
+    ({"options": [1]}, TypeError, "`options` must be a dict"),
+])
+def test_more_bad_input(kwargs, exc, match):
+    with pytest.raises(exc, match=match):
+        match_collection(_graphs([4, 4, 4]), progress=False, **kwargs)
+
+
+def test_result_arrays_are_read_only(planted):
+    res = match_collection(planted.graphs, sync=None, affinity=AFF, progress=False)
+    with pytest.raises(ValueError):
+        res.assignments[0, 0] = 3
+    assert res.mode == "offline"                  # sync=None: the pairs were solved alone
+
+
+def test_online_orthogonal_sync(planted):
+    res = match_collection(planted.graphs, sync="orthogonal", affinity=AFF, progress=False,
+                           rng=0)
+    assert res.accuracy(planted.ground_truth) == 1.0 and res.consistency == 1.0

@@ -19,7 +19,7 @@ from ._linear import hungarian, sinkhorn
 from ._pf import PFStepper, pf
 from ._result import MatchingResult
 from ._rrwm import RRWMStepper, rrwm
-from ._sinkhorn import sinkhorn_augmented_batch, sinkhorn_batch, sinkhorn_normalize
+from ._sinkhorn import sinkhorn_augmented_batch, sinkhorn_batch
 from ._sm import SMStepper, sm
 from ._stepwise import Stepper
 
@@ -51,7 +51,6 @@ __all__ = [
     "sinkhorn",
     "sinkhorn_augmented_batch",
     "sinkhorn_batch",
-    "sinkhorn_normalize",
     "sm",
     "solver_options",
 ]

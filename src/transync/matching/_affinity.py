@@ -743,6 +743,12 @@ def gaussian_edge_factors(graphs, *, sigma2: float = 0.15, attribute: str | None
     """
     sigma2 = check_positive(sigma2, "sigma2")
     tol = check_positive(tol, "tol")
+    if isinstance(graphs, Graph) or not isinstance(graphs, (list, tuple)) or not graphs:
+        raise TypeError("`graphs` must be a non-empty list or tuple of Graph, got "
+                        f"{type(graphs).__name__}")
+    for k, g in enumerate(graphs):
+        if not isinstance(g, Graph):
+            raise TypeError(f"`graphs[{k}]` must be a Graph, got {type(g).__name__}")
     attribute = _common_attribute(graphs, attribute)
     if attribute is None:
         raise ValueError("the graphs disagree on their edge attributes (some have edge_features "
@@ -757,10 +763,16 @@ def gaussian_edge_factors(graphs, *, sigma2: float = 0.15, attribute: str | None
         raise ValueError(f"`graphs` must all have the same number of nodes, got sizes "
                          f"{sorted(sizes)}")
     n = sizes.pop()
-    pairs = (np.stack(np.triu_indices(N, 1), axis=1) if pairs is None
-             else check_array(pairs, "pairs", ndim=2, dtype=np.int64))
+    if pairs is None:
+        pairs = np.stack(np.triu_indices(N, 1), axis=1)
+    else:
+        pairs = check_array(pairs, "pairs", ndim=2, dtype=np.int64)
+        if pairs.shape[1:] != (2,) or (pairs.size and (pairs.min() < 0 or pairs.max() >= N)):
+            raise ValueError(f"`pairs` must be (P, 2) graph indices in [0, {N}), got shape "
+                             f"{pairs.shape}, range [{pairs.min(initial=0)}, "
+                             f"{pairs.max(initial=0)}]")
     nonempty = [v for v in vals if v.size]
-    E = np.stack([np.where(m, a, 0.0) for a, m in zip(attrs, masks)]) if N else None
+    E = np.stack([np.where(m, a, 0.0) for a, m in zip(attrs, masks)])
     M = np.stack(masks)
     if not nonempty:
         return GaussianEdgeFactors(np.zeros((N, 1, n, n)), np.zeros((N, 1, n, n)), 0.0, E, M,

@@ -42,6 +42,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import logsumexp
 
+from .._validation import check_array, check_choice, check_int, check_positive
+
 __all__ = ["SinkhornOutput", "sinkhorn_augmented_batch", "sinkhorn_batch", "sinkhorn_normalize"]
 
 DOMAINS = ("log", "scaling", "augmented")
@@ -266,7 +268,7 @@ def _alternate(dom, *, n_half: int, tol: float | None, check_every: int):
 # that it gets exactly the iterate of the 2-D `sinkhorn_normalize` call.
 
 
-def _sinkhorn_scaling(A, *, slack_mass: float, tol, max_iter: int = 1000,
+def _batch_scaling(A, *, slack_mass: float, tol, max_iter: int = 1000,
                       half_sweeps: int | None = None, check_every: int = 1):
     """``diag(u) A diag(v)`` for a stack ``A`` of shape (b, r, c), ``r <= c``.
 
@@ -314,21 +316,16 @@ def _sinkhorn_scaling(A, *, slack_mass: float, tol, max_iter: int = 1000,
     return (u[:, :, None] * A) * v[:, None, :], n_sweeps, converged
 
 
-def sinkhorn_batch(A, *, slack: str, **kw):
-    """Scaling-domain Sinkhorn of a stack ``A`` of (n1, n2) kernels; transposes when ``n1 > n2``.
-
-    ``slack="mass"`` or ``"none"`` as :func:`sinkhorn_normalize`; keywords ``tol``,
-    ``max_iter``, ``half_sweeps``, ``check_every`` as there. Every matrix gets exactly the iterate
-    of its own 2-D call. Returns ``(X, n_sweeps (b,), converged (b,))``.
-    """
+def _batch_slack(A, *, slack: str, **kw):
+    """Scaling-domain Sinkhorn of a stack of kernels (trusted input); transposes when n1 > n2."""
     transposed = A.shape[1] > A.shape[2]
     K = np.swapaxes(A, 1, 2) if transposed else A
     mass = float(K.shape[2] - K.shape[1]) if slack == "mass" else 0.0
-    X, n_sweeps, conv = _sinkhorn_scaling(np.ascontiguousarray(K), slack_mass=mass, **kw)
+    X, n_sweeps, conv = _batch_scaling(np.ascontiguousarray(K), slack_mass=mass, **kw)
     return (np.swapaxes(X, 1, 2) if transposed else X), n_sweeps, conv
 
 
-def sinkhorn_augmented_batch(M, *, tol: float, max_iter: int, which=None) -> None:
+def _batch_augmented(M, *, tol: float, max_iter: int, which=None) -> None:
     """Gold & Rangarajan's slack Sinkhorn of ``M[which]`` (b, n1 + 1, n2 + 1), in place."""
     idx = np.arange(len(M)) if which is None else np.asarray(which)
     if not len(idx):
@@ -352,3 +349,99 @@ def sinkhorn_augmented_batch(M, *, tol: float, max_iter: int, which=None) -> Non
         old = Ma[:, :n1, :n2].copy()
         Ma[:, :n1] /= Ma[:, :n1].sum(2, keepdims=True)
     M[idx] = Ma
+
+
+def sinkhorn_batch(A, *, slack: str = "mass", domain: str = "scaling", tol: float | None = None,
+                   max_iter: int = 1000, half_sweeps: int | None = None, check_every: int = 1):
+    """Sinkhorn normalisation of a stack of ``b`` kernels, each as its own 2-D call would give.
+
+    The lock-step multi-graph solvers normalise all pairs at once with it. Each matrix stops on
+    its own test (then frozen), so every matrix gets exactly the iterate of the 2-D call.
+
+    Parameters
+    ----------
+    A : ndarray of shape (b, n1, n2)
+        ``domain="scaling"``: non-negative kernels with a positive entry in every row and column;
+        ``"log"``: log-kernels (finite), normalised pair by pair in the log domain.
+    slack : {"mass", "none"}, default="mass"
+        Marginals when ``n1 != n2``: the smaller side sums to one and the larger side's slack
+        mass ``|n1 - n2|`` is spread (``"mass"``), or the sides alternate (``"none"``).
+    domain : {"scaling", "log"}, default="scaling"
+    tol : float, optional
+        Stop a matrix when its row-sum error falls below ``tol`` (tested every
+        ``check_every`` sweeps); ``None``: no test.
+    max_iter : int, default=1000
+        Maximum sweeps (each a column and a row normalisation).
+    half_sweeps : int, optional
+        Instead of ``tol``/``max_iter``: exactly this many half-sweeps (>= 1), rows first.
+    check_every : int, default=1
+
+    Returns
+    -------
+    X : ndarray of shape (b, n1, n2)
+    n_sweeps : ndarray of shape (b,)
+    converged : ndarray of shape (b,) of bool
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.matching import sinkhorn_batch
+    >>> A = np.random.default_rng(0).random((4, 3, 3)) + 0.1
+    >>> X, sweeps, ok = sinkhorn_batch(A, tol=1e-9)
+    >>> bool(np.allclose(X.sum(1), 1) and np.allclose(X.sum(2), 1)), bool(ok.all())
+    (True, True)
+    """
+    check_choice(slack, "slack", ("mass", "none"))
+    check_choice(domain, "domain", ("scaling", "log"))
+    A = check_array(A, "A", ndim=3)
+    if 0 in A.shape:
+        raise ValueError(f"`A` must have shape (b, n1, n2) with every size >= 1, got {A.shape}")
+    if half_sweeps is not None:
+        half_sweeps = check_int(half_sweeps, "half_sweeps", minimum=1)
+    max_iter = check_int(max_iter, "max_iter", minimum=1)
+    check_every = check_int(check_every, "check_every", minimum=1)
+    if tol is not None:
+        tol = check_positive(tol, "tol")
+    if domain == "log":
+        outs = [sinkhorn_normalize(a, domain="log", slack=slack, tol=tol, max_iter=max_iter,
+                                   half_sweeps=half_sweeps, check_every=check_every) for a in A]
+        return (np.stack([o.X for o in outs]), np.array([o.n_sweeps for o in outs]),
+                np.array([o.converged for o in outs]))
+    _check_kernels(A, "A")
+    return _batch_slack(A, slack=slack, tol=tol, max_iter=max_iter, half_sweeps=half_sweeps,
+                        check_every=check_every)
+
+
+def sinkhorn_augmented_batch(M, *, tol: float, max_iter: int, which=None) -> None:
+    """Gold & Rangarajan's slack Sinkhorn of a stack ``M`` (b, n1 + 1, n2 + 1), **in place**.
+
+    The real block's rows and columns are normalised against the slack row and column (which
+    are never normalised themselves) until the real block changes by less than ``tol`` (L1) over
+    a sweep, or ``max_iter`` sweeps; ``which`` restricts the work to some matrices. Every matrix
+    gets exactly the iterate of ``sinkhorn_normalize(M[k], domain="augmented", ...)``.
+
+    >>> import numpy as np
+    >>> from transync.matching import sinkhorn_augmented_batch
+    >>> M = np.ones((2, 3, 3))
+    >>> sinkhorn_augmented_batch(M, tol=1e-9, max_iter=100)
+    >>> bool(np.all(M[:, :2, :2].sum(1) <= 1 + 1e-9))
+    True
+    """
+    if not isinstance(M, np.ndarray) or M.ndim != 3 or M.dtype.kind != "f" \
+            or min(M.shape[1:], default=0) < 2 or not M.flags.writeable:
+        raise ValueError("`M` must be a writable float ndarray of shape (b, n1 + 1, n2 + 1) "
+                         f"with n1, n2 >= 1 (normalised in place), got "
+                         f"{getattr(M, 'shape', type(M).__name__)}")
+    tol = check_positive(tol, "tol")
+    max_iter = check_int(max_iter, "max_iter", minimum=1)
+    _check_kernels(M, "M")
+    _batch_augmented(M, tol=tol, max_iter=max_iter, which=which)
+
+
+def _check_kernels(A: np.ndarray, name: str) -> None:
+    """Non-negative, finite, and no all-zero row or column (they would give NaN)."""
+    if not np.all(np.isfinite(A)) or A.min() < 0:
+        raise ValueError(f"`{name}` must be finite and non-negative, got minimum {A.min():.3g}")
+    if not (A.max(2) > 0).all() or not (A.max(1) > 0).all():
+        raise ValueError(f"`{name}` has an all-zero row or column in some matrix: Sinkhorn "
+                         "cannot normalise it")

@@ -29,7 +29,7 @@ Examples
 --------
 >>> import numpy as np
 >>> from transync.datasets import make_graph_collection
->>> from transync.multigraph._affinity import PairAffinities
+>>> from transync.multigraph import PairAffinities
 >>> graphs = make_graph_collection(n_graphs=4, n_inliers=6, rng=0).graphs
 >>> aff = PairAffinities.from_graphs(graphs)
 >>> len(aff), aff.backend
@@ -118,6 +118,10 @@ def _unvec_batch(x: np.ndarray, n1: int, n2: int) -> np.ndarray:
 
 # --------------------------------------------------------------------------- per-graph factors
 
+
+#: largest entrywise error of the per-graph separable expansion used as is; above it the
+#: default affinity is built exactly (factorized) pair by pair
+MAX_SEPARABLE_ERROR = 1e-6
 
 _FAST_KEYWORDS = {"sigma2", "attribute", "tol", "backend", "angle_weight"}
 
@@ -510,8 +514,15 @@ class PairAffinities:
                 sym = bool(np.array_equal(M, np.swapaxes(M, 1, 2))
                            and np.array_equal(np.where(M, E, 0), np.where(M, E, 0).swapaxes(1, 2)))
                 exact = (np.where(M, E, 1e100), np.where(M, E, -1e100), sigma2, sym)
-                impl = _Separable(F, G, local[:, 0], local[:, 1], exact=exact)
-                return cls(impl, pairs, max_error=err)
+                if err <= MAX_SEPARABLE_ERROR or backend == "separable":
+                    impl = _Separable(F, G, local[:, 0], local[:, 1], exact=exact)
+                    return cls(impl, pairs, max_error=err)
+                # the expansion over all graphs' attributes is too coarse (attributes spread
+                # over many kernel widths): the exact factorized form, pair by pair
+                kw = {k: v for k, v in opts.items() if k != "backend"}
+                affinity = functools.partial(gaussian_edge_affinity, backend="factorized", **kw)
+        if affinity is None:          # the default, where the per-graph expansion does not apply
+            affinity = functools.partial(gaussian_edge_affinity, sigma2=0.15)
         if not callable(affinity):
             raise TypeError(f"`affinity` must be None or a callable (g_i, g_j) -> Affinity, got "
                             f"{type(affinity).__name__}")
@@ -569,14 +580,15 @@ class PairAffinities:
         return cls(_Loop(affs, n1, n2), pairs)
 
     @classmethod
-    def from_blocks(cls, K, pairs=None, n: int | None = None, *, name: str = "K"
-                    ) -> PairAffinities:
+    def from_blocks(cls, K, pairs=None, n: int | None = None, *, n_graphs: int | None = None,
+                    name: str = "K") -> PairAffinities:
         """Precomputed pygmtools-layout blocks ``K_ij`` of shape ``(n*n, n*n)``.
 
         ``K``: an ndarray of shape ``(N, N, n*n, n*n)``, a dict ``{(i, j): K_ij}`` or an ``(N, N)``
         nested list (entries dense or ``scipy.sparse``). A pair ``(i, j)`` missing from a dict or
         list whose ``(j, i)`` block is present uses that block, re-indexed. ``pairs`` default:
         all pairs of the ``N`` graphs (``N`` from the array or list; required for a dict).
+        ``n_graphs``: the number of graphs the blocks must describe (checked when given).
         """
         if n is None:
             raise TypeError("`n` (the number of nodes per graph) is required")
@@ -585,9 +597,13 @@ class PairAffinities:
         if isinstance(K, dict):
             if pairs is None:
                 raise TypeError("`pairs` is required when `K` is a dict")
+            keys = _dict_keys(K, name)
             top = np.asarray(pairs).max(initial=0) if np.size(pairs) else 0
-            N = 1 + max([int(top)] + [max(int(i), int(j)) for i, j in K])
-            pairs = check_pairs(pairs, max(N, 2))
+            N = 1 + max([int(top)] + [max(i, j) for i, j in keys])
+            if n_graphs is not None and N > n_graphs:
+                raise ValueError(f"`{name}` has a block for graph {N - 1}, but there are only "
+                                 f"{n_graphs} graphs")
+            pairs = check_pairs(pairs, max(N, 2) if n_graphs is None else n_graphs)
             get = lambda i, j: K.get((i, j))  # noqa: E731
         elif isinstance(K, np.ndarray) and K.dtype != object:
             K = check_array(K, name, ndim=4)
@@ -595,6 +611,7 @@ class PairAffinities:
                 raise ValueError(f"`{name}` must have shape (N, N, n*n, n*n) = "
                                  f"(N, N, {nn}, {nn}), got "
                                  f"{K.shape}")
+            _check_count(K.shape[0], n_graphs, name)
             pairs = check_pairs(pairs, K.shape[0])
             sel = K[pairs[:, 0], pairs[:, 1]]
             if sel.size and sel.min() < 0:
@@ -606,6 +623,7 @@ class PairAffinities:
             N = len(K)
             if any(not isinstance(row, (list, tuple, np.ndarray)) or len(row) != N for row in K):
                 raise ValueError(f"`{name}` as a nested list must be (N, N) = ({N}, {N}) blocks")
+            _check_count(N, n_graphs, name)
             pairs = check_pairs(pairs, N)
             get = lambda i, j: K[i][j]  # noqa: E731
         else:
@@ -617,13 +635,13 @@ class PairAffinities:
         affs = []
         for i, j in pairs:
             i, j = int(i), int(j)
-            b, name = get(i, j), f"K[{i}][{j}]"
+            b, where = get(i, j), f"{name}[{i}][{j}]"
             if b is None:
-                b, name = get(j, i), f"K[{j}][{i}]"
+                b, where = get(j, i), f"{name}[{j}][{i}]"
                 if b is None:
                     raise ValueError(f"`{name}` has no block for pair ({i}, {j}) (nor ({j}, {i}))")
                 b = b.tocsr()[t][:, t] if sp.issparse(b) else np.asarray(b)[np.ix_(t, t)]
-            affs.append(as_affinity(b, n1=n, n2=n, name=name))
+            affs.append(as_affinity(b, n1=n, n2=n, name=where))
         return cls.from_affinities(affs, pairs)
 
     # ---------------------------------------------------------------- container
@@ -760,6 +778,24 @@ def _all_separable(graphs, pairs) -> bool:
     m = np.array([int(g.mask.sum()) for g in graphs], dtype=np.int64)
     n = graphs[0].n_nodes
     return bool(np.all(2 * n ** 3 < m[pairs[:, 0]] * m[pairs[:, 1]]))
+
+
+def _check_count(N: int, n_graphs, name: str) -> None:
+    if n_graphs is not None and N != n_graphs:
+        raise ValueError(f"`{name}` holds blocks for {N} graphs, but {n_graphs} graphs were given")
+
+
+def _dict_keys(K: dict, name: str) -> list[tuple[int, int]]:
+    keys = []
+    for key in K:
+        ok = (isinstance(key, tuple) and len(key) == 2
+              and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 0
+                      for v in key))
+        if not ok:
+            raise TypeError(f"`{name}` as a dict must have keys (i, j) of graph indices, got "
+                            f"{key!r}")
+        keys.append((int(key[0]), int(key[1])))
+    return keys
 
 
 def check_graphs(graphs) -> list:

@@ -55,6 +55,7 @@ import pickle
 import reprlib
 import time
 import traceback
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from concurrent import futures as cf
 from typing import Any, NamedTuple
@@ -404,7 +405,10 @@ def _run_joblib(fn, chunks: list, n_jobs: int, timeout: float, bar) -> list:
     finally:
         close = getattr(gen, "close", None)
         if close is not None:
-            close()         # stopped early: joblib aborts and stops its workers
+            with warnings.catch_warnings():     # joblib says it cancelled the tasks: we asked
+                warnings.filterwarnings("ignore", message=".*still being processed",
+                                        category=UserWarning)
+                close()     # stopped early: joblib aborts and stops its workers
     return results
 
 

@@ -21,13 +21,14 @@ from ..synchronization import synchronize_doubly_stochastic, synchronize_permuta
 from ._affinity import PairAffinities, all_pairs, check_graphs, check_pairs
 from ._cao import cao
 from ._executors import map_chunks, split_chunks
-from ._lockstep import doubly_stochastic_iterates, run_lockstep
+from ._lockstep import SOLVERS as LOCKSTEP_SOLVERS
+from ._lockstep import doubly_stochastic_iterates, lockstep_options, run_lockstep
 from ._refine import refine_consistent
 from ._result import MultiMatchingResult
 
 __all__ = ["match_collection", "SOLVERS", "ONLINE_SOLVERS", "CAO_VARIANTS", "SYNCS"]
 
-ONLINE_SOLVERS = ("rrwm", "ga", "pf")
+ONLINE_SOLVERS = LOCKSTEP_SOLVERS
 PAIRWISE_SOLVERS = ("rrwm", "ga", "pf", "sm", "ipfp")
 CAO_VARIANTS = ("cao", "cao-c", "cao-uc", "cao-pc")
 SOLVERS = PAIRWISE_SOLVERS + CAO_VARIANTS
@@ -47,8 +48,8 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
 
     * ``solver="ga" | "rrwm" | "pf"`` with ``sync="birkhoff"`` and ``mode="online"`` (default):
       S-GA, S-RRWM, S-PF. All pairs run in lock-step on batched ``(P, n, n)`` arrays; at each
-      synchronization point (GA: after every beta step; RRWM: every ``sync_every`` iterations;
-      PF: after every lambda step) every pair's doubly-stochastic iterate is replaced by
+      synchronization point (every ``sync_every`` outer steps: by default RRWM 5 iterations,
+      GA 4 beta levels, PF 4 lambda steps) every pair's doubly-stochastic iterate is replaced by
       ``(1 - damping) X + damping Y``, ``Y`` the Birkhoff-polytope synchronization of all
       iterates (warm-started from the previous synchronization point), so that consistency
       steers the optimization. The output is the better (by total affinity score) of the most
@@ -56,8 +57,10 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
       synchronization of the final per-pair roundings: cycle-consistent either way.
     * ``mode="offline"``: every pair solved on its own (``executor`` spreads the work), then one
       synchronization (``"birkhoff"`` on the soft solutions, ``"spectral"`` / ``"orthogonal"``
-      on the rounded ones). ``sm`` and ``ipfp`` are offline only.
-    * ``sync=None``: plain pairwise matching of every pair (the unsynchronized baselines).
+      on the rounded ones; ``sm`` and ``ipfp`` give 0/1 blocks). ``sm`` and ``ipfp`` are
+      offline only.
+    * ``sync=None``: plain pairwise matching of every pair (the unsynchronized baselines; RRWM is
+      the lock-step solver's default variant, pygmtools', see ``options``).
     * ``solver="cao" | "cao-c" | "cao-uc" | "cao-pc"``: Yan et al.'s composition-based multi-graph
       matching (TPAMI 2016) started from pairwise RRWM on the same affinities; its output need
       not be consistent (``matching`` is ``None`` unless a ``sync`` is asked for on top).
@@ -87,11 +90,15 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
         ``concurrent.futures`` executor or a ``dask.distributed.Client``). The online solvers run
         all pairs in lock-step in this process and refuse an executor.
     options : dict, optional
-        Options of the pairwise solver (see :func:`transync.matching.solver_options`).
+        Options of the pairwise solver (:func:`transync.multigraph.run_lockstep` for rrwm, ga,
+        pf; :func:`transync.matching.solver_options` for sm, ipfp); for CAO, of its pairwise
+        RRWM. RRWM runs pygmtools' variant unless ``options={"variant": "original"}``.
     sync_every : int, optional
-        Online RRWM: iterations between synchronization points (default: the lock-step solver's).
+        Online solvers: outer steps between synchronization points (default RRWM 5 iterations,
+        GA 4 beta levels, PF 4 lambda steps). Refused elsewhere.
     damping : float in (0, 1], default=1.0
-        Weight of the synchronized iterate at each synchronization point.
+        Online solvers: weight of the synchronized iterate at each synchronization point.
+        Refused elsewhere.
     refine : bool, default=True
         After synchronization, re-anchor graphs on the pairwise stage's maps while the total
         affinity score increases (consistent coordinate ascent, see ``info["refine"]``); the output
@@ -100,6 +107,11 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
     rng : None, int or numpy.random.Generator
     progress : bool, default=True
         tqdm progress bars on the long loops.
+
+    Pairwise solvers that stop at their iteration budget give one ``ConvergenceWarning`` (and
+    ``converged=False``). The online solvers are different: every synchronization point restarts
+    the pairs' stopping tests, and on hard problems they run to the budget by design; they do not
+    warn, and ``converged`` says whether every pair met its test after the last point.
 
     Returns
     -------
@@ -130,14 +142,25 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
     solver, sync, mode = _check_method(solver, sync, mode)
     pairs = _check_pairs(pairs, N, need_all=solver in CAO_VARIANTS,
                          need_connected=sync is not None)
+    online = mode == "online" and sync is not None and solver in ONLINE_SOLVERS
+    if not online:
+        mode = "offline"                 # the pairs are solved independently: as run
     damping = check_positive(damping, "damping")
     if damping > 1:
         raise ValueError(f"`damping` must be in (0, 1], got {damping}")
-    if executor is not None and mode == "online" and sync is not None \
-            and solver in ONLINE_SOLVERS:
+    for name, value, default in (("sync_every", sync_every, None), ("damping", damping, 1.0)):
+        if not online and value != default:
+            raise ValueError(f"`{name}` steers the online synchronized solvers; solver="
+                             f"{solver!r} with sync={sync!r} runs none, got {name}={value!r}")
+    if online and executor is not None:
         raise ValueError("`executor` spreads independent pairwise work (mode='offline', CAO); "
                          "the online solvers run all pairs in lock-step in this process: pass "
                          f"executor=None or mode='offline', got executor={executor!r}")
+    if not isinstance(refine, (bool, np.bool_)):
+        raise TypeError(f"`refine` must be True or False, got {refine!r}")
+    if not isinstance(progress, (bool, np.bool_)):
+        raise TypeError(f"`progress` must be True or False, got {progress!r}")
+    options = _check_options(options, "rrwm" if solver in CAO_VARIANTS else solver)
     gen = as_generator(rng)
     with blas_limit(n * n):          # many small products: one BLAS thread is faster
         return _run(graphs, n, pairs, affinity, solver, sync, mode, executor, options,
@@ -161,10 +184,14 @@ def _run(graphs, n, pairs, affinity, solver, sync, mode, executor, options, sync
                               progress, timings, info)
     else:
         stage = _offline_stage(aff, solver, options, executor, progress, timings)
-    assignments, soft, n_iter, converged = stage
-    input_consistency = _consistency(pairs, assignments, n, N, gen)
-    if "input_assignments" in info:
-        input_consistency = _consistency(pairs, info.pop("input_assignments"), n, N, gen)
+    assignments, soft, n_iter, unconverged = stage
+    if unconverged and mode == "offline":
+        warnings.warn(f"match_collection: {unconverged} of {len(pairs)} pairs did not converge "
+                      f"within the iteration budget of solver {solver!r} (see options "
+                      "'max_iter'); their last iterates are used", ConvergenceWarning,
+                      stacklevel=3)
+    input_consistency = _consistency(pairs, info.pop("input_assignments", assignments), n, N,
+                                     gen)
 
     matching = info.pop("matching", None)
     if sync is not None and matching is None:
@@ -187,7 +214,7 @@ def _run(graphs, n, pairs, affinity, solver, sync, mode, executor, options, sync
         scores=np.asarray(scores, dtype=float), total_score=float(np.sum(scores)),
         consistency=float(consistency), input_consistency=float(input_consistency),
         timings=timings, solver=solver, sync=sync, mode=mode, n_iter=int(n_iter),
-        converged=bool(converged), n_graphs=N, info=info)
+        converged=not unconverged, n_graphs=N, info=info)
 
 
 # --------------------------------------------------------------------------- checks
@@ -207,6 +234,23 @@ def _check_method(solver, sync, mode):
         raise ValueError(f"mode='online' synchronizes inside the solvers {ONLINE_SOLVERS}; "
                          f"solver={solver!r} runs offline only: pass mode='offline'")
     return solver, sync, mode
+
+
+def _check_options(options, solver: str) -> dict:
+    """The solver's keyword options; unknown names are refused by name, listing the valid ones."""
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise TypeError(f"`options` must be a dict of solver options, got "
+                        f"{type(options).__name__}")
+    from ..matching import solver_options
+
+    valid = lockstep_options(solver) if solver in ONLINE_SOLVERS else solver_options(solver)
+    unknown = sorted(set(options) - set(valid))
+    if unknown:
+        raise TypeError(f"`options` has unknown option(s) {', '.join(map(repr, unknown))} for "
+                        f"solver={solver!r}; valid: {', '.join(valid)}")
+    return dict(options)
 
 
 def _check_pairs(pairs, N: int, *, need_all: bool, need_connected: bool) -> np.ndarray:
@@ -243,7 +287,8 @@ def _pair_affinities(graphs, pairs, affinity, n) -> PairAffinities:
     if affinity is None or callable(affinity):
         return PairAffinities.from_graphs(graphs, pairs, affinity)
     if isinstance(affinity, (Mapping, list, tuple, np.ndarray)):
-        return PairAffinities.from_blocks(affinity, pairs, n, name="affinity")
+        return PairAffinities.from_blocks(affinity, pairs, n, n_graphs=len(graphs),
+                                          name="affinity")
     raise TypeError("`affinity` must be a callable (g_i, g_j) -> Affinity, pygmtools K blocks "
                     "((N, N, n*n, n*n) array, dict {(i, j): K} or nested list) or None, got "
                     f"{type(affinity).__name__}")
@@ -252,11 +297,11 @@ def _pair_affinities(graphs, pairs, affinity, n) -> PairAffinities:
 def _solve_chunk(payload):
     """Worker (module level, picklable): solve a chunk of independent pairs."""
     aff, solver, options = payload
-    with warnings.catch_warnings():      # in the worker: unconverged pairs are reported
+    with warnings.catch_warnings():      # unconverged pairs are counted and reported once
         warnings.simplefilter("ignore", ConvergenceWarning)
         if solver in ONLINE_SOLVERS:
             out = run_lockstep(aff, solver=solver, sync=None, options=options, progress=False)
-            return out.soft, out.assignments, out.n_iter, bool(np.all(out.converged))
+            return out.soft, out.assignments, out.n_iter, int(np.sum(~out.converged))
         from .. import matching
 
         fn = getattr(matching, solver)
@@ -269,7 +314,7 @@ def _solve_chunk(payload):
         ok = assign[p] >= 0
         soft[p, rows[ok], assign[p][ok]] = 1.0
     return (soft, assign, max(r.n_iter for r in results),
-            all(r.converged for r in results))
+            sum(not r.converged for r in results))
 
 
 def _offline_stage(aff, solver, options, executor, progress, timings):
@@ -283,18 +328,18 @@ def _offline_stage(aff, solver, options, executor, progress, timings):
     soft[order] = np.concatenate([o[0] for o in outs])
     assign[order] = np.concatenate([o[1] for o in outs])
     timings["pairwise"] = time.perf_counter() - t
-    return assign, soft, max(o[2] for o in outs), all(o[3] for o in outs)
+    return assign, soft, max(o[2] for o in outs), sum(o[3] for o in outs)
 
 
 def _cao_stage(aff, N, variant, options, executor, progress, timings, info):
-    assign, _, n_iter, converged = _offline_stage(aff, "rrwm", options, executor, progress,
+    assign, _, n_iter, unconverged = _offline_stage(aff, "rrwm", options, executor, progress,
                                                   timings)
     info["input_assignments"] = assign
     t = time.perf_counter()
     out = cao(assign, aff.pairs, N, aff.score_assignments, variant=variant, progress=progress)
     timings["cao"] = time.perf_counter() - t
     info["cao"] = {"n_iter": out.n_iter, "converged": out.converged, "history": out.history}
-    return out.assignments, None, n_iter, converged
+    return out.assignments, None, n_iter, unconverged
 
 
 class _SyncPoint:
@@ -305,7 +350,6 @@ class _SyncPoint:
         self.last = None                 # last BirkhoffSyncResult (warm start) or matching
         self.first_rounding = None
         self.seconds = 0.0
-        self.calls = 0
 
     def __call__(self, X):
         t = time.perf_counter()
@@ -325,7 +369,6 @@ class _SyncPoint:
             Y = np.zeros_like(X)
             P = m.pairwise_array(self.pairs)
             Y[np.arange(len(P))[:, None], np.arange(self.n)[None, :], P] = 1.0
-        self.calls += 1
         self.seconds += time.perf_counter() - t
         return Y
 
@@ -341,7 +384,8 @@ def _online_stage(aff, N, n, solver, sync, options, sync_every, damping, gen, pr
     timings["pairwise"] = time.perf_counter() - t - point.seconds
     t = time.perf_counter()
     final = out.assignments          # the solvers' own rounding (as transync.matching's)
-    candidates = {"permutation_sync": _synchronize(aff.pairs, final, None, n, N, "spectral", gen)}
+    method = "spectral" if sync == "birkhoff" else sync
+    candidates = {"permutation_sync": _synchronize(aff.pairs, final, None, n, N, method, gen)}
     if sync == "birkhoff":
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
@@ -361,7 +405,7 @@ def _online_stage(aff, N, n, solver, sync, options, sync_every, damping, gen, pr
                  "matching": candidates[best],
                  "input_assignments": point.first_rounding if point.first_rounding is not None
                  else final})
-    return final, out.soft, out.n_iter, bool(np.all(out.converged))
+    return final, out.soft, out.n_iter, int(np.sum(~out.converged))
 
 
 def _refine(matching, pairs, proposals, aff, info) -> MultiMatching:
@@ -377,7 +421,7 @@ def _refine(matching, pairs, proposals, aff, info) -> MultiMatching:
 
 def _round(X: np.ndarray) -> np.ndarray:
     """Per-pair Hungarian rounding of soft blocks ``(P, n, n)`` -> assignments ``(P, n)``."""
-    return np.stack([solve_lap(x) for x in X]) if len(X) else np.zeros((0, X.shape[1]), int)
+    return np.stack([solve_lap(x) for x in X])
 
 
 def _synchronize(pairs, assignments, soft, n, N, sync, gen) -> MultiMatching:

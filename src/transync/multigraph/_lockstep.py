@@ -5,9 +5,9 @@
 of all pairs lives in stacked ``(P, n1, n2)`` arrays, every outer step is a handful of NumPy calls
 on the whole batch (one batched affinity product, one batched Sinkhorn, ...) and pairs that have
 met their own stopping test are frozen (masked out), so that with ``sync=None`` every pair
-follows exactly the pairwise solver's iterates. At the synchronization points of ALGORITHMS.md
-section 4.3 (RRWM: every ``sync_every`` iterations; GA: after each beta level; PF: after each
-lambda step) the current doubly-stochastic iterates of all pairs go to ``sync`` and the state is
+follows exactly the pairwise solver's iterates. At the synchronization points (every
+``sync_every`` outer steps: RRWM iterations, GA beta levels, PF lambda steps; ALGORITHMS.md
+section 4.3 proposes every step, see ``SYNC_EVERY`` for why the defaults are sparser) the current doubly-stochastic iterates of all pairs go to ``sync`` and the state is
 overwritten with ``(1 - damping) X + damping sync(X)``, as ``Stepper.set_iterate`` does for one
 pair; the solvers then continue (S-RRWM, S-GA, S-PF).
 
@@ -19,8 +19,7 @@ Examples
 --------
 >>> import numpy as np
 >>> from transync.datasets import make_graph_collection
->>> from transync.multigraph._affinity import PairAffinities
->>> from transync.multigraph._lockstep import run_lockstep
+>>> from transync.multigraph import PairAffinities, run_lockstep
 >>> prob = make_graph_collection(n_graphs=4, n_inliers=8, deformation=0.0, rng=0)
 >>> aff = PairAffinities.from_graphs(prob.graphs, affinity=None)
 >>> out = run_lockstep(aff, solver="rrwm")
@@ -49,7 +48,6 @@ from ..matching import (
     RRWMStepper,
     sinkhorn_augmented_batch,
     sinkhorn_batch,
-    sinkhorn_normalize,
     solver_options,
 )
 from ..permutations import solve_lap
@@ -218,9 +216,8 @@ class _RRWMPygmtools(_Batch):
         if np.all(top - scores.min((1, 2)) < 600.0):
             S = sinkhorn_batch(np.exp(scores - top[:, None, None]), slack="none",
                                tol=None, half_sweeps=self.sk_half)[0]
-        else:       # amplification >= 600: the pairwise log domain, pair by pair
-            S = np.stack([sinkhorn_normalize(sc, domain="log", slack="none",
-                                             half_sweeps=self.sk_half).X for sc in scores])
+        else:       # amplification >= 600: the log domain (pair by pair)
+            S = sinkhorn_batch(scores, slack="none", domain="log", half_sweeps=self.sk_half)[0]
         v = alpha * S + (1.0 - alpha) * w
         v /= _norm1(v)[:, None, None]
         va = self.v[a]

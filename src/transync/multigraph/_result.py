@@ -35,15 +35,22 @@ class MultiMatchingResult:
         ``1 - cycle_error`` of the output maps over the triangles of observed pairs (1.0 for a
         consistent output).
     input_consistency : float
-        The same for the maps of the pairwise stage, before synchronization or CAO.
+        The same for the maps of the pairwise stage, before synchronization or CAO. For the
+        online solvers: of the per-pair roundings of the iterates at the first synchronization
+        point (so it depends on ``sync_every``; not comparable with the offline value).
     timings : dict
-        Seconds per stage (``"affinity"``, ``"pairwise"``, ``"sync"``, ``"cao"``, ``"total"``).
+        Seconds per stage (``"affinity"``, ``"pairwise"``, ``"sync"``, ``"refine"``, ``"cao"``,
+        ``"total"``; the stages that ran).
     solver, sync, mode : str or None
-        The method, as run.
+        The method, as run (``mode="offline"`` whenever the pairs were solved independently:
+        ``sync=None``, CAO, ``sm``/``ipfp``).
     n_iter : int
         Outer iterations of the pairwise (lock-step) stage.
     converged : bool
-        Whether every pairwise solver met its stopping criterion.
+        Whether every pairwise solver met its stopping criterion (else a
+        ``ConvergenceWarning`` was issued).
+    n_graphs : int
+        ``N``.
     info : dict
         Details per stage (number of synchronization calls, CAO history ...).
     """
@@ -63,6 +70,12 @@ class MultiMatchingResult:
     converged: bool
     n_graphs: int
     info: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        for name in ("pairs", "assignments", "scores"):      # read-only, like MultiMatching's
+            arr = np.array(getattr(self, name))
+            arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
 
     @property
     def n_nodes(self) -> int:

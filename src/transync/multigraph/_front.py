@@ -63,7 +63,8 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
       the lock-step solver's default variant, pygmtools', see ``options``).
     * ``solver="cao" | "cao-c" | "cao-uc" | "cao-pc"``: Yan et al.'s composition-based multi-graph
       matching (TPAMI 2016) started from pairwise RRWM on the same affinities; its output need
-      not be consistent (``matching`` is ``None`` unless a ``sync`` is asked for on top).
+      not be consistent (``matching`` is ``None`` unless a ``sync`` is asked for on top; its
+      maps are hard, so ``"birkhoff"`` there means the spectral permutation synchronization).
 
     Parameters
     ----------

@@ -16,13 +16,13 @@ import numpy as np
 from .._blas import blas_limit
 from .._validation import as_generator, check_array, check_choice, check_positive
 from ..exceptions import ConvergenceWarning
-from ..permutations import MultiMatching, cycle_inconsistency_arrays, solve_lap
+from ..permutations import MultiMatching, cycle_inconsistency_arrays
 from ..synchronization import synchronize_doubly_stochastic, synchronize_permutations
 from ._affinity import PairAffinities, all_pairs, check_graphs, check_pairs
 from ._cao import cao
 from ._executors import map_chunks, split_chunks
 from ._lockstep import SOLVERS as LOCKSTEP_SOLVERS
-from ._lockstep import doubly_stochastic_iterates, lockstep_options, run_lockstep
+from ._lockstep import doubly_stochastic_iterates, lockstep_options, round_blocks, run_lockstep
 from ._refine import refine_consistent
 from ._result import MultiMatchingResult
 
@@ -355,17 +355,17 @@ class _SyncPoint:
     def __call__(self, X):
         t = time.perf_counter()
         if self.first_rounding is None:
-            self.first_rounding = _round(X)
+            self.first_rounding = round_blocks(X)
         if self.sync == "birkhoff":
-            blocks = {(int(i), int(j)): X[p] for p, (i, j) in enumerate(self.pairs.tolist())}
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", ConvergenceWarning)
-                res = synchronize_doubly_stochastic(blocks, init=self.last,
+                res = synchronize_doubly_stochastic(_by_pair(self.pairs, X), init=self.last,
                                                     max_iter=SYNC_POINT_ITER, rng=self.gen)
             self.last = res
             Y = res.stacked_blocks(self.pairs)
         else:
-            m = _synchronize(self.pairs, _round(X), None, self.n, self.N, self.sync, self.gen)
+            m = _synchronize(self.pairs, round_blocks(X), None, self.n, self.N, self.sync,
+                             self.gen)
             self.last = m
             Y = np.zeros_like(X)
             P = m.pairwise_array(self.pairs)
@@ -383,29 +383,24 @@ def _online_stage(aff, N, n, solver, sync, options, sync_every, damping, gen, pr
         out = run_lockstep(aff, solver=solver, sync=point, sync_every=sync_every,
                            damping=damping, options=options, progress=progress)
     timings["pairwise"] = time.perf_counter() - t - point.seconds
+    first_rounding, seconds_at_points = point.first_rounding, point.seconds
     t = time.perf_counter()
     final = out.assignments          # the solvers' own rounding (as transync.matching's)
     method = "spectral" if sync == "birkhoff" else sync
     candidates = {"permutation_sync": _synchronize(aff.pairs, final, None, n, N, method, gen)}
     if sync == "birkhoff":
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", ConvergenceWarning)
-            ds = doubly_stochastic_iterates(out.soft)
-            blocks = {(int(i), int(j)): ds[p] for p, (i, j) in enumerate(aff.pairs.tolist())}
-            res = synchronize_doubly_stochastic(blocks, init=point.last,
-                                                max_iter=SYNC_POINT_ITER, rng=gen)
-        candidates["map_atom"] = res.matching
+        point(doubly_stochastic_iterates(out.soft))     # one last warm-started synchronization
+        candidates["map_atom"] = point.last.matching
     elif isinstance(point.last, MultiMatching):
         candidates["last_sync"] = point.last
     idx = np.arange(len(aff.pairs))
     scores = {k: float(np.sum(aff.score_assignments(idx, m.pairwise_array(aff.pairs))))
               for k, m in candidates.items()}
     best = max(scores, key=scores.get)
-    timings["sync"] = point.seconds + time.perf_counter() - t
+    timings["sync"] = seconds_at_points + time.perf_counter() - t
     info.update({"n_sync": out.n_sync, "output": best, "candidate_scores": scores,
                  "matching": candidates[best],
-                 "input_assignments": point.first_rounding if point.first_rounding is not None
-                 else final})
+                 "input_assignments": first_rounding if first_rounding is not None else final})
     return final, out.soft, out.n_iter, int(np.sum(~out.converged))
 
 
@@ -420,20 +415,19 @@ def _refine(matching, pairs, proposals, aff, info) -> MultiMatching:
     return MultiMatching(list(L), matching.n_universe)
 
 
-def _round(X: np.ndarray) -> np.ndarray:
-    """Per-pair Hungarian rounding of soft blocks ``(P, n, n)`` -> assignments ``(P, n)``."""
-    return np.stack([solve_lap(x) for x in X])
+def _by_pair(pairs, values) -> dict:
+    """``{(i, j): values[p]}`` for ``pairs[p] = (i, j)``: the synchronizers' pairwise input."""
+    return {(int(i), int(j)): values[p] for p, (i, j) in enumerate(pairs.tolist())}
 
 
 def _synchronize(pairs, assignments, soft, n, N, sync, gen) -> MultiMatching:
     """One synchronization of the pairwise stage's output into universe labels."""
     if sync == "birkhoff" and soft is not None:
         soft = doubly_stochastic_iterates(soft)       # solver iterates are DS to ~1e-3 only
-        blocks = {(int(i), int(j)): soft[p] for p, (i, j) in enumerate(pairs.tolist())}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
-            return synchronize_doubly_stochastic(blocks, rng=gen).matching
-    maps = {(int(i), int(j)): assignments[p] for p, (i, j) in enumerate(pairs.tolist())}
+            return synchronize_doubly_stochastic(_by_pair(pairs, soft), rng=gen).matching
+    maps = _by_pair(pairs, assignments)
     method = "spectral" if sync in ("birkhoff", "spectral") else "orthogonal"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)

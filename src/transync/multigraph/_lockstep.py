@@ -54,7 +54,7 @@ from ..permutations import solve_lap
 from ._affinity import PairAffinities
 
 __all__ = ["LockstepOutcome", "SOLVERS", "doubly_stochastic_iterates", "lockstep_options",
-           "run_lockstep"]
+           "round_blocks", "run_lockstep"]
 
 SOLVERS = ("rrwm", "ga", "pf")
 # outer steps between synchronization points. Measured (12 problems, N = 8, n = 10,
@@ -615,7 +615,7 @@ def run_lockstep(affinities: PairAffinities, *, solver: str, sync=None,
         t0 = time.perf_counter()
         soft = np.array(st.iterate, dtype=float)
         scores = np.array(st.scores(), dtype=float)
-        assignments = np.stack([solve_lap(s) for s in scores])
+        assignments = round_blocks(scores)
         t_solve += time.perf_counter() - t0
     info = {"solver": solver, "options": opts, "steps_per_pair": st.n_iter.copy(),
             "sync_every": sync_every, "damping": damping}
@@ -628,6 +628,11 @@ def run_lockstep(affinities: PairAffinities, *, solver: str, sync=None,
     return LockstepOutcome(soft=soft, scores=scores, assignments=assignments, n_iter=rounds,
                            converged=st.converged.copy(), n_sync=n_sync, seconds_solve=t_solve,
                            seconds_sync=t_sync, info=info)
+
+
+def round_blocks(X: np.ndarray) -> np.ndarray:
+    """Per-pair Hungarian rounding (maximizing) of blocks ``(P, n1, n2)`` -> ``(P, n1)``."""
+    return np.stack([solve_lap(x) for x in X])
 
 
 def doubly_stochastic_iterates(X, tol: float = 1e-10, max_iter: int = 200):

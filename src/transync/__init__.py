@@ -54,6 +54,7 @@ _LAZY = {
     "matching": ("transync.matching", None),
     "metrics": ("transync.metrics", None),
     "multigraph": ("transync.multigraph", None),
+    "parallel": ("transync.parallel", None),
     "permutations": ("transync.permutations", None),
     "synchronization": ("transync.synchronization", None),
 }

@@ -20,7 +20,7 @@ from ..permutations import MultiMatching, cycle_inconsistency_arrays
 from ..synchronization import synchronize_doubly_stochastic, synchronize_permutations
 from ._affinity import PairAffinities, all_pairs, check_graphs, check_pairs
 from ._cao import cao
-from ._executors import map_chunks, split_chunks
+from ..parallel import map_chunks, split_chunks
 from ._lockstep import SOLVERS as LOCKSTEP_SOLVERS
 from ._lockstep import doubly_stochastic_iterates, lockstep_options, round_blocks, run_lockstep
 from ._refine import refine_consistent

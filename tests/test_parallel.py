@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from transync.exceptions import ExecutorError, TransyncError
-from transync.multigraph._executors import (
+from transync.parallel import (
     DEFAULT_TIMEOUT,
     _demo_chunk,
     map_chunks,

@@ -1,7 +1,10 @@
 """Executors for independent pairwise work: serial, joblib processes, concurrent.futures, Dask.
 
-The multi-graph solvers split the pairs of a collection into chunks (:func:`split_chunks`) and
-run one function per chunk (:func:`map_chunks`). The chunks are independent, so they can run in
+One home for every layer that spreads independent work (multi-graph matching, assignment
+kernels).
+
+The multi-graph solvers and the kernels split the pairs of a collection into chunks
+(:func:`split_chunks`) and run one function per chunk (:func:`map_chunks`). The chunks are independent, so they can run in
 this process, on local processes, or on any ``concurrent.futures``-like executor, a
 ``dask.distributed.Client`` included; the results are the same whichever runs them.
 
@@ -62,9 +65,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .._progress import progress_bar
-from .._validation import check_int, check_positive
-from ..exceptions import ExecutorError
+from ._progress import progress_bar
+from ._validation import check_int, check_positive
+from .exceptions import ExecutorError
 
 __all__ = ["DEFAULT_TIMEOUT", "map_chunks", "split_chunks"]
 

@@ -33,11 +33,30 @@ def test_registered_and_builds_on_the_folder(sequence):
     exp = build(quick=True, data=sequence)
     (sw,) = exp.sweeps
     assert exp.name == "cmu" and tuple(sw.methods) == METHODS and len(METHODS) == 7
-    assert sw.base["data"] == str(sequence.resolve()) and sw.base["n_frames"] == 4
+    assert "data" not in sw.base and sw.base["n_frames"] == 4
+    assert exp.trial.keywords["data"] == str(sequence.resolve())
     assert sw.values == [1, 2]                       # 4 frames fit 7 positions apart at most 2
     full = build(data=sequence)
     assert full.trials >= 20 and full.sweeps[0].base["n_frames"] == N_FRAMES
     assert full.sweeps[0].values == [1]
+
+
+def test_stored_key_does_not_depend_on_the_folder(sequence, tmp_path):
+    """Moving the data folder keeps the configuration (and so the stored trials); changing the
+    landmarks changes it."""
+    import shutil
+
+    moved = tmp_path / "elsewhere"
+    shutil.copytree(sequence, moved)
+    a, b = build(quick=True, data=sequence), build(quick=True, data=moved)
+    assert a.sweeps[0].base == b.sweeps[0].base
+    label = next((moved / "label").iterdir())
+    label.write_text(label.read_text().replace("0", "1", 1))
+    c = build(quick=True, data=moved)
+    assert c.sweeps[0].base["fingerprint"] != a.sweeps[0].base["fingerprint"]
+    with pytest.raises(ValueError, match="not the one"):
+        a.trial.func(dict(a.sweeps[0].base, gap=1, method="GA"), np.random.default_rng(0),
+                     data=str(moved))
 
 
 def test_frame_gaps():
@@ -70,12 +89,12 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
 
 
 def test_trial_spreads_frames(sequence):
-    cfg = dict(data=str(sequence), sequence="toy", n_frames=4, gap=2, method="S-RRWM")
-    out = trial(cfg, np.random.default_rng(0))
+    cfg = dict(sequence="toy", n_frames=4, gap=2, method="S-RRWM")
+    out = trial(cfg, np.random.default_rng(0), data=str(sequence))
     assert out["first_frame"] in (0.0, 1.0)           # 4 frames 2 apart span 7 of 8 positions
     assert out["accuracy"] == 1.0 and out["consistency"] == pytest.approx(1.0)
     with pytest.raises(ValueError, match="need 10 frames"):
-        trial(dict(cfg, gap=3), np.random.default_rng(0))
+        trial(dict(cfg, gap=3), np.random.default_rng(0), data=str(sequence))
 
 
 def test_quick_run_through_the_cli(tmp_path, capsys):

@@ -22,6 +22,7 @@ the CMU layout (:func:`transync.datasets.load_cmu_sequence`); default
 from __future__ import annotations
 
 import functools
+import hashlib
 from pathlib import Path
 
 import numpy as np
@@ -61,11 +62,19 @@ def load_sequence(data=None):
             "set TRANSYNC_DATA to a folder holding `cmu-house`") from None
 
 
-def trial(config: dict, rng: np.random.Generator) -> dict:
-    """One draw of ``n_frames`` frames at ``gap`` apart, one method of :data:`METHODS`."""
+def trial(config: dict, rng: np.random.Generator, *, data: str) -> dict:
+    """One draw of ``n_frames`` frames at ``gap`` apart, one method of :data:`METHODS`.
+
+    ``data`` is the sequence's folder; it is bound by :func:`build` and is not part of the
+    stored configuration (which holds the sequence's content fingerprint instead), so moving
+    the data folder does not invalidate stored trials.
+    """
     from ..datasets import LANDMARK_AFFINITY
 
-    seq = _load(config["data"])
+    seq = _load(data)
+    if config.get("fingerprint") not in (None, sequence_fingerprint(seq)):
+        raise ValueError(f"the sequence in {data} is not the one this experiment was built on "
+                         "(its landmarks changed); rebuild the experiment")
     n, gap = int(config["n_frames"]), int(config["gap"])
     span = gap * (n - 1)
     if span > seq.n_frames - 1:
@@ -79,6 +88,13 @@ def trial(config: dict, rng: np.random.Generator) -> dict:
     out = collection_metrics(res, problem, affinity, seconds)
     out["first_frame"] = float(frames[0])
     return out
+
+
+def sequence_fingerprint(seq) -> str:
+    """A short hash of a sequence's landmarks and frame numbers (the stored trials' key)."""
+    h = hashlib.sha1(np.ascontiguousarray(seq.points, dtype=np.float64).tobytes())
+    h.update(np.ascontiguousarray(seq.frames, dtype=np.int64).tobytes())
+    return h.hexdigest()[:16]
 
 
 def frame_gaps(n_sequence: int, n_frames: int, *, count: int = 5) -> list[int]:
@@ -115,11 +131,12 @@ def build(*, quick: bool = False, data=None) -> Experiment:
         raise ValueError(f"the sequence in {path} has {seq.n_frames} frame(s); the cmu "
                          "experiment needs at least 2")
     gaps = frame_gaps(seq.n_frames, n_frames, count=count)
-    base = dict(data=path, sequence=seq.name, n_frames=n_frames)
+    base = dict(sequence=seq.name, fingerprint=sequence_fingerprint(seq), n_frames=n_frames)
     sweeps = [Sweep(name="gap", variable="gap", values=gaps, methods=METHODS, base=base,
                     metrics=METRICS,
                     xlabel=f"frame gap ({n_frames} frames of {seq.name!r})")]
-    return Experiment(name="cmu", sweeps=sweeps, trial=trial, trials=trials,
+    return Experiment(name="cmu", sweeps=sweeps, trial=functools.partial(trial, data=path),
+                      trials=trials,
                       description=f"{seq.name} ({seq.n_frames} frames, {seq.n_landmarks} "
                                   f"landmarks), {n_frames} frames per trial",
                       finish=functools.partial(finish, title=seq.name))

@@ -485,7 +485,9 @@ class MultiMatching:
         i, j = self._object(i, "i"), self._object(j, "j")
         return self._inverse()[j, self._padded[i, : self._sizes[i]]]   # slot -1 -> column -1
 
-    def _pairs(self, pairs) -> np.ndarray:
+    def check_pairs(self, pairs=None) -> np.ndarray:
+        """``pairs`` validated as a ``(P, 2)`` int array of object indices; ``None``: every
+        ``i < j``."""
         if pairs is None:
             return np.column_stack(np.triu_indices(self.n_objects, 1)).astype(np.int64)
         arr = check_array(pairs, "pairs", ndim=(1, 2))
@@ -502,13 +504,13 @@ class MultiMatching:
     def pairwise_array(self, pairs=None) -> np.ndarray:
         """Maps of many pairs at once: ``(P, n_max)`` int, row ``p`` the map ``i -> j`` of
         ``pairs[p] = (i, j)`` padded with -1 (default: every ``i < j``)."""
-        pairs = self._pairs(pairs)
+        pairs = self.check_pairs(pairs)
         inv = self._inverse()
         return inv[pairs[:, 1][:, None], self._padded[pairs[:, 0]]]
 
     def pairwise_dict(self, pairs=None) -> dict[tuple[int, int], np.ndarray]:
         """``{(i, j): pairwise(i, j)}`` for ``pairs`` (default: every ``i < j``)."""
-        pairs = self._pairs(pairs)
+        pairs = self.check_pairs(pairs)
         maps = self.pairwise_array(pairs)
         sizes = self.sizes
         return {(int(i), int(j)): maps[p, : sizes[i]].copy()
@@ -547,11 +549,11 @@ class MultiMatching:
         only it is given). Evaluated over every ``i < j`` or over the ``(P, 2)`` ``pairs``;
         1.0 when there is no correspondence to recover.
         """
-        pairs = self._pairs(pairs)
+        pairs = self.check_pairs(pairs)
         if pairs.shape[0] == 0:
             return 1.0
         if isinstance(other, Mapping):
-            pred = self._maps_from_mapping(other, pairs)
+            pred = self.maps_from(other, pairs)
         else:
             if not isinstance(other, MultiMatching) and isinstance(
                     getattr(other, "matching", None), MultiMatching):
@@ -573,7 +575,11 @@ class MultiMatching:
             hit += int((ok & (pred_v == true_v)).sum())
         return float(hit / tot) if tot else 1.0
 
-    def _maps_from_mapping(self, maps: Mapping, pairs: np.ndarray) -> np.ndarray:
+    def maps_from(self, maps: Mapping, pairs: np.ndarray) -> np.ndarray:
+        """Pairwise assignments ``{(i, j): assignment}`` (need not be consistent) as a
+        ``(P, n_max)`` array aligned with ``pairs`` (validated against this matching's sizes;
+        ``(j, i)`` used, inverted, when only it is given; a missing pair gives ``-1`` rows)."""
+        pairs = self.check_pairs(pairs)
         sizes = self.sizes
         n_max = int(sizes.max(initial=0))
         out = np.full((pairs.shape[0], n_max), UNMATCHED, dtype=np.int64)

@@ -561,6 +561,36 @@ def mean_se(values) -> tuple[float, float, int]:
             float(vals.std(ddof=1) / math.sqrt(n)) if n > 1 else 0.0, int(n))
 
 
+#: axis labels (with units) of the metrics the experiments report
+METRIC_LABELS = {
+    "accuracy": "accuracy (fraction of true matches)",
+    "objective": "affinity score / ground truth's\n(> 1: the solver beats the truth)",
+    "consistency": "output cycle consistency\n(fraction of consistent triangles)",
+    "input_consistency": "input cycle consistency\n(fraction of consistent triangles)",
+    "cycle_error": "cycle error\n(fraction of inconsistent triangles)",
+    "seconds": "time per trial (s)",
+    "time": "time (s)",
+    "mean_error": "mean corner error (px)",
+    "max_error": "max corner error (px)",
+    "acc_1px": "views with corner error < 1 px (fraction)",
+    "brenner_ratio": "Brenner focus of the mean warp\n(estimated / true homographies)",
+    "precision": "precision",
+    "recall": "recall",
+    "f1": "F1 score",
+    "error": "error",
+}
+
+def metric_label(metric: str, *, inline: bool = False) -> str:
+    """The axis label of ``metric`` (:data:`METRIC_LABELS`, else the name with spaces);
+    ``inline``: on one line (tables, headings).
+
+    >>> metric_label("seconds"), metric_label("n_iter")
+    ('time per trial (s)', 'n iter')
+    """
+    label = METRIC_LABELS.get(metric, metric.replace("_", " "))
+    return label.replace("\n", " ") if inline else label
+
+
 def value_label(value) -> str:
     """How a swept value is written in tables and tick labels (strings without JSON quotes)."""
     return value if isinstance(value, str) else json.dumps(value, default=str)
@@ -610,7 +640,8 @@ def _write_summary(rows: list[dict], out: Path) -> None:
         methods = list(dict.fromkeys(r["method"] for r in sub))
         values = list(dict.fromkeys(json.dumps(r["value"], default=str) for r in sub))
         for metric in metrics:
-            lines.append(f"\n### {sweep}: {metric} (mean ± s.e.)\n")
+            lines.append(f"\n### {sweep}: {metric_label(metric, inline=True)} — mean ± standard error "
+                         "over trials\n")
             lines.append("| " + sub[0]["variable"] + " | " + " | ".join(methods) + " |")
             lines.append("|" + "---|" * (len(methods) + 1))
             for v in values:
@@ -620,6 +651,7 @@ def _write_summary(rows: list[dict], out: Path) -> None:
                            and json.dumps(r["value"], default=str) == v]
                     r = hit[0] if hit else None
                     cells.append("—" if r is None or not r["n"]
+                                 else f"{r['mean']:.4g} (1 trial)" if r["n"] == 1
                                  else f"{r['mean']:.4g} ± {r['se']:.2g}")
                 lines.append(f"| {value_label(json.loads(v))} | " + " | ".join(cells) + " |")
     (out / "summary.md").write_text("\n".join(lines).lstrip() + "\n")

@@ -1,7 +1,10 @@
 """Evaluation metrics: one home for every measure the library reports.
 
-* Matchings (:mod:`._matching`): :func:`matching_accuracy`, :func:`matching_precision_recall`,
-  :func:`affinity_score`, :func:`cycle_inconsistency`, :func:`multimatching_accuracy`.
+* Matchings (:mod:`._matching`, :mod:`._multimatching`): :func:`matching_accuracy`,
+  :func:`matching_precision_recall`, :func:`affinity_score`, :func:`cycle_inconsistency`,
+  :func:`multimatching_accuracy`, :func:`multimatching_precision_recall`.
+* Constraint violations of multi-matchings (:mod:`._constraints`, ALGORITHMS.md §5):
+  :func:`constraint_violations` (CVR, CVVR, ACVV for capacity and transitivity).
 * Plane homographies (:mod:`._homography`): :func:`corner_error`, :func:`pairwise_corner_error`,
   :func:`corner_accuracy`, :func:`brenner_focus`, :func:`segmentation_scores`.
 
@@ -17,6 +20,7 @@ Examples
 {'precision': 0.25, 'recall': 0.333..., 'f1': 0.285...}
 """
 
+from ._constraints import ConstraintStats, ConstraintViolations, constraint_violations
 from ._homography import (
     brenner_focus,
     corner_accuracy,
@@ -31,16 +35,21 @@ from ._matching import (
     matching_precision_recall,
     multimatching_accuracy,
 )
+from ._multimatching import multimatching_precision_recall
 
 __all__ = [
+    "ConstraintStats",
+    "ConstraintViolations",
     "affinity_score",
     "brenner_focus",
+    "constraint_violations",
     "corner_accuracy",
     "corner_error",
     "cycle_inconsistency",
     "matching_accuracy",
     "matching_precision_recall",
     "multimatching_accuracy",
+    "multimatching_precision_recall",
     "pairwise_corner_error",
     "segmentation_scores",
 ]

@@ -1,0 +1,246 @@
+import itertools
+
+import numpy as np
+import pytest
+from scipy.optimize import linear_sum_assignment
+
+from transync.datasets import make_subgraph_collection
+from transync.metrics import (
+    ConstraintStats,
+    ConstraintViolations,
+    constraint_violations,
+)
+from transync.permutations import MultiMatching
+
+
+# ------------------------------------------------------------------ brute force reference
+def _stats(values, tol=1e-9):
+    g = np.asarray(values, dtype=float)
+    ex = g - 1
+    bad = ex > tol
+    return int(g.size), int(bad.sum()), float(ex[bad].sum()), float(np.abs(g).sum())
+
+
+def brute_force(blocks, sizes):
+    """``blocks[(i, j)]`` dense (n_i, n_j) for i < j (missing = unobserved): plain loops."""
+    def get(a, b):
+        if (a, b) in blocks:
+            return blocks[(a, b)]
+        if (b, a) in blocks:
+            return blocks[(b, a)].T
+        return None
+    cap = []
+    for (i, j), M in blocks.items():
+        cap += list(M.sum(1)) + list(M.sum(0))
+    trans = []
+    N = len(sizes)
+    for i, j, k in itertools.permutations(range(N), 3):
+        if i > k:
+            continue
+        A, B, C = get(i, j), get(j, k), get(i, k)
+        if A is None or B is None or C is None:
+            continue
+        for u in range(sizes[i]):
+            for v in range(sizes[j]):
+                for w in range(sizes[k]):
+                    trans.append(A[u, v] + B[v, w] - C[u, w])
+    return _stats(cap), _stats(trans)
+
+
+def _check_against(result, ref):
+    (c_n, c_bad, c_v, c_m), (t_n, t_bad, t_v, t_m) = ref
+    cap, tr = result.capacity, result.transitivity
+    assert (cap.n_constraints, cap.n_violated) == (c_n, c_bad)
+    np.testing.assert_allclose([cap.violation, cap.magnitude], [c_v, c_m], rtol=1e-12, atol=1e-9)
+    assert (tr.n_constraints, tr.n_evaluated, tr.n_violated) == (t_n, t_n, t_bad)
+    np.testing.assert_allclose([tr.violation, tr.magnitude], [t_v, t_m], rtol=1e-12, atol=1e-9)
+
+
+def _random_assignment(rng, n1, n2, p_match=0.8):
+    perm = rng.permutation(n2)[:n1] if n2 >= n1 else np.concatenate(
+        [rng.permutation(n2), np.full(n1 - n2, -1)])
+    a = np.where(rng.random(n1) < p_match, perm, -1)
+    return rng.permutation(a)
+
+
+def _to_matrix(a, n2):
+    M = np.zeros((a.size, n2))
+    u = np.flatnonzero(a >= 0)
+    M[u, a[u]] = 1
+    return M
+
+
+SIZES = [3, 1, 4, 2, 3]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_partial_permutations_match_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    X, blocks = {}, {}
+    for i, j in itertools.combinations(range(5), 2):
+        if (i, j) == (1, 3):
+            continue                                  # one unobserved pair
+        a = _random_assignment(rng, SIZES[i], SIZES[j])
+        blocks[(i, j)] = _to_matrix(a, SIZES[j])
+        if (i + j) % 2:                               # some given in the other direction
+            X[(j, i)] = np.array([np.flatnonzero(r)[0] if r.any() else -1
+                                  for r in blocks[(i, j)].T])
+        else:
+            X[(i, j)] = a
+    r = constraint_violations(X, sizes=SIZES)
+    assert r.info["transitivity_mode"] == "exact" and r.info["input"] == "pairwise"
+    _check_against(r, brute_force(blocks, SIZES))
+    # the same blocks as 0/1 matrices give the same numbers
+    r2 = constraint_violations({k: blocks[k] for k in blocks})
+    _check_against(r2, brute_force(blocks, SIZES))
+
+
+@pytest.mark.parametrize("kind", ["soft", "binary"])
+def test_dense_blocks_match_brute_force(kind, rng):
+    blocks = {}
+    for i, j in itertools.combinations(range(5), 2):
+        M = rng.random((SIZES[i], SIZES[j]))
+        blocks[(i, j)] = (M / M.sum(1, keepdims=True)) if kind == "soft" else (M > 0.6) * 1.0
+    if kind == "binary":
+        blocks[(0, 2)] = np.ones((3, 4))                      # certainly not injective
+    r = constraint_violations(blocks)
+    assert r.info["transitivity_mode"] == "exhaustive"
+    ref = brute_force(blocks, SIZES)
+    _check_against(r, ref)
+    assert ref[1][1] > 0 and r.transitivity.cvr == ref[1][1] / ref[1][0]
+
+
+def test_absolute_soft_maps_match_brute_force(rng):
+    d = 4
+    maps = [rng.dirichlet(np.ones(d), size=n) for n in SIZES]
+    blocks = {(i, j): maps[i] @ maps[j].T for i, j in itertools.combinations(range(5), 2)}
+    r = constraint_violations(maps)
+    assert r.info["input"] == "absolute"
+    _, trans = brute_force(blocks, SIZES)
+    cols = np.concatenate([m.sum(0) for m in maps])
+    _check_against(r, (_stats(cols), trans))
+    assert r.capacity.n_constraints == 5 * d
+
+
+def test_consistent_multimatching_has_no_violation():
+    c = make_subgraph_collection(n_graphs=6, n_universe=9, p_keep=(0.5, 1.0), n_outliers=1,
+                                 rng=0)
+    gt = c.ground_truth
+    onehot = [np.eye(gt.n_universe)[lab] * (lab >= 0)[:, None] for lab in gt.labels]
+    for X in (gt, gt.pairwise_dict(), onehot, {k: _to_matrix(a, c.sizes[k[1]])
+                                                for k, a in gt.pairwise_dict().items()}):
+        kw = dict(sizes=c.sizes) if isinstance(X, dict) else {}
+        r = constraint_violations(X, **kw)
+        assert r.capacity.cvr == 0.0 and r.transitivity.cvr == 0.0
+        assert r.capacity.cvvr == r.capacity.acvv == r.transitivity.cvvr == 0.0
+        assert r.transitivity.n_constraints > 0 and r.transitivity.magnitude > 0
+    assert r.info["transitivity_mode"] == "exact"
+
+
+def _noisy_soft(c, noise, rng):
+    """Truth blocks plus uniform noise, row-normalized (pairs i < j)."""
+    gt = c.ground_truth
+    out = {}
+    for (i, j), a in gt.pairwise_dict().items():
+        M = _to_matrix(a, c.sizes[j]) + noise * rng.random((c.sizes[i], c.sizes[j]))
+        out[(i, j)] = M
+    return out
+
+
+def test_independent_pairwise_rounding_violates_transitivity_only(rng):
+    c = make_subgraph_collection(n_graphs=6, n_universe=10, p_keep=1.0, rng=1)
+    soft = _noisy_soft(c, 1.5, rng)
+    rounded = {}
+    for key, M in soft.items():
+        r_, c_ = linear_sum_assignment(M, maximize=True)
+        a = np.full(M.shape[0], -1)
+        a[r_] = c_
+        rounded[key] = a
+    r = constraint_violations(rounded, sizes=c.sizes)
+    assert r.capacity.cvr == 0.0
+    assert r.transitivity.cvr > 0 and r.transitivity.acvv == 1.0
+    assert r.transitivity.cvvr > 0
+
+
+def test_row_argmax_rounding_violates_capacity_only(rng):
+    c = make_subgraph_collection(n_graphs=5, n_universe=10, p_keep=1.0, rng=2)
+    d = c.n_universe
+    maps = []
+    for lab in c.labels:
+        soft = np.eye(d)[lab] + 1.5 * rng.random((lab.size, d))
+        maps.append(np.eye(d)[np.argmax(soft, 1)])
+    r = constraint_violations(maps)
+    assert r.capacity.cvr > 0 and r.capacity.acvv >= 1.0
+    assert r.transitivity.cvr == 0.0          # node -> slot functions are always transitive
+
+
+def test_sampled_estimate_is_close_to_exhaustive():
+    rng = np.random.default_rng(5)
+    c = make_subgraph_collection(n_graphs=8, n_universe=12, p_keep=(0.6, 1.0), rng=3)
+    soft = _noisy_soft(c, 0.6, rng)
+    full = constraint_violations(soft, sizes=c.sizes)
+    assert full.info["transitivity_mode"] == "exhaustive"
+    samp = constraint_violations(soft, sizes=c.sizes, max_triples=40_000, rng=0)
+    assert samp.info["transitivity_mode"] == "sampled" and samp.transitivity.sampled
+    assert samp.transitivity.n_constraints == full.transitivity.n_constraints
+    assert samp.transitivity.n_evaluated == 40_000
+    p = full.transitivity.cvr
+    assert 0.01 < p < 0.5
+    assert abs(samp.transitivity.cvr - p) < 4 * np.sqrt(p * (1 - p) / 40_000)
+    np.testing.assert_allclose(samp.transitivity.cvvr, full.transitivity.cvvr, rtol=0.1)
+    np.testing.assert_allclose(samp.transitivity.acvv, full.transitivity.acvv, rtol=0.1)
+    again = constraint_violations(soft, sizes=c.sizes, max_triples=40_000, rng=0)
+    assert again == samp
+    # capacity is never sampled
+    assert samp.capacity == full.capacity
+
+
+def test_runs_at_n32_n40(rng):
+    """Issue #11: N = 32, n = 40 in seconds (soft input is sampled, discrete input is exact)."""
+    c = make_subgraph_collection(n_graphs=32, n_universe=40, p_keep=1.0, rng=0)
+    soft = _noisy_soft(c, 0.3, rng)
+    r = constraint_violations(soft, max_triples=200_000, rng=0)
+    assert r.info["transitivity_mode"] == "sampled" and r.info["n_object_triples"] == 14880
+    assert r.transitivity.n_constraints == 14880 * 40 ** 3
+    exact = constraint_violations(c.ground_truth.pairwise_dict(), sizes=c.sizes)
+    assert exact.info["transitivity_mode"] == "exact" and exact.transitivity.cvr == 0.0
+    assert exact.transitivity.n_evaluated == 14880 * 40 ** 3
+
+
+def test_result_objects():
+    m = MultiMatching([np.array([0, 1]), np.array([1, 0]), np.array([0])])
+    r = constraint_violations(m)
+    assert isinstance(r, ConstraintViolations) and isinstance(r.capacity, ConstraintStats)
+    row = r.as_dict()
+    assert row["capacity_cvr"] == 0.0 and row["transitivity_constraints"] == 3 * 4
+    with pytest.raises(AttributeError):
+        r.capacity.n_violated = 3                    # frozen
+
+
+def test_one_node_graphs_and_single_pair():
+    r = constraint_violations({(0, 1): np.array([0])}, sizes=[1, 1])
+    assert r.capacity.n_constraints == 2 and r.transitivity.n_constraints == 0
+    assert r.transitivity.cvr == 0.0
+
+
+@pytest.mark.parametrize("X, kw, exc, match", [
+    ({(0, 0): np.array([0])}, {}, ValueError, "keys"),
+    ({(0, -1): np.array([0])}, {}, ValueError, "keys"),
+    ({"ab": np.array([0])}, {}, ValueError, "keys"),
+    ({(0, 1): np.array([0, 0])}, {}, ValueError, "injective"),
+    ({(0, 1): np.zeros((2, 3)), (1, 2): np.zeros((2, 2))}, {}, ValueError, "object 1"),
+    ({(0, 1): np.array([0, 1])}, dict(sizes=[3, 2]), ValueError, "implies 2 nodes"),
+    ({(0, 1): np.array([0, 3])}, dict(sizes=[2, 2]), ValueError, "n2"),
+    ({(0, 1): np.array([0, 1]), (2, 0): np.array([0, 1])}, dict(sizes=[2, 2]), ValueError,
+     "sizes"),
+    ({(0, 1): np.full((2, 2), np.nan)}, {}, ValueError, "finite"),
+    ([np.ones((2, 3)), np.ones((2, 4))], {}, ValueError, "columns"),
+    ([np.ones((2, 3))], dict(sizes=[2]), TypeError, "sizes"),
+    ([], {}, ValueError, "at least one"),
+    (3.0, {}, TypeError, "`X`"),
+    ({(0, 1): np.array([0])}, dict(max_triples=0), ValueError, "max_triples"),
+    ({(0, 1): np.array([0])}, dict(tol=-1.0), ValueError, "tol"),
+])
+def test_bad_input(X, kw, exc, match):
+    with pytest.raises(exc, match=match):
+        constraint_violations(X, **kw)

@@ -33,6 +33,11 @@ _LAZY = {
     "LandmarkSequence": "._cmu",
     "load_cmu_sequence": "._cmu",
     "load_willow_class": "._willow",
+    "TUDataset": "._tu",
+    "list_tu": "._tu",
+    "load_tu": "._tu",
+    "SubgraphCollectionProblem": "._subgraphs",
+    "make_subgraph_collection": "._subgraphs",
 }
 
 __all__ = [

@@ -1,3 +1,4 @@
+import argparse
 import json
 import subprocess
 import sys
@@ -6,7 +7,7 @@ import types
 import numpy as np
 import pytest
 
-from transync.cli import main
+from transync.cli import build_parser, main
 from transync.datasets import make_permutation_collection, make_point_matching_problem
 from transync.metrics import matching_accuracy
 
@@ -132,7 +133,7 @@ def bad_inputs(tmp_path):
     (["sync", "{d}/broken.json"], r"broken\.json, line 3: not valid JSON"),
     (["sync", "{d}/badpair.json"], r"badpair\.json: pairs\[0\] must be \[i, j, map\]"),
     (["demo", "--experiments", "foo", "--out", "{d}/demo"],
-     r"unknown experiment 'foo'; choose from cmu, homography, multigraph, pairwise, sync"),
+     r"unknown experiment 'foo'; choose from cmu, homography, kernels, multigraph, pairwise, sync"),
     (["experiment", "nope"], r"unknown experiment 'nope'; choose from"),
     (["match", "{d}/empty.txt", "{d}/p2.txt"], r"empty\.txt: no points found"),
     (["match", "{d}/header.csv", "{d}/p2.txt"],
@@ -312,3 +313,37 @@ def test_sync_command_takes_matrices_like_the_library(tmp_path):
         assert main(["sync", str(src), "--out", str(out)]) == 0
         outs.append(json.loads(out.read_text())["labels"])
     assert outs[0] == outs[1]
+
+
+def test_cli_defaults_and_choices_are_the_librarys():
+    """One default per concept: the parser (built without importing the library) agrees with
+    the library's own defaults and choices."""
+    import inspect
+
+    from transync.cli import _match
+    from transync.matching import DEFAULT_SIGMA2, match_graphs
+    from transync.synchronization import _permutations
+
+    assert _match.DEFAULT_SIGMA2 == DEFAULT_SIGMA2
+    assert inspect.signature(match_graphs).parameters["sigma2"].default == DEFAULT_SIGMA2
+    assert _match.SYNC_METHODS == _permutations._METHODS
+    parser = build_parser()
+    args = parser.parse_args(["match", "a.txt", "b.txt"])
+    assert args.sigma2 == DEFAULT_SIGMA2
+
+
+@pytest.mark.parametrize("command", ["demo", "experiment", "match", "sync", "homography",
+                                     "kernel", "datasets"])
+def test_every_option_has_help_and_shows_its_default(command):
+    sub = next(a for a in build_parser()._actions
+               if isinstance(a, argparse._SubParsersAction)).choices[command]
+    text = sub.format_help()
+    for action in sub._actions:
+        if action.help == argparse.SUPPRESS or not action.option_strings or action.dest == "help":
+            continue
+        assert action.help, f"{command} {action.option_strings[0]} has no help"
+        if action.default not in (None, False):
+            assert "default" in sub._get_formatter()._get_help_string(action), \
+                f"{command} {action.option_strings[0]} does not show its default"
+        if action.choices:
+            assert "{" + ",".join(map(str, action.choices)) + "}" in text

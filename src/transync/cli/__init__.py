@@ -1,4 +1,5 @@
-"""Command-line interface: ``transync demo | experiment | match | sync | homography | datasets``.
+"""Command-line interface: ``transync demo | experiment | match | sync | homography | kernel |
+datasets``.
 
 The CLI holds no logic of its own: every subcommand parses arguments, calls the library through
 its public names and writes plain files (JSON, CSV, PNG) that other tools can read. Heavy
@@ -23,8 +24,37 @@ from ._common import CLIError
 __all__ = ["CLIError", "build_parser", "main"]
 
 
+_DESCRIPTION = """\
+transync: consistent correspondences and transformations from many noisy pairwise ones.
+
+Run `transync COMMAND --help` for a command's options (each shows its default)."""
+
+_EPILOG = """\
+exit status: 0 success; 2 an error (one line on stderr: `transync: error: ...`; --debug shows
+the traceback); 130 interrupted (Ctrl-C; stored experiment trials are kept, rerun to resume)."""
+
+
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Keeps the description's line breaks; appends ``(default: X)`` to every option that has
+    a default worth saying (not None/False, not already in its help)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        default = action.default
+        if (default not in (None, False, argparse.SUPPRESS) and "default" not in text
+                and action.option_strings):
+            shown = " ".join(map(str, default)) if isinstance(default, (list, tuple)) else default
+            text = f"{text} (default: {shown})" if text else f"default: {shown}"
+        return text
+
+
 class _Parser(argparse.ArgumentParser):
-    """Usage errors as one line too: ``transync: error: ... (see `transync CMD --help`)``."""
+    """Usage errors as one line too: ``transync: error: ... (see `transync CMD --help`)``;
+    every subcommand's help shows its defaults."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", _HelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message):
         self.exit(2, f"transync: error: {message} (see `{self.prog} --help`)\n")
@@ -33,16 +63,17 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     """The ``argparse`` parser of every subcommand (each sets ``func``)."""
     from .. import __version__
-    from . import _datasets, _experiment, _homography, _match
+    from . import _datasets, _experiment, _homography, _kernel, _match
 
-    parser = _Parser(prog="transync", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="transync", description=_DESCRIPTION, epilog=_EPILOG)
     parser.add_argument("--version", action="version", version=f"transync {__version__}")
     parser.add_argument("--debug", action="store_true",
                         help="show the full traceback of an error (any position)")
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _experiment.add_parsers(sub)
     _match.add_parsers(sub)
     _homography.add_parser(sub)
+    _kernel.add_parser(sub)
     _datasets.add_parser(sub)
     return parser
 

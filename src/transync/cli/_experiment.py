@@ -120,24 +120,30 @@ def _headline(summary: list[dict]) -> str:
 def add_parsers(sub) -> None:
     """Register ``demo`` and ``experiment``."""
     p = sub.add_parser("demo", help="run quick experiments on generated data (offline)")
-    p.add_argument("--out", default="transync-demo", help="output folder (default: transync-demo)")
-    p.add_argument("--workers", type=positive_int, default=1)
+    p.add_argument("--out", default="transync-demo", help="output folder")
+    p.add_argument("--workers", type=positive_int, default=1,
+                   help="worker processes for the trials (1 = in this process)")
     p.add_argument("--experiments", nargs="+", default=["pairwise", "sync", "homography"],
                    help="which quick experiments to run (see `transync experiment --list`)")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("experiment", help="run (or resume) a thesis experiment")
     p.add_argument("name", nargs="?", help="experiment name (see --list)")
     p.add_argument("--list", action="store_true", help="list the experiments")
-    p.add_argument("--quick", action="store_true", help="small version (about a minute)")
+    p.add_argument("--quick", action="store_true",
+                   help="small version (about a minute; what `transync demo` runs)")
     p.add_argument("--out", help="output folder (default: results/NAME)")
     p.add_argument("--data", metavar="PATH",
                    help="data folder of the experiments on real data (cmu: any folder in the "
                         "CMU layout; default: TRANSYNC_DATA's cmu-house)")
-    p.add_argument("--trials", type=positive_int, help="trials per configuration")
-    p.add_argument("--workers", type=positive_int, default=1, help="processes")
+    p.add_argument("--trials", type=positive_int,
+                   help="trials per configuration (default: the experiment's own, 20 for the "
+                        "full thesis experiments; fewer than stored: only those are reported)")
+    p.add_argument("--workers", type=positive_int, default=1,
+                   help="worker processes for the trials (1 = in this process)")
     p.add_argument("--seed", type=int, default=0,
-                   help="changes every trial's random problem (stored apart from other seeds)")
-    p.add_argument("--no-progress", action="store_true")
+                   help="base seed of every trial's random problem (stored apart from other "
+                        "seeds: a new seed adds trials, it never overwrites)")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     p.set_defaults(func=_cmd_experiment)

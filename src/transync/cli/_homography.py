@@ -134,19 +134,23 @@ def add_parser(sub) -> None:
     p = sub.add_parser(
         "homography", help="homographies of the dominant plane across images, with plane masks")
     p.add_argument("images", nargs="+", metavar="IMAGE", help="image files (2 or more)")
-    p.add_argument("--reference", type=int, default=0, help="reference image index (default 0)")
+    p.add_argument("--reference", type=int, default=0,
+                   help="index of the reference image (its plane defines the homographies)")
     p.add_argument("--out", default="transync-homography",
                    help="output folder (created only when the run succeeds)")
     p.add_argument("--no-dense", action="store_true", help="skip the dense photometric step")
     p.add_argument("--no-segment", action="store_true", help="skip the plane segmentation")
-    p.add_argument("--method", default="ransac", choices=RANSAC)
+    p.add_argument("--method", default="ransac", choices=RANSAC,
+                   help="robust estimator of the pairwise homographies (OpenCV's)")
     p.add_argument("--threshold", type=positive_float, default=3.0,
                    help="RANSAC threshold (pixels)")
     p.add_argument("--features", type=positive_int, default=2000, help="SIFT features per image")
     p.add_argument("--max-iter", type=positive_int, default=3, help="segmentation + dense rounds")
-    p.add_argument("--dense-target", default="auto", choices=["auto", "mean", "reference"])
+    p.add_argument("--dense-target", default="auto", choices=["auto", "mean", "reference"],
+                   help="what the dense step aligns each view to: the mean of the warped views, "
+                        "the reference image, or auto (the mean from 4 views on)")
     p.add_argument("--seed", type=int, default=0,
-                   help="seed of the random stages (RANSAC, segmentation); same seed, same answer "
-                        "(default 0)")
+                   help="seed of the random stages (RANSAC, segmentation); same seed, same "
+                        "answer")
     p.add_argument("--verbose", action="store_true", help="progress bar and stage log on stderr")
     p.set_defaults(func=_cmd_homography)

@@ -12,6 +12,11 @@ __all__ = ["add_parsers", "read_points"]
 
 METHODS = ("hungarian", "sinkhorn", "sm", "rrwm", "ipfp", "ga", "pf")
 LINEAR = ("hungarian", "sinkhorn")
+#: ``synchronize_permutations``'s methods (kept in step by tests/cli)
+SYNC_METHODS = ("spectral", "orthogonal", "matcheig")
+#: ``gaussian_edge_affinity``'s default width (kept in step by tests/cli; the CLI does not import
+#: the library to build its parser)
+DEFAULT_SIGMA2 = 0.15
 
 
 def read_points(path):
@@ -189,21 +194,29 @@ def _cmd_sync(args) -> int:
 def add_parsers(sub) -> None:
     """Register ``match`` and ``sync``."""
     p = sub.add_parser("match", help="match two point sets (.npy, .txt or .csv, one point a row)")
-    p.add_argument("points1")
-    p.add_argument("points2")
+    p.add_argument("points1", help="first point set: .npy, or .txt/.csv with one point (x y [z]) "
+                                    "a row; a header line is skipped")
+    p.add_argument("points2", help="second point set, same format and dimension")
     p.add_argument("--method", default="rrwm", choices=list(METHODS),
                    help="solver; hungarian and sinkhorn use the linearized edge affinity as "
                         "their unary term")
-    p.add_argument("--edges", default="full", choices=["full", "delaunay", "knn"])
-    p.add_argument("--sigma2", type=positive_float, default=0.05,
-                   help="Gaussian edge-length kernel width after scaling points to unit size")
+    p.add_argument("--edges", default="full", choices=["full", "delaunay", "knn"],
+                   help="graph built on each point set: complete, Delaunay triangulation, or "
+                        "k nearest neighbours")
+    p.add_argument("--sigma2", type=positive_float, default=DEFAULT_SIGMA2,
+                   help="width of the Gaussian edge-length affinity exp(-(d1 - d2)^2 / sigma2), "
+                        "after scaling both point sets to unit size (the library's default)")
     p.add_argument("--out", help="JSON output file (default: print)")
     p.set_defaults(func=_cmd_match)
 
     p = sub.add_parser("sync", help="synchronize pairwise assignments given as JSON "
                                     "{\"pairs\": [[i, j, assignment], ...]}")
-    p.add_argument("pairwise")
-    p.add_argument("--method", default="spectral")
-    p.add_argument("--n-universe", type=positive_int, default=None)
+    p.add_argument("pairwise", help="JSON file {\"pairs\": [[i, j, assignment], ...]} "
+                                    "(assignment[u] = v, -1 unmatched) or 0/1 matrices")
+    p.add_argument("--method", default="spectral", choices=list(SYNC_METHODS),
+                   help="permutation synchronization method (transync.synchronize_permutations)")
+    p.add_argument("--n-universe", type=positive_int, default=None,
+                   help="size of the universe of nodes (default: estimated from the spectrum; "
+                        "the number of nodes when every object has the same size)")
     p.add_argument("--out", help="JSON output file (default: print)")
     p.set_defaults(func=_cmd_sync)

@@ -1,6 +1,7 @@
 """Pairwise graph matching: affinities and solvers behind ``match_graphs``."""
 
 from ._affinity import (
+    DEFAULT_SIGMA2,
     Affinity,
     DenseAffinity,
     FactorizedAffinity,
@@ -24,6 +25,7 @@ from ._sm import SMStepper, sm
 from ._stepwise import Stepper
 
 __all__ = [
+    "DEFAULT_SIGMA2",
     "Affinity",
     "DenseAffinity",
     "FactorizedAffinity",

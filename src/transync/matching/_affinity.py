@@ -48,6 +48,7 @@ from ..exceptions import DegenerateInputError
 from ..graphs import Graph
 
 __all__ = [
+    "DEFAULT_SIGMA2",
     "Affinity",
     "DenseAffinity",
     "FactorizedAffinity",
@@ -435,6 +436,12 @@ def gaussian_node_affinity(g1: Graph, g2: Graph, *, sigma2: float = 1.0,
     return np.exp(-d2 / sigma2)
 
 
+#: Default width ``sigma2`` of the Gaussian edge affinity ``exp(-(d1 - d2)^2 / sigma2)`` (Cho et
+#: al.'s 0.15; ALGORITHMS.md section 6): the one default of :func:`gaussian_edge_affinity`,
+#: :func:`gaussian_edge_factors`, :func:`~transync.matching.match_graphs`,
+#: :func:`~transync.match_collection` and ``transync match --sigma2``.
+DEFAULT_SIGMA2 = 0.15
+
 # exp(-t) for t above this is below 1e-300: the Gaussian kernel has underflowed
 _UNDERFLOW = 690.0
 
@@ -484,7 +491,7 @@ def _edge_attributes(g: Graph, attribute: str, name: str) -> list[np.ndarray]:
     return [D] if attribute == "length" else [D, g.angles()]
 
 
-def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = 0.15,
+def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = DEFAULT_SIGMA2,
                            attribute: str | None = None, angle_weight: float = 0.1,
                            node_affinity=None, backend: str = "auto",
                            tol: float = 1e-10) -> Affinity:
@@ -703,7 +710,7 @@ class GaussianEdgeFactors:
         return int(self.F.shape[1])
 
 
-def gaussian_edge_factors(graphs, *, sigma2: float = 0.15, attribute: str | None = None,
+def gaussian_edge_factors(graphs, *, sigma2: float = DEFAULT_SIGMA2, attribute: str | None = None,
                           tol: float = 1e-10, pairs=None):
     """Per-graph separable factors of :func:`~transync.matching.gaussian_edge_affinity`.
 

@@ -21,7 +21,12 @@ import inspect
 from ..graphs import Graph
 from .._validation import check_choice, check_positive
 from ..exceptions import DegenerateInputError
-from ._affinity import as_affinity, gaussian_edge_affinity, gaussian_node_affinity
+from ._affinity import (
+    DEFAULT_SIGMA2,
+    as_affinity,
+    gaussian_edge_affinity,
+    gaussian_node_affinity,
+)
 from ._ga import ga
 from ._ipfp import ipfp
 from ._linear import hungarian, sinkhorn
@@ -71,7 +76,7 @@ def _check_options(method: str, options: dict) -> None:
 
 
 def match_graphs(g1: Graph, g2: Graph, *, method: str = "rrwm", affinity=None,
-                 sigma2: float = 0.15, node_affinity=None, **options) -> MatchingResult:
+                 sigma2: float = DEFAULT_SIGMA2, node_affinity=None, **options) -> MatchingResult:
     """Match two graphs.
 
     Parameters

@@ -238,7 +238,7 @@ def scene():
     return make_planar_scene(5, image_size=(320, 240), difficulty="moderate", rng=0)
 
 
-def test_cli_homography(tmp_path, scene):
+def test_cli_homography(tmp_path, scene, capsys):
     import cv2
 
     from transync.metrics import corner_error
@@ -257,6 +257,13 @@ def test_cli_homography(tmp_path, scene):
     assert corner_error(H, scene.homographies[:4], image_size=(320, 240)).max() < 0.5
     assert len(list((out / "masks").glob("*.png"))) == 4
     assert (out / "mean_warped.png").exists() and (out / "report.md").exists()
+    report = (out / "report.md").read_text()
+    assert "dense refinement: on; view updates over 1 round(s): accepted" in report
+    assert "views linked to the reference: all" in report and "black where no" in report
+    assert "transync homography: sparse pairs" in capsys.readouterr().err    # progress shown
+    assert main(["homography", *paths[:2], "--out", str(tmp_path / "quiet"), "--features", "800",
+                 "--max-iter", "1", "--no-progress"]) == 0
+    assert capsys.readouterr().err == ""
 
 
 def test_cli_homography_failures_leave_no_output_folder(tmp_path, capsys):
@@ -347,3 +354,17 @@ def test_every_option_has_help_and_shows_its_default(command):
                 f"{command} {action.option_strings[0]} does not show its default"
         if action.choices:
             assert "{" + ",".join(map(str, action.choices)) + "}" in text
+
+
+def test_homography_report_says_when_every_dense_update_was_rejected():
+    from transync.cli._homography import _dense_line, _views_line
+
+    hist = [{"dense_views": {1: {"status": "rejected_sparse"}, 2: {"status": "diverged"}}}]
+    res = types.SimpleNamespace(info={"history": hist}, n_iter=1,
+                                homographies=np.stack([np.eye(3), np.full((3, 3), np.nan)]))
+    on = types.SimpleNamespace(no_dense=False)
+    line = _dense_line(res, on)
+    assert "every dense update was rejected" in line and "sparse estimate" in line
+    assert "diverged 1" in line and "rejected sparse 1" in line
+    assert "off" in _dense_line(res, types.SimpleNamespace(no_dense=True))
+    assert "b.png" in _views_line(res, ["a.png", "b.png"])

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+import contextlib
 import json
 import time
 from pathlib import Path
@@ -30,6 +32,29 @@ def _check_images(paths) -> None:
             raise CLIError(f"{path}: not an image format OpenCV can read")
 
 
+@contextlib.contextmanager
+def _stage_log(enabled: bool):
+    """Progress on stderr while the pipeline runs: one line per stage (sparse pairs, each
+    dense round); the pipeline adds a bar over the rounds."""
+    if not enabled:
+        yield
+        return
+    import logging
+    import sys
+
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("transync homography: %(message)s"))
+    log = logging.getLogger("transync.homography")
+    level = log.level
+    log.addHandler(handler)
+    log.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        log.removeHandler(handler)
+        log.setLevel(level)
+
+
 def _estimate(args):
     from ..exceptions import DegenerateInputError
     from ..homography import estimate_plane_homographies
@@ -38,13 +63,10 @@ def _estimate(args):
                    segment=not args.no_segment, method=args.method, threshold=args.threshold,
                    n_features=args.features, max_iter=args.max_iter,
                    dense_target=args.dense_target, rng=args.seed)
-    if args.verbose:
-        import logging
-
-        logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s")
-        options["verbose"] = True
     try:
-        return estimate_plane_homographies(list(args.images), **options)
+        with _stage_log(enabled=not args.no_progress):
+            return estimate_plane_homographies(list(args.images), verbose=not args.no_progress,
+                                               **options)
     except DegenerateInputError as exc:
         raise CLIError(f"the {len(args.images)} images could not be related: {exc}") from exc
     except (ValueError, TypeError) as exc:
@@ -104,9 +126,10 @@ def _write_outputs(out: Path, res, payload: dict, args, names, seconds) -> list[
         f"- pairs estimated: {int(res.pairwise.mask.sum() // 2)}, failed: "
         f"{len(res.pairwise.failed)}, rejected by robust synchronization: "
         f"{int((sync.mask & ~sync.inliers).sum() // 2)}",
-        f"- dense refinement: {'off' if args.no_dense else 'on'}, segmentation: "
-        f"{'off' if args.no_segment else 'on'}, rounds: {res.n_iter}, converged: "
-        f"{res.converged}",
+        _dense_line(res, args),
+        f"- segmentation: {'off' if args.no_segment else 'on'}, rounds: {res.n_iter}, "
+        f"converged: {res.converged}",
+        _views_line(res, names),
         f"- plane fraction per view: "
         f"{', '.join(f'{m.mean():.2f}' for m in res.masks)}",
         f"- time: {seconds:.1f} s "
@@ -116,10 +139,48 @@ def _write_outputs(out: Path, res, payload: dict, args, names, seconds) -> list[
     for h in res.info["history"]:
         lines.append(f"| {h['iteration']} | {h['max_corner_change']:.4f} | "
                      f"{h['plane_fraction']:.3f} |")
-    lines += ["", "Files: `homographies.json`, `masks/mask_NNN.png` (255 = plane), "
-              "`mean_warped.png`."]
+    lines += ["", "Files:", "",
+              "- `homographies.json`: `homographies[i]` maps pixel (x, y, 1) of image i into the "
+              "reference image (null for views that could not be linked); "
+              "`sparse_homographies`: the synchronized feature-based estimate before the dense "
+              "step; `failed_pairs`; per-round `history`.",
+              "- `masks/mask_NNN.png`: the plane mask of image NNN in its own pixels "
+              "(255 = on the dominant plane).",
+              "- `mean_warped.png`: the mean of all images warped into the reference frame, on "
+              "a canvas extending the reference image by the canvas margin on every side. "
+              "Sharp where the homographies agree, blurred where they do not; black where no "
+              "warped image covers the canvas (outside every view's footprint)."]
     (out / "report.md").write_text("\n".join(lines) + "\n")
     return lines
+
+
+def _dense_line(res, args) -> str:
+    """What the dense step did: updates accepted / rejected / diverged over the rounds."""
+    if args.no_dense:
+        return "- dense refinement: off (--no-dense): the homographies are the sparse estimate"
+    counts: dict[str, int] = {}
+    for h in res.info.get("history", []):
+        for rec in h.get("dense_views", {}).values():
+            counts[rec["status"]] = counts.get(rec["status"], 0) + 1
+    total = sum(counts.values())
+    accepted = counts.get("accepted", 0)
+    detail = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in sorted(counts.items()))
+    if total == 0:
+        return "- dense refinement: on, but no view was refined (no round ran)"
+    if accepted == 0:
+        return (f"- dense refinement: on, but every dense update was rejected ({detail}): the "
+                "homographies are the sparse estimate")
+    return f"- dense refinement: on; view updates over {res.n_iter} round(s): {detail}"
+
+
+def _views_line(res, names) -> str:
+    import numpy as np
+
+    lost = [names[k] for k, H in enumerate(res.homographies) if not np.all(np.isfinite(H))]
+    if not lost:
+        return "- views linked to the reference: all"
+    return (f"- views that could not be linked to the reference (no homography, empty mask): "
+            f"{', '.join(lost)}")
 
 
 def _imwrite(path: Path, image) -> None:
@@ -152,5 +213,7 @@ def add_parser(sub) -> None:
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the random stages (RANSAC, segmentation); same seed, same "
                         "answer")
-    p.add_argument("--verbose", action="store_true", help="progress bar and stage log on stderr")
+    p.add_argument("--no-progress", action="store_true",
+                   help="hide the stage log and the progress bar (shown on stderr by default)")
+    p.add_argument("--verbose", action="store_true", help=argparse.SUPPRESS)   # the old opt-in
     p.set_defaults(func=_cmd_homography)

@@ -19,14 +19,22 @@ def _registry() -> dict:
     return REGISTRY
 
 
-def _build(name: str, *, quick: bool, data=None):
+def _build(name: str, *, quick: bool, data=None, sets=None, out=None):
+    """The experiment ``name``; ``data``/``sets`` only for builds that take them (an error
+    otherwise), ``out`` (the output folder, for on-disk caches) whenever the build takes it."""
     build = importlib.import_module(_registry()[name]).build
-    if data is None:
-        return build(quick=quick)
-    if "data" not in inspect.signature(build).parameters:
-        raise CLIError(f"experiment {name!r} generates its data and takes no --data; --data is "
-                       "for the experiments on real data sets (e.g. cmu)")
-    return build(quick=quick, data=data)
+    params = inspect.signature(build).parameters
+    kwargs = {"quick": quick}
+    for option, value, flag in (("data", data, "--data"), ("sets", sets, "--sets")):
+        if value is None:
+            continue
+        if option not in params:
+            raise CLIError(f"experiment {name!r} takes no {flag}; {flag} is for the experiments "
+                           "on real data sets (cmu: --data; kernels: --data, --sets)")
+        kwargs[option] = value
+    if out is not None and "out" in params:
+        kwargs["out"] = out
+    return build(**kwargs)
 
 
 def _check_names(names, what: str) -> None:
@@ -48,8 +56,9 @@ def _cmd_experiment(args) -> int:
             print(f"{name:14s} {doc[0] if doc else ''}")
         return 0
     _check_names([args.name], "experiment")
-    exp = _build(args.name, quick=args.quick, data=args.data)
     out = Path(args.out or f"results/{args.name}{'-quick' if args.quick else ''}")
+    sets = [s for s in args.sets.split(",") if s.strip()] if args.sets else None
+    exp = _build(args.name, quick=args.quick, data=args.data, sets=sets, out=out)
     args.interrupt_hint = (f"finished trials are saved in {out / 'results.sqlite'}; run the "
                            "same command again to resume")
     report = run_experiment(exp, out, trials=args.trials, workers=args.workers, seed=args.seed,
@@ -79,7 +88,7 @@ def _cmd_demo(args) -> int:
     failed = 0
     created = not out.exists()
     for name in dict.fromkeys(args.experiments):
-        exp = _build(name, quick=True)
+        exp = _build(name, quick=True, out=out / name)
         try:
             report = run_experiment(exp, out / name, workers=args.workers,
                                     progress=not args.no_progress)
@@ -135,8 +144,12 @@ def add_parsers(sub) -> None:
                    help="small version (about a minute; what `transync demo` runs)")
     p.add_argument("--out", help="output folder (default: results/NAME)")
     p.add_argument("--data", metavar="PATH",
-                   help="data folder of the experiments on real data (cmu: any folder in the "
-                        "CMU layout; default: TRANSYNC_DATA's cmu-house)")
+                   help="data of the experiments on real data (cmu: a folder in the CMU layout, "
+                        "default TRANSYNC_DATA's cmu-house; kernels: a TU folder or a folder of "
+                        "TU folders, default TRANSYNC_DATA's tu)")
+    p.add_argument("--sets", metavar="NAME,NAME",
+                   help="comma-separated data sets to run (kernels: TU names, e.g. MUTAG,PTC_MR; "
+                        "default: all five of the thesis)")
     p.add_argument("--trials", type=positive_int,
                    help="trials per configuration (default: the experiment's own, 20 for the "
                         "full thesis experiments; fewer than stored: only those are reported)")

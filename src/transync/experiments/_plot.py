@@ -136,7 +136,8 @@ def render_experiment(experiment, summary: list[dict]):
                 continue
             for m, d in _draw_panel(axes[r, c], sw, sw.metrics[c], summary, styles).items():
                 drawn[m] = drawn.get(m, True) and d
-    handles = [Line2D([], [], label=m + ("" if drawn[m] else " (some points not drawn: <= 0 on a log axis)"),
+    hidden = " (some points not drawn: <= 0 on a log axis)"
+    handles = [Line2D([], [], label=m + ("" if drawn[m] else hidden),
                       ms=5, **styles[m]) for m in all_methods if m in drawn]
     if handles:
         fig.legend(handles=handles, loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8,

@@ -640,8 +640,8 @@ def _write_summary(rows: list[dict], out: Path) -> None:
         methods = list(dict.fromkeys(r["method"] for r in sub))
         values = list(dict.fromkeys(json.dumps(r["value"], default=str) for r in sub))
         for metric in metrics:
-            lines.append(f"\n### {sweep}: {metric_label(metric, inline=True)} — mean ± standard error "
-                         "over trials\n")
+            label = metric_label(metric, inline=True)
+            lines.append(f"\n### {sweep}: {label} — mean ± standard error over trials\n")
             lines.append("| " + sub[0]["variable"] + " | " + " | ".join(methods) + " |")
             lines.append("|" + "---|" * (len(methods) + 1))
             for v in values:

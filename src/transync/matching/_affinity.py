@@ -1,8 +1,8 @@
 """Affinities for quadratic graph matching, behind one small interface.
 
 A Lawler QAP maximizes ``vec(X)^T K vec(X)`` over matchings ``X`` of shape ``(n1, n2)``. The
-solvers never see ``K``; they call :meth:`Affinity.matvec`, which returns ``reshape(K vec(X))`` as an
-``(n1, n2)`` array. ``vec`` is column-major, as in pygmtools: candidate ``(i, a)`` has index
+solvers never see ``K``; they call :meth:`Affinity.matvec`, which returns ``reshape(K vec(X))``
+as an ``(n1, n2)`` array. ``vec`` is column-major, as in pygmtools: candidate ``(i, a)`` has index
 ``a * n1 + i``.
 
 Backends
@@ -318,8 +318,8 @@ class FactorizedAffinity(Affinity):
 class SeparableAffinity(Affinity):
     """``K = diag(vec(node)) + sum_r G_r (x) F_r``: a sum of Kronecker products.
 
-    ``K[(i, a), (j, b)] = node[i, a] [i == j, a == b] + sum_r F[r, i, j] G[r, a, b]``; the product is
-    ``Y = node * X + sum_r F_r X G_r^T`` at ``O(R (n1^2 n2 + n1 n2^2))``.
+    ``K[(i, a), (j, b)] = node[i, a] [i == j, a == b] + sum_r F[r, i, j] G[r, a, b]``; the
+    product is ``Y = node * X + sum_r F_r X G_r^T`` at ``O(R (n1^2 n2 + n1 n2^2))``.
 
     Attributes
     ----------
@@ -424,7 +424,8 @@ def gaussian_node_affinity(g1: Graph, g2: Graph, *, sigma2: float = 1.0,
     f1 = g1.node_features if attribute == "features" else g1.points
     f2 = g2.node_features if attribute == "features" else g2.points
     if f1 is None or f2 is None:
-        raise ValueError(f"both graphs need `{'node_features' if attribute == 'features' else 'points'}`"
+        need = "node_features" if attribute == "features" else "points"
+        raise ValueError(f"both graphs need `{need}`"
                          " for a node affinity")
     if f1.shape[1] != f2.shape[1]:
         raise ValueError(f"node {attribute} dimensions differ: {f1.shape[1]} vs {f2.shape[1]}")
@@ -437,7 +438,8 @@ def gaussian_node_affinity(g1: Graph, g2: Graph, *, sigma2: float = 1.0,
 
 
 #: Default width ``sigma2`` of the Gaussian edge affinity ``exp(-(d1 - d2)^2 / sigma2)`` (Cho et
-#: al.'s 0.15; ALGORITHMS.md section 6): the one default of :func:`gaussian_edge_affinity`,
+#: al.'s 0.15; methods page *Synthetic protocols and evaluation measures*): the one default of
+#: :func:`gaussian_edge_affinity`,
 #: :func:`gaussian_edge_factors`, :func:`~transync.matching.match_graphs`,
 #: :func:`~transync.match_collection` and ``transync match --sigma2``.
 DEFAULT_SIGMA2 = 0.15
@@ -611,7 +613,8 @@ def _chebyshev_nodes(lo: float, hi: float, p: int) -> np.ndarray:
 
 
 def _lagrange_basis(x: np.ndarray, nodes: np.ndarray) -> np.ndarray:
-    """Barycentric Lagrange basis at ``x`` for Chebyshev points of the first kind; shape (len(x), p)."""
+    """Barycentric Lagrange basis at ``x`` for Chebyshev points of the first kind; shape
+    (len(x), p)."""
     p = nodes.size
     k = np.arange(p)
     w = (-1.0) ** k * np.sin(np.pi * (2 * k + 1) / (2 * p))

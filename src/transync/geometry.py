@@ -51,6 +51,7 @@ def normalize_determinant(A, *, singular_tol: float = 1e-14) -> np.ndarray:
     Parameters
     ----------
     A : array_like of shape (..., d, d)
+        Square matrices (a stack).
     singular_tol : float, default=1e-14
         Matrices whose smallest singular value is at most ``singular_tol`` times their largest
         give NaN. ``0`` skips that test (one SVD per matrix) and leaves only exactly singular
@@ -59,6 +60,12 @@ def normalize_determinant(A, *, singular_tol: float = 1e-14) -> np.ndarray:
     Returns
     -------
     ndarray of shape (..., d, d)
+        The scaled matrices (NaN for singular or non-finite ones).
+
+    Raises
+    ------
+    ValueError, TypeError
+        ``A`` not a stack of square real matrices; ``singular_tol`` outside [0, 1).
 
     Examples
     --------
@@ -98,11 +105,17 @@ def image_corners(size) -> np.ndarray:
     Parameters
     ----------
     size : (width, height)
+        Image size in pixels (positive).
 
     Returns
     -------
     ndarray of shape (4, 2)
         ``(0, 0), (w-1, 0), (w-1, h-1), (0, h-1)`` as ``(x, y)`` rows.
+
+    Raises
+    ------
+    ValueError, TypeError
+        ``size`` not two positive finite numbers.
 
     Examples
     --------
@@ -119,13 +132,19 @@ def transfer_points(H, points) -> np.ndarray:
     Parameters
     ----------
     H : array_like of shape (..., 3, 3)
+        Homographies (a stack).
     points : array_like of shape (k, 2) or (..., k, 2)
-        Broadcast against the leading dimensions of ``H``.
+        Points ``(x, y)``, broadcast against the leading dimensions of ``H``.
 
     Returns
     -------
     ndarray of shape (..., k, 2)
         Points at infinity come back as ``inf``/``nan``; callers decide what that means.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Mis-shaped or non-numeric ``H`` or ``points``.
 
     Examples
     --------
@@ -147,15 +166,24 @@ def transfer_points(H, points) -> np.ndarray:
 
 
 def normalization_matrix(image_size) -> np.ndarray:
-    """Hartley-style similarity taking pixel coordinates of a ``(width, height)`` image to ~[-1, 1].
+    """Similarity taking pixel coordinates of a ``(width, height)`` image to about [-1, 1].
+
+    Hartley-style: the image centre goes to the origin and the longer side to length 2.
 
     Parameters
     ----------
     image_size : (width, height)
+        Image size in pixels (positive).
 
     Returns
     -------
     ndarray of shape (3, 3)
+        The normalizing similarity.
+
+    Raises
+    ------
+    ValueError, TypeError
+        ``image_size`` not two positive finite numbers.
 
     Examples
     --------
@@ -170,6 +198,21 @@ def normalization_matrix(image_size) -> np.ndarray:
 def translation(tx, ty) -> np.ndarray:
     """The homography ``[x, y] -> [x + tx, y + ty]`` (e.g. the offset of a canvas origin).
 
+    Parameters
+    ----------
+    tx, ty : float
+        Translation in pixels.
+
+    Returns
+    -------
+    ndarray of shape (3, 3)
+        The translation as a homography.
+
+    Raises
+    ------
+    TypeError
+        ``tx`` or ``ty`` not a finite real number.
+
     Examples
     --------
     >>> translation(2, -1) @ [1.0, 1.0, 1.0]
@@ -181,7 +224,7 @@ def translation(tx, ty) -> np.ndarray:
     return np.array([[1.0, 0.0, float(tx)], [0.0, 1.0, float(ty)], [0.0, 0.0, 1.0]])
 
 
-def hartley_normalization(points):
+def hartley_normalization(points) -> tuple[np.ndarray, np.ndarray]:
     """Hartley's isotropic normalization of a 2-D point set.
 
     The similarity ``T`` moves the centroid to the origin and scales the points to a mean
@@ -190,12 +233,19 @@ def hartley_normalization(points):
     Parameters
     ----------
     points : array_like of shape (k, 2)
+        At least one finite point.
 
     Returns
     -------
     T : ndarray of shape (3, 3)
+        The normalizing similarity.
     normalized : ndarray of shape (k, 2)
         ``transfer_points(T, points)``. Coincident points (no spread) get ``T`` a pure translation.
+
+    Raises
+    ------
+    ValueError
+        Mis-shaped, empty or non-finite points, or points whose spread overflows.
 
     Examples
     --------

@@ -50,6 +50,25 @@ class Graph:
         ``adjacency != 0``.
     directed : bool, default=False
         Undirected graphs must have a symmetric adjacency.
+    meta : dict, optional
+        Free-form metadata (e.g. the source file); not used by the algorithms.
+
+    Raises
+    ------
+    ValueError, TypeError
+        A non-square, empty, negative or (undirected) asymmetric adjacency, a non-zero diagonal,
+        attributes whose first dimension is not ``n``, non-finite values, bad flags.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.graphs import Graph
+    >>> g = Graph(adjacency=np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], float),
+    ...           node_labels=np.array([0, 1, 0]))
+    >>> g.n_nodes, g.n_edges
+    (3, 2)
+    >>> Graph.from_points(np.random.default_rng(0).random((5, 2)), edges="full").n_edges
+    10
     """
 
     adjacency: np.ndarray

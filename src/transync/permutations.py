@@ -82,7 +82,34 @@ def check_assignment(assignment, name: str = "assignment", *, n2: int | None = N
                      n1: int | None = None) -> np.ndarray:
     """Validate an assignment index array and return it as ``int64``.
 
-    Raises ``ValueError`` when values fall outside ``[-1, n2)`` or a target is used twice.
+    Parameters
+    ----------
+    assignment : array_like of shape (n1,), int
+        ``assignment[u] = v`` maps node ``u`` to node ``v``; ``-1`` marks an unmatched node.
+        Integral floats are accepted.
+    name : str, default="assignment"
+        Argument name used in error messages.
+    n2 : int, optional
+        Size of the target object; entries must then be ``< n2``.
+    n1 : int, optional
+        Required length of ``assignment``.
+
+    Returns
+    -------
+    ndarray of shape (n1,), int64
+        A validated copy.
+
+    Raises
+    ------
+    TypeError
+        Non-integer entries (fractions, NaN, strings, complex).
+    ValueError
+        Not 1-d, wrong length, entries outside ``[-1, n2)``, or a target used twice.
+
+    Examples
+    --------
+    >>> check_assignment([2.0, 0, -1], n2=3)
+    array([ 2,  0, -1])
     """
     arr = _as_label_array(assignment, name)
     if arr.size and arr.max() >= 2**62:
@@ -100,18 +127,89 @@ def check_assignment(assignment, name: str = "assignment", *, n2: int | None = N
 
 
 def identity(n: int) -> np.ndarray:
-    """The identity assignment of ``n`` nodes."""
+    """The identity assignment of ``n`` nodes.
+
+    Parameters
+    ----------
+    n : int
+        Number of nodes (>= 0).
+
+    Returns
+    -------
+    ndarray of shape (n,), int64
+        ``arange(n)``.
+
+    Raises
+    ------
+    ValueError, TypeError
+        ``n`` negative, too large (above :data:`MAX_NODES`) or not an integer.
+
+    Examples
+    --------
+    >>> identity(3)
+    array([0, 1, 2])
+    """
     return np.arange(check_int(n, "n", minimum=0, maximum=MAX_NODES), dtype=np.int64)
 
 
 def random_permutation(n: int, rng=None) -> np.ndarray:
-    """A uniformly random permutation of ``n`` nodes as an assignment."""
+    """A uniformly random permutation of ``n`` nodes as an assignment.
+
+    Parameters
+    ----------
+    n : int
+        Number of nodes (>= 0).
+    rng : None, int or numpy.random.Generator, optional
+        Source of randomness.
+
+    Returns
+    -------
+    ndarray of shape (n,), int64
+        A permutation of ``0 .. n - 1``.
+
+    Raises
+    ------
+    ValueError, TypeError
+        ``n`` negative, too large or not an integer; an invalid ``rng``.
+
+    Examples
+    --------
+    >>> sorted(random_permutation(4, rng=0).tolist())
+    [0, 1, 2, 3]
+    """
     n = check_int(n, "n", minimum=0, maximum=MAX_NODES)
     return as_generator(rng).permutation(n).astype(np.int64)
 
 
 def assignment_to_matrix(assignment, n2: int, *, dtype=float) -> np.ndarray:
-    """Matching matrix ``X`` of shape ``(n1, n2)`` with ``X[u, assignment[u]] = 1``."""
+    """Matching matrix ``X`` of shape ``(n1, n2)`` with ``X[u, assignment[u]] = 1``.
+
+    Parameters
+    ----------
+    assignment : array_like of shape (n1,), int
+        Assignment (``-1``: unmatched, an all-zero row).
+    n2 : int
+        Number of columns (nodes of the target object).
+    dtype : data-type, default=float
+        Data type of the matrix.
+
+    Returns
+    -------
+    ndarray of shape (n1, n2)
+        The 0/1 partial-permutation matrix.
+
+    Raises
+    ------
+    ValueError, TypeError
+        An invalid assignment (see :func:`check_assignment`), or a matrix of more than
+        :data:`MAX_NODES` entries.
+
+    Examples
+    --------
+    >>> assignment_to_matrix([1, -1], 2).astype(int)
+    array([[0, 1],
+           [0, 0]])
+    """
     n2 = check_int(n2, "n2", minimum=0, maximum=MAX_NODES)
     a = check_assignment(assignment, n2=n2)
     if a.shape[0] * n2 > MAX_NODES:
@@ -126,9 +224,26 @@ def assignment_to_matrix(assignment, n2: int, *, dtype=float) -> np.ndarray:
 def is_partial_permutation_matrix(X, *, atol: float = 1e-8) -> bool:
     """True when ``X`` is 0/1 (to ``atol``) with at most one 1 per row and per column.
 
-    A predicate: any real array answers (non-2-D arrays and NaN entries answer False); complex
-    or non-numeric input raises ``TypeError``.
+    A predicate: any real array answers (non-2-D arrays and NaN entries answer False).
 
+    Parameters
+    ----------
+    X : array_like
+        The matrix to test.
+    atol : float, default=1e-8
+        Tolerance on the 0/1 entries and on the row and column sums.
+
+    Returns
+    -------
+    bool
+
+    Raises
+    ------
+    TypeError
+        Complex or non-numeric input.
+
+    Examples
+    --------
     >>> is_partial_permutation_matrix([[0, 1], [0, 0]]), is_partial_permutation_matrix([[1, 1]])
     (True, False)
     """
@@ -140,7 +255,30 @@ def is_partial_permutation_matrix(X, *, atol: float = 1e-8) -> bool:
 
 
 def matrix_to_assignment(X, *, name: str = "X") -> np.ndarray:
-    """Assignment from a 0/1 partial-permutation matrix (rows without a 1 become -1)."""
+    """Assignment from a 0/1 partial-permutation matrix (rows without a 1 become -1).
+
+    Parameters
+    ----------
+    X : array_like of shape (n1, n2)
+        0/1 matrix with at most one 1 per row and per column.
+    name : str, default="X"
+        Argument name used in error messages.
+
+    Returns
+    -------
+    ndarray of shape (n1,), int64
+        ``assignment[u] = v`` where ``X[u, v] = 1``, else ``-1``.
+
+    Raises
+    ------
+    ValueError
+        ``X`` is not a partial-permutation matrix (round soft matrices with :func:`solve_lap`).
+
+    Examples
+    --------
+    >>> matrix_to_assignment([[0, 1], [0, 0]])
+    array([ 1, -1])
+    """
     X = check_array(X, name, ndim=2)
     if not is_partial_permutation_matrix(X):
         raise ValueError(f"`{name}` must be a 0/1 partial-permutation matrix (at most one 1 per "
@@ -152,7 +290,30 @@ def matrix_to_assignment(X, *, name: str = "X") -> np.ndarray:
 
 
 def invert(assignment, n2: int) -> np.ndarray:
-    """Inverse map: ``b[v] = u`` where ``assignment[u] = v``, ``-1`` for unused targets."""
+    """Inverse map: ``b[v] = u`` where ``assignment[u] = v``, ``-1`` for unused targets.
+
+    Parameters
+    ----------
+    assignment : array_like of shape (n1,), int
+        Assignment into an object of ``n2`` nodes.
+    n2 : int
+        Number of nodes of the target object (the length of the result).
+
+    Returns
+    -------
+    ndarray of shape (n2,), int64
+        The inverse assignment.
+
+    Raises
+    ------
+    ValueError, TypeError
+        An invalid assignment or ``n2``.
+
+    Examples
+    --------
+    >>> invert([2, 0, -1], n2=3)
+    array([ 1, -1,  0])
+    """
     n2 = check_int(n2, "n2", minimum=0, maximum=MAX_NODES)
     a = check_assignment(assignment, n2=n2)
     b = np.full(n2, UNMATCHED, dtype=np.int64)
@@ -162,7 +323,30 @@ def invert(assignment, n2: int) -> np.ndarray:
 
 
 def compose(first, second) -> np.ndarray:
-    """Follow ``first`` (i -> j) then ``second`` (j -> k); unmatched anywhere gives -1."""
+    """Follow ``first`` (i -> j) then ``second`` (j -> k); unmatched anywhere gives -1.
+
+    Parameters
+    ----------
+    first : array_like of shape (n_i,), int
+        Assignment from object ``i`` to object ``j``.
+    second : array_like of shape (n_j,), int
+        Assignment from object ``j`` to object ``k``.
+
+    Returns
+    -------
+    ndarray of shape (n_i,), int64
+        The composed assignment ``i -> k``.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Invalid assignments, or ``first`` pointing beyond the length of ``second``.
+
+    Examples
+    --------
+    >>> compose([2, 0, -1], [1, 2, 0])
+    array([ 0,  1, -1])
+    """
     a = check_assignment(first, "first")
     b = check_assignment(second, "second")
     if a.size and a.max() >= b.shape[0]:
@@ -178,9 +362,29 @@ def solve_lap(score, *, maximize: bool = True, min_score: float | None = None,
               name: str = "score") -> np.ndarray:
     """Rectangular linear assignment on ``score`` of shape ``(n1, n2)`` (Hungarian, via SciPy).
 
-    Returns an assignment of length ``n1``; when ``n1 > n2`` the rows left over are ``-1``.
-    With ``min_score`` (maximizing) pairs whose score is below it are dropped to ``-1``.
+    Parameters
+    ----------
+    score : array_like of shape (n1, n2)
+        Finite scores (or costs with ``maximize=False``).
+    maximize : bool, default=True
+        Maximize the total score (else minimize the total cost).
+    min_score : float, optional
+        Pairs whose score is below it (above it when minimizing) are dropped to ``-1``.
+    name : str, default="score"
+        Argument name used in error messages.
 
+    Returns
+    -------
+    ndarray of shape (n1,), int64
+        The assignment; when ``n1 > n2`` the rows left over are ``-1``.
+
+    Raises
+    ------
+    ValueError, TypeError
+        ``score`` not 2-d, not finite or not numeric.
+
+    Examples
+    --------
     >>> solve_lap(np.array([[0.1, 0.9], [0.8, 0.2], [0.0, 0.1]]))
     array([ 1,  0, -1])
     """
@@ -208,6 +412,30 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
     ``i < j < k`` are drawn uniformly at random (with ``rng``) and the observed ones among them
     are checked; ``"sampled"`` says so. The work is vectorized over triangles (index gathers).
 
+    Parameters
+    ----------
+    pairwise : dict {(i, j): assignment}
+        Observed pairwise assignments.
+    max_triangles : int, default=200000
+        Largest number of triples checked exhaustively.
+    rng : None, int or numpy.random.Generator, optional
+        Draws the triples when sampling.
+
+    Returns
+    -------
+    dict
+        ``n_triangles`` (int), ``inconsistent_triangles`` (fraction), ``cycle_error`` (mean
+        fraction of disagreeing nodes) and ``sampled`` (bool).
+
+    Raises
+    ------
+    TypeError
+        ``pairwise`` is not a mapping, or holds non-integer assignments.
+    ValueError
+        Invalid assignments or ``max_triangles``.
+
+    Examples
+    --------
     >>> p = {(0, 1): np.array([1, 0]), (1, 2): np.array([1, 0]), (0, 2): np.array([0, 1])}
     >>> cycle_inconsistency(p)
     {'n_triangles': 1, 'inconsistent_triangles': 0.0, 'cycle_error': 0.0, 'sampled': False}
@@ -266,6 +494,32 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
     ``pairs[q, 0] -> pairs[q, 1]`` padded with -1 to a common width; ``sizes`` holds the number
     of nodes of every object. Duplicate pairs: the first occurrence is used.
 
+    Parameters
+    ----------
+    pairs : array_like of shape (Q, 2), int
+        Object pairs ``i < j``.
+    maps : array_like of shape (Q, n), int
+        ``maps[q]`` the assignment of ``pairs[q]``, padded with ``-1``.
+    sizes : array_like of shape (N,), int
+        Number of nodes of every object.
+    max_triangles : int, default=200000
+        Largest number of triples checked exhaustively.
+    rng : None, int or numpy.random.Generator, optional
+        Draws the triples when sampling.
+
+    Returns
+    -------
+    dict
+        As :func:`cycle_inconsistency`.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Mis-shaped or non-integer arrays, pairs out of range or not ``i < j``, map entries that
+        are not node indices.
+
+    Examples
+    --------
     >>> cycle_inconsistency_arrays([[0, 1], [1, 2], [0, 2]], [[1, 0], [1, 0], [0, 1]], [2, 2, 2])
     {'n_triangles': 1, 'inconsistent_triangles': 0.0, 'cycle_error': 0.0, 'sampled': False}
     """

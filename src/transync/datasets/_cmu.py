@@ -12,7 +12,7 @@ same physical point in every frame, so the ground truth of any set of frames is 
 Graphs (:meth:`LandmarkSequence.graphs`) are Delaunay triangulations of the landmarks, with
 coordinates divided by the image diagonal when the image sizes are known (PNG headers, read
 without decoding) and by the diagonal of the frame's landmark bounding box otherwise, so that
-the Yan et al. affinity scale (``Scale = 0.05``, ALGORITHMS.md §1.10) is meaningful; see
+the Yan et al. affinity scale (``Scale = 0.05``) is meaningful; see
 :data:`LANDMARK_AFFINITY`, the keyword arguments of
 :func:`transync.matching.gaussian_edge_affinity` for it (``gaussian_edge_affinity(g1, g2,
 **LANDMARK_AFFINITY)``).
@@ -41,7 +41,7 @@ from ._home import data_home
 __all__ = ["LANDMARK_AFFINITY", "LandmarkSequence", "load_cmu_sequence"]
 
 #: Keyword arguments of :func:`transync.matching.gaussian_edge_affinity` for the length + angle
-#: edge affinity of Yan et al. on diagonal-normalized landmarks (ALGORITHMS.md §1.10):
+#: edge affinity of Yan et al. on diagonal-normalized landmarks (Yan et al., TPAMI 2016):
 #: ``exp(-(0.9 dd^2 + 0.1 dtheta^2) / 0.05)`` (``dd`` edge-length difference, ``dtheta`` wrapped
 #: angle difference in radians), written as ``exp(-(dd^2 + angle_weight dtheta^2) / sigma2)``.
 LANDMARK_AFFINITY = {"attribute": "length+angle", "sigma2": 0.05 / 0.9, "angle_weight": 0.1 / 0.9}
@@ -87,6 +87,20 @@ class LandmarkSequence:
         ``(width, height)`` of each image, with ``image_paths``.
     source : Path
         The folder read.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import numpy as np
+    >>> from transync.datasets import load_cmu_sequence
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> (d / "label").mkdir()
+    >>> pts = np.random.default_rng(0).random((5, 2)) * 100
+    >>> for k in (1, 2, 3):
+    ...     np.savetxt(d / "label" / f"house{k}", pts + k)
+    >>> seq = load_cmu_sequence(d)
+    >>> seq.n_frames, seq.n_landmarks, len(seq.graphs([0, 2]).graphs)
+    (3, 5, 2)
     """
 
     name: str

@@ -59,6 +59,16 @@ class HomographySequence:
         ``homographies[k]`` maps pixels of image ``k`` into image 0 (determinant 1).
     names : list of str
     info : dict
+
+    Examples
+    --------
+    See :func:`load_oxford_sequence`, which builds one from files.
+
+    >>> import numpy as np
+    >>> seq = HomographySequence(images=[np.zeros((8, 8))] * 2,
+    ...                          homographies=np.stack([np.eye(3)] * 2), names=["a", "b"])
+    >>> seq.n_views
+    2
     """
 
     images: list
@@ -262,9 +272,35 @@ def load_oxford_sequence(folder) -> HomographySequence:
 
 
 def load_hpatches_sequence(folder) -> HomographySequence:
-    """HPatches full-image sequence (``1.ppm .. 6.ppm``, ``H_1_2 .. H_1_6``).
+    """HPatches full-image sequence: images ``1.ppm`` to ``6.ppm``, ground truth ``H_1_2`` to
+    ``H_1_6``.
 
-    Parameters, returns and errors as :func:`load_oxford_sequence`.
+    Parameters
+    ----------
+    folder : path
+        Folder holding ``1.*``, ``2.*``, ... and ``H_1_2``, ``H_1_3``, ...
+
+    Returns
+    -------
+    HomographySequence
+
+    Raises
+    ------
+    FileNotFoundError
+        The folder, ``1.*`` or a ground-truth file is missing.
+    ValueError
+        As :func:`load_oxford_sequence`.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib, numpy as np, cv2
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> for k in (1, 2):
+    ...     _ = cv2.imwrite(str(d / f"{k}.png"), np.zeros((8, 8), np.uint8))
+    >>> _ = (d / "H_1_2").write_text("1 0 0\\n0 1 3\\n0 0 1\\n")
+    >>> seq = load_hpatches_sequence(d)
+    >>> seq.names, float(seq.homographies[1][1, 2])
+    (['1.png', '2.png'], -3.0)
     """
     folder = _check_folder(folder)
     files = _image_files(folder, r"(\d+)\.\w+")
@@ -277,7 +313,35 @@ def load_graf(folder=None) -> HomographySequence:
     """Oxford graf images 1 and 3 with the ground truth ``H1to3p.xml`` (data home by default).
 
     The ground truth is read from ``H1to3p.xml`` (OpenCV FileStorage) or, when that file is
-    absent, from the Oxford text file ``H1to3p``. Errors as :func:`load_oxford_sequence`.
+    absent, from the Oxford text file ``H1to3p``.
+
+    Parameters
+    ----------
+    folder : path, optional
+        Folder holding ``graf1.*``, ``graf3.*`` and the ground truth; default the data home's
+        ``oxford-graf``.
+
+    Returns
+    -------
+    HomographySequence
+        Two views; ``homographies[1]`` maps graf3 into graf1.
+
+    Raises
+    ------
+    FileNotFoundError
+        The folder, an image or the ground truth is missing.
+    ValueError
+        As :func:`load_oxford_sequence`.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib, numpy as np, cv2
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> for k in (1, 3):
+    ...     _ = cv2.imwrite(str(d / f"graf{k}.png"), np.zeros((8, 8), np.uint8))
+    >>> _ = (d / "H1to3p").write_text("1 0 5\\n0 1 0\\n0 0 1\\n")
+    >>> float(load_graf(d).homographies[1][0, 2])
+    -5.0
     """
     folder = _check_folder(folder) if folder is not None else data_home(subfolder="oxford-graf")
     xml, text = folder / "H1to3p.xml", folder / "H1to3p"
@@ -297,7 +361,27 @@ def load_graf(folder=None) -> HomographySequence:
 
 @dataclass(frozen=True)
 class AdelaideRMFPair:
-    """One AdelaideRMF image pair: correspondences ``x1 -> x2`` (pixels) with plane labels."""
+    """One AdelaideRMF image pair: correspondences ``x1 -> x2`` (pixels) with plane labels.
+
+
+    Attributes
+    ----------
+    name : str
+        The sequence name (file stem).
+    x1, x2 : ndarray of shape (n, 2)
+        Corresponding points in image 1 and image 2, pixels.
+    labels : ndarray of shape (n,), int
+        Plane of every correspondence (0: outlier).
+    img1, img2 : ndarray
+        The two images.
+
+    Examples
+    --------
+    See :func:`load_adelaidermf`.
+
+    >>> AdelaideRMFPair.__dataclass_fields__.keys() >= {"x1", "x2", "labels"}
+    True
+    """
 
     name: str
     x1: np.ndarray
@@ -316,7 +400,31 @@ def _adelaide_folder(folder) -> Path:
 
 
 def list_adelaidermf(folder=None) -> list:
-    """Names of the AdelaideRMF sequences available (``.mat`` files; empty list if none)."""
+    """Names of the AdelaideRMF sequences available (``.mat`` files; empty list if none).
+
+    Parameters
+    ----------
+    folder : path, optional
+        Folder of the ``.mat`` files; default the data home's ``adelaidermf``.
+
+    Returns
+    -------
+    list of str
+        Sorted file stems, the names :func:`load_adelaidermf` accepts.
+
+    Raises
+    ------
+    FileNotFoundError
+        The folder does not exist.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> _ = (d / "johnsona.mat").write_bytes(b"")
+    >>> list_adelaidermf(d)
+    ['johnsona']
+    """
     folder = _adelaide_folder(folder)
     return sorted(p.stem for p in folder.glob("*.mat") if p.is_file())
 
@@ -360,6 +468,19 @@ def load_adelaidermf(name, folder=None) -> AdelaideRMFPair:
         The file cannot be read as MATLAB data, or a field is missing or malformed (``data``
         6xN and finite with non-zero homogeneous rows, ``label`` N non-negative integers,
         ``img1``/``img2`` images); the message names the file and the field.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib, numpy as np
+    >>> from scipy.io import savemat
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> x = np.array([[10.0, 20.0], [5.0, 6.0], [1, 1], [11.0, 21.0], [5.0, 7.0], [1, 1]])
+    >>> img = np.zeros((4, 4, 3), np.uint8)
+    >>> savemat(d / "pair.mat", {"data": x, "label": np.array([[1, 0]]), "img1": img,
+    ...                          "img2": img})
+    >>> p = load_adelaidermf("pair", d)
+    >>> p.x2.tolist(), p.labels.tolist()
+    ([[11.0, 5.0], [21.0, 7.0]], [1, 0])
     """
     from scipy.io import loadmat
 

@@ -1,7 +1,7 @@
 """Synthetic collections of corrupted pairwise permutations with ground truth.
 
-Every object ``g`` sees a subset of a universe of ``d`` nodes; ``labels[g][u]`` is the universe id of
-its node ``u``. The true pairwise map ``i -> j`` sends ``u`` to the node of ``j`` with the same
+Every object ``g`` sees a subset of a universe of ``d`` nodes; ``labels[g][u]`` is the universe id
+of its node ``u``. The true pairwise map ``i -> j`` sends ``u`` to the node of ``j`` with the same
 universe id (``-1`` when ``j`` does not see it). Observed pairs are the true maps, except a chosen
 fraction that is replaced by random maps.
 """
@@ -46,6 +46,13 @@ class PermutationCollection:
     ground_truth : MultiMatching
         The ground truth as a multi-matching (built from ``labels`` and ``n_universe``);
         ``true_pairwise`` and ``accuracy`` delegate to it.
+
+    Examples
+    --------
+    >>> from transync.datasets import make_permutation_collection
+    >>> c = make_permutation_collection(5, 4, corruption=0.5, rng=0)
+    >>> len(c.pairwise), c.n_universe, bool(c.corrupted.any())
+    (10, 4, True)
     """
 
     pairwise: Mapping[tuple[int, int], np.ndarray]
@@ -117,10 +124,18 @@ def make_permutation_collection(n_objects: int, n_nodes: int, *, corruption: flo
     ensure_connected : bool, default=True
         Always observe a random Hamiltonian path, so the observation graph is connected.
     rng : None, int or numpy.random.Generator
+        Source of randomness.
 
     Returns
     -------
     PermutationCollection
+
+    Raises
+    ------
+    ValueError, TypeError
+        Fewer than two objects, sizes that are not positive integers, fractions outside [0, 1],
+        a universe smaller than ``n_nodes`` or larger than all nodes together, a collection too
+        large to generate, a non-bool ``ensure_connected``.
 
     Examples
     --------

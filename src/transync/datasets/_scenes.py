@@ -1,10 +1,11 @@
 """Rendered multi-view scenes of a textured plane with parallax clutter, with ground truth.
 
-World frame: the dominant plane is ``z = 0``; cameras sit above it (``z > 0``) and look at it.
-The plane texture is a mosaic of distinct, never repeated crops of images shipped with
-scikit-image (no downloads), blended with smooth windows, plus fine unique noise. Clutter objects are textured rectangles floating parallel to the plane
-at heights ``h > 0``; each is rendered through its own induced homography, so it moves with
-parallax relative to the plane and breaks the plane homography where it occludes the plane.
+World frame: the dominant plane is ``z = 0``; cameras sit above it (``z > 0``) and look at it. The
+plane texture is a mosaic of distinct, never repeated crops of images shipped with scikit-image (no
+downloads), blended with smooth windows, plus fine unique noise. Clutter objects are textured
+rectangles floating parallel to the plane at heights ``h > 0``; each is rendered through its own
+induced homography, so it moves with parallax relative to the plane and breaks the plane homography
+where it occludes the plane.
 """
 
 from __future__ import annotations
@@ -51,6 +52,13 @@ class PlanarScene:
         The views without photometric noise.
     info : dict
         Cameras ``K``, ``R``, ``C``, clutter list, ``clutter_fraction`` per view, preset values.
+
+    Examples
+    --------
+    >>> from transync.datasets import make_planar_scene
+    >>> scene = make_planar_scene(3, image_size=(160, 120), difficulty="easy", rng=0)
+    >>> len(scene.images), scene.homographies.shape, scene.masks[0].shape
+    (3, (3, 3, 3), (120, 160))
     """
 
     images: list
@@ -218,7 +226,9 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
     Parameters
     ----------
     n_views : int, default=20
+        Number of views (images).
     image_size : (width, height), default=(640, 480)
+        Size of every image in pixels.
     difficulty : {"easy", "moderate", "hard"}, default="moderate"
         Presets: moderate = views within +-25 degrees of the plane normal and about 20 % of
         the reference view covered by clutter; hard = +-45 degrees and about 33 %; easy =
@@ -233,10 +243,17 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
     reference : int, default=0
         The reference view (fronto-parallel camera).
     rng : None, int or Generator
+        Source of randomness.
 
     Returns
     -------
     PlanarScene
+
+    Raises
+    ------
+    ValueError, TypeError
+        No view, a ``reference`` out of range, an image smaller than 32 x 32 pixels, an
+        unknown ``difficulty``, angles, clutter or noise out of range.
 
     Examples
     --------

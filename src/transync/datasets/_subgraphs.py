@@ -1,9 +1,9 @@
 """Synthetic multi-subgraph matching problems: graphs of different sizes over a common universe.
 
-The generator of ALGORITHMS.md §5 (thesis ch. 7): a universe of ``d`` nodes with ``U(0, 1)``
-edge attributes (Yan et al.'s protocol, §1.8); every graph keeps each universe node independently
-with its own probability ``p``, adds outliers of its own, deforms, sparsifies and optionally
-flips its edges, and shuffles its nodes. The ground truth is a
+The generator of thesis ch. 7 (methods page *Synthetic protocols and evaluation measures*): a
+universe of ``d`` nodes with ``U(0, 1)`` edge attributes (Yan et al.'s protocol, §1.8); every graph
+keeps each universe node independently with its own probability ``p``, adds outliers of its own,
+deforms, sparsifies and optionally flips its edges, and shuffles its nodes. The ground truth is a
 :class:`~transync.permutations.MultiMatching` into the universe (outliers ``-1``).
 
 Examples
@@ -42,6 +42,24 @@ class SubgraphCollectionProblem(GraphCollectionProblem):
     universe size ``n_universe`` and ``truth(i, j)`` the true assignment ``i -> j`` (``-1`` where
     node ``u`` has no partner in ``j``). ``params["keep_probabilities"]`` holds the probability
     ``p`` drawn for every graph.
+
+    Attributes
+    ----------
+    graphs : list of Graph
+        The graphs.
+    labels : list of ndarray of int
+        ``labels[g][u]``: universe id of node ``u`` of graph ``g`` (``-1``: outlier).
+    n_universe : int
+        Universe size.
+    params : dict
+        The generator's parameters.
+
+    Examples
+    --------
+    >>> from transync.datasets import make_subgraph_collection
+    >>> c = make_subgraph_collection(n_graphs=3, n_universe=6, p_keep=0.5, rng=0)
+    >>> c.sizes.tolist(), c.truth(0, 1).shape
+    ([3, 3, 2], (3,))
     """
 
     @property
@@ -86,7 +104,7 @@ def make_subgraph_collection(n_graphs: int = 8, n_universe: int = 20, p_keep=(0.
                              n_outliers: int = 0, deformation: float = 0.0, density: float = 1.0,
                              flip: float = 0.0, *, shuffle: bool = True,
                              rng=None) -> SubgraphCollectionProblem:
-    """Graphs of different sizes drawn from one universe (ALGORITHMS.md §5), with ground truth.
+    """Graphs of different sizes drawn from one universe (thesis ch. 7), with ground truth.
 
     The universe has ``n_universe`` nodes and symmetric edge attributes ``U(0, 1)``. Graph ``g``
     draws ``p ~ U(low, high)`` (or uses ``p = p_keep``) and keeps every universe node
@@ -118,6 +136,7 @@ def make_subgraph_collection(n_graphs: int = 8, n_universe: int = 20, p_keep=(0.
     shuffle : bool, default=True
         Randomly reorder the nodes of every graph.
     rng : None, int or Generator
+        Source of randomness.
 
     Returns
     -------

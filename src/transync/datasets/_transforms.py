@@ -34,6 +34,13 @@ class TransformProblem:
     image_size : tuple or None
         ``(width, height)`` for homography problems.
     info : dict
+
+    Examples
+    --------
+    >>> from transync.datasets import make_noisy_linear_maps
+    >>> prob = make_noisy_linear_maps(n_objects=4, noise=0.0, rng=0)
+    >>> prob.observed.shape, bool(prob.mask[0, 1])
+    ((4, 4, 3, 3), True)
     """
 
     observed: np.ndarray
@@ -84,13 +91,19 @@ def make_noisy_linear_maps(n_objects=10, dim=3, *, group="GL", noise=0.05, outli
     Parameters
     ----------
     n_objects : int, default=10
+        Number of objects ``N``.
     dim : int, default=3
+        Dimension ``d`` of the maps.
     group : {"GL", "SL", "SO"}, default="GL"
+        Group the true maps are drawn from.
     noise : float, default=0.05
+        Standard deviation of the Gaussian noise added to every observed map.
     outlier_fraction : float, default=0.0
+        Fraction of observed pairs replaced by random maps.
     density : float, default=1.0
         Probability that a pair is observed (a random spanning path is always observed).
     rng : None, int or Generator
+        Source of randomness.
 
     Returns
     -------
@@ -177,7 +190,9 @@ def make_noisy_homographies(n_views=10, *, image_size=(640, 480), noise=0.5, out
     Parameters
     ----------
     n_views : int, default=10
+        Number of views ``N``.
     image_size : (width, height), default=(640, 480)
+        Image size in pixels (the corners define the noise and the errors).
     noise : float, default=0.5
         Pixel noise on the transferred corners.
     outlier_fraction : float, default=0.0
@@ -187,6 +202,7 @@ def make_noisy_homographies(n_views=10, *, image_size=(640, 480), noise=0.5, out
     max_angle : float, default=25.0
         In-plane rotation range of the views, degrees.
     rng : None, int or Generator
+        Source of randomness.
 
     Returns
     -------

@@ -1,10 +1,9 @@
 """Multi-graph matching on Yan et al.'s synthetic collections (thesis Figs. 6.1, 6.2, 6.3, 6.5).
 
-Every trial generates one collection with :func:`transync.datasets.make_graph_collection`
-(node orders shuffled) and matches it with one method through
-:func:`transync.match_collection`, on Yan et al.'s edge affinity
-``exp(-(e - e')^2 / 0.05)`` (ALGORITHMS.md §1.8, §4.4). All methods of a trial see the same
-collection. Methods (:data:`METHODS`):
+Every trial generates one collection with :func:`transync.datasets.make_graph_collection` (node
+orders shuffled) and matches it with one method through :func:`transync.match_collection`, on Yan
+et al.'s edge affinity ``exp(-(e - e')^2 / 0.05)`` (methods page *Synthetic protocols and
+evaluation measures*). All methods of a trial see the same collection. Methods (:data:`METHODS`):
 
 * ``GA``, ``RRWM``, ``PF`` - every pair matched on its own (no synchronization);
 * ``S-GA``, ``S-RRWM``, ``S-PF`` - the same solvers run in lock-step on all pairs, their
@@ -16,10 +15,11 @@ collection. Methods (:data:`METHODS`):
   (affinity only, and with pairwise consistency).
 
 Sweeps, one variable at a time around N = 8 graphs, 10 inliers, no outliers, deformation 0.05,
-complete graphs (ALGORITHMS.md §4.4): ``deformation`` (edge-weight noise), ``density`` (edge
-density; Fig. 6.3 plots it as the fraction of edges removed), ``outliers`` (outlier nodes per
-graph), ``flip`` (topological noise: every inlier node pair's edge toggled with this
-probability), ``nodes`` (inliers per graph) and ``graphs`` (number of graphs).
+complete graphs (the grid is described in ``docs/experiments/multigraph/README.md``):
+``deformation`` (edge-weight noise), ``density`` (edge density; Fig. 6.3 plots it as the fraction
+of edges removed), ``outliers`` (outlier nodes per graph), ``flip`` (topological noise: every
+inlier node pair's edge toggled with this probability), ``nodes`` (inliers per graph) and
+``graphs`` (number of graphs).
 
 Metrics: ``accuracy`` (mean over pairs of the fraction of inliers matched correctly,
 :meth:`MultiMatchingResult.accuracy`), ``objective`` (total affinity score of the output over
@@ -140,7 +140,7 @@ def trial(config: dict, rng: np.random.Generator) -> dict:
 
 
 def build(*, quick: bool = False) -> Experiment:
-    """The six sweeps of ALGORITHMS.md §4.4.
+    """The six sweeps of thesis ch. 6 (grid: ``docs/experiments/multigraph/README.md``).
 
     ``quick``: two values per sweep, N = 3 graphs of 5 inliers, one trial (about half a
     minute: the eleven methods run 12 times); full: 20 trials per point (hours, see

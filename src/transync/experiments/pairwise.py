@@ -1,14 +1,15 @@
 """Pairwise graph matching on Cho et al.'s synthetic protocol (ECCV 2010), all seven solvers.
 
-Three sweeps, one variable at a time (ALGORITHMS.md §1.8): deformation noise (20 inliers, no
-outliers, complete graphs), outlier nodes (20 inliers, no noise) and edge density (20 inliers,
-deformation 0.05). Affinity ``exp(-(a_ij - a_ab)^2 / 0.15)`` on the random edge attributes.
-Metrics: accuracy over inliers, objective relative to the ground truth's, run time.
+Three sweeps, one variable at a time (methods page *Synthetic protocols and evaluation measures*):
+deformation noise (20 inliers, no outliers, complete graphs), outlier nodes (20 inliers, no noise)
+and edge density (20 inliers, deformation 0.05). Affinity ``exp(-(a_ij - a_ab)^2 / 0.15)`` on the
+random edge attributes. Metrics: accuracy over inliers, objective relative to the ground truth's,
+run time.
 
 The graphs carry no node attributes, so the linear baselines (``hungarian``, ``sinkhorn``) are
-given the first-order linearization of the QAP as their unary term: the total affinity
-``(K 1)[i, a]`` of each candidate pair (scaled to a maximum of 1), i.e. how well the edge attributes around ``i`` and ``a``
-agree, without any pairwise consistency.
+given the first-order linearization of the QAP as their unary term: the total affinity ``(K 1)[i,
+a]`` of each candidate pair (scaled to a maximum of 1), i.e. how well the edge attributes around
+``i`` and ``a`` agree, without any pairwise consistency.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Permutation synchronization on corrupted collections (issue #3, item 5).
+"""Permutation synchronization on corrupted collections.
 
 Four sweeps, one variable at a time, on :func:`transync.datasets.make_permutation_collection`:
 the fraction of corrupted pairs, the number of objects, the fraction of observed pairs, and run

@@ -17,7 +17,7 @@ def _scale(H, s):
 
 
 def refine_homography_ecc(template, image, H_init, *, mask=None, template_mask=None, levels=3,
-                          max_iter=60, eps=1e-5, gauss_size=3):
+                          max_iter=60, eps=1e-5, gauss_size=3) -> tuple[np.ndarray, bool]:
     """Refine ``H`` (pixels of ``image`` into ``template``) by maximizing the ECC criterion.
 
     Coarse-to-fine over ``levels`` pyramid levels with ``cv2.findTransformECC``
@@ -25,12 +25,54 @@ def refine_homography_ecc(template, image, H_init, *, mask=None, template_mask=N
     ``template_mask`` (optional) the valid pixels of ``template``: template pixels outside it are
     replaced by the warped image so that they carry no error.
 
+    Parameters
+    ----------
+    template : array_like of shape (h_t, w_t)
+        Grey template (the target frame).
+    image : array_like of shape (h, w)
+        Grey image to align onto the template.
+    H_init : array_like of shape (3, 3)
+        Initial homography from pixels of ``image`` into ``template``.
+    mask : array_like of shape (h, w), bool, optional
+        Valid pixels of ``image`` (e.g. its plane mask); default all.
+    template_mask : array_like of shape (h_t, w_t), bool, optional
+        Valid pixels of ``template``; default all.
+    levels : int, default=3
+        Pyramid levels, 1 to 8.
+    max_iter : int, default=60
+        ECC iterations per level.
+    eps : float, default=1e-5
+        ECC convergence threshold.
+    gauss_size : int, default=3
+        Gaussian filter size of ``cv2.findTransformECC``.
+
     Returns
     -------
-    H : ndarray (3, 3)
-        Refined homography, or ``H_init`` when ECC fails at the finest level.
+    H : ndarray of shape (3, 3)
+        Refined homography (determinant 1), or ``H_init`` when ECC fails at the finest level.
     ok : bool
         Whether every level converged without an OpenCV error.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Images that are not 2-d, masks of the wrong shape, ``H_init`` not (3, 3), bad options.
+
+    Examples
+    --------
+    >>> import cv2
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> base = cv2.GaussianBlur(rng.random((120, 160)).astype(np.float32), (0, 0), 3.0)
+    >>> M = np.array([[1.0, 0.0, 4.0], [0.0, 1.0, 2.0], [0.0, 0.0, 1.0]])  # shift by (4, 2)
+    >>> view = cv2.warpPerspective(base, M, (160, 120))
+    >>> valid = cv2.warpPerspective(np.ones((120, 160), np.uint8), M, (160, 120))
+    >>> valid = cv2.erode(valid, np.ones((5, 5), np.uint8)) > 0   # away from the black border
+    >>> H0 = np.linalg.inv(M)
+    >>> H0[0, 2] += 1.5                                  # start 1.5 px off
+    >>> H, ok = refine_homography_ecc(base, view, H0, mask=valid, levels=2)
+    >>> ok, np.round(H[:2, 2] / H[2, 2], 1).tolist()     # back to the true shift (-4, -2)
+    (True, [-4.0, -2.1])
     """
     tpl = check_array(template, "template", ndim=2, dtype=np.float32)
     img = check_array(image, "image", ndim=2, dtype=np.float32)
@@ -83,21 +125,86 @@ def refine_homography_ecc(template, image, H_init, *, mask=None, template_mask=N
     return normalize_determinant(np.linalg.inv(W)), ok
 
 
-def warp_to_reference(image, H, size, *, offset=(0, 0), interpolation=cv2.INTER_LINEAR):
-    """Warp ``image`` into a reference canvas of ``size`` (w, h) whose origin sits at ``offset``."""
+def warp_to_reference(image, H, size, *, offset=(0, 0),
+                      interpolation=cv2.INTER_LINEAR) -> np.ndarray:
+    """Warp ``image`` into a reference canvas of ``size`` (w, h) whose origin sits at ``offset``.
+
+    Parameters
+    ----------
+    image : ndarray of shape (h_i, w_i) or (h_i, w_i, c)
+        The view.
+    H : array_like of shape (3, 3)
+        Homography from pixels of the view into the reference frame.
+    size : (width, height)
+        Canvas size in pixels.
+    offset : (float, float), default=(0, 0)
+        Position of the reference frame's origin in the canvas.
+    interpolation : int, default=cv2.INTER_LINEAR
+        OpenCV interpolation flag.
+
+    Returns
+    -------
+    ndarray of shape (height, width) or (height, width, c)
+        The warped view; canvas pixels it does not cover are 0.
+
+    Examples
+    --------
+    >>> import cv2
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> base = cv2.GaussianBlur(rng.random((120, 160)).astype(np.float32), (0, 0), 3.0)
+    >>> M = np.array([[1.0, 0.0, 4.0], [0.0, 1.0, 2.0], [0.0, 0.0, 1.0]])  # shift by (4, 2)
+    >>> view = cv2.warpPerspective(base, M, (160, 120))
+    >>> back = warp_to_reference(view, np.linalg.inv(M), (160, 120))
+    >>> bool(np.allclose(back[10:-10, 10:-10], base[10:-10, 10:-10], atol=1e-5))
+    True
+    """
     T = translation(*offset)
     return cv2.warpPerspective(image, T @ H, tuple(int(v) for v in size), flags=interpolation,
                                borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
 
 def mean_warped_image(images, homographies, *, size, masks=None, offset=(0, 0),
-                      normalize=True, reference=0):
+                      normalize=True, reference=0) -> tuple[np.ndarray, np.ndarray]:
     """Average of the views warped into the reference frame (over their masks).
+
+    Parameters
+    ----------
+    images : sequence of ndarray of shape (h_i, w_i)
+        Grey views.
+    homographies : array_like of shape (N, 3, 3)
+        ``homographies[i]`` maps pixels of view ``i`` into the reference frame.
+    size : (width, height)
+        Canvas size in pixels.
+    masks : sequence of bool arrays of shape (h_i, w_i), optional
+        Pixels of each view to use (e.g. plane masks); default all.
+    offset : (float, float), default=(0, 0)
+        Position of the reference frame's origin in the canvas.
+    normalize : bool, default=True
+        Fit each view's photometric gain and bias to the running mean (least squares on the
+        overlap) before adding it.
+    reference : int, default=0
+        The view added first (the photometric reference).
 
     Returns
     -------
-    mean : ndarray (h, w) float32 (NaN where no view contributes)
-    count : ndarray (h, w) int
+    mean : ndarray of shape (height, width), float32
+        The mean warped image, NaN where no view contributes.
+    count : ndarray of shape (height, width), int
+        Number of views contributing to each pixel.
+
+    Examples
+    --------
+    >>> import cv2
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> base = cv2.GaussianBlur(rng.random((120, 160)).astype(np.float32), (0, 0), 3.0)
+    >>> M = np.array([[1.0, 0.0, 4.0], [0.0, 1.0, 2.0], [0.0, 0.0, 1.0]])  # shift by (4, 2)
+    >>> view = cv2.warpPerspective(base, M, (160, 120))
+    >>> H = np.stack([np.eye(3), np.linalg.inv(M)])
+    >>> mean, count = mean_warped_image([base, view], H, size=(160, 120))
+    >>> int(count.max()), bool(np.allclose(mean[10:-10, 10:-10], base[10:-10, 10:-10], atol=1e-4))
+    (2, True)
     """
     w, h = (int(v) for v in size)
     acc = np.zeros((h, w), np.float64)

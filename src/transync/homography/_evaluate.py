@@ -16,11 +16,51 @@ from ._sparse import estimate_pairwise_homographies, load_images, to_gray
 __all__ = ["chained_homographies", "evaluate_alignment", "to_reference_homographies"]
 
 
-def to_reference_homographies(images, *, reference=0, n_features=2000, features=None, **kw):
+def to_reference_homographies(images, *, reference=0, n_features=2000, features=None,
+                              **kw) -> np.ndarray:
     """OpenCV baseline: every view matched to the reference (SIFT + ratio + RANSAC + LM).
 
-    Views whose pair fails get NaN, with an :class:`~transync.exceptions.UnlinkedViewsWarning`.
-    ``**kw`` goes to :func:`estimate_pairwise_homographies` (``rng``, ``method``...).
+    Parameters
+    ----------
+    images : list of arrays or paths
+        The views (see :func:`load_images`).
+    reference : int, default=0
+        The reference view.
+    n_features : int, default=2000
+        SIFT features per view.
+    features : list of (pts, desc), optional
+        Precomputed features (as returned by :func:`sift_features`).
+    **kw
+        Passed to :func:`estimate_pairwise_homographies` (``rng``, ``method``, ...).
+
+    Returns
+    -------
+    ndarray of shape (N, 3, 3)
+        Homographies of every view into the reference, determinant 1; NaN for views whose pair
+        failed.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Invalid images or options.
+
+    Warns
+    -----
+    UnlinkedViewsWarning
+        When some views have no estimate.
+
+    Examples
+    --------
+    >>> import cv2
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> base = cv2.GaussianBlur((rng.random((180, 240)) * 255).astype(np.uint8), (0, 0), 1.5)
+    >>> M = np.array([[1.0, 0.05, 8.0], [-0.03, 1.0, 5.0], [0.0, 0.0, 1.0]])
+    >>> view = cv2.warpPerspective(base, M, (240, 180))      # view 1 = view 0 moved by M
+    >>> H = to_reference_homographies([base, view], n_features=500, rng=0)
+    >>> from transync.metrics import corner_error
+    >>> bool(corner_error(H[1], np.linalg.inv(M), image_size=(240, 180)) < 0.5)
+    True
     """
     images = load_images(images)
     n = len(images)
@@ -44,10 +84,53 @@ def _finish(H, name, pw):
     return H
 
 
-def chained_homographies(images, *, reference=0, n_features=2000, features=None, **kw):
-    """OpenCV baseline: consecutive views matched and chained to the reference
-    (``H_i = H_{i-1} H_{i-1,i}`` outward from the reference); a failed link breaks the chain:
-    the views beyond it get NaN, with an :class:`~transync.exceptions.UnlinkedViewsWarning`."""
+def chained_homographies(images, *, reference=0, n_features=2000, features=None,
+                         **kw) -> np.ndarray:
+    """OpenCV baseline: consecutive views matched and chained to the reference.
+
+    ``H_i = H_{i-1} H_{i-1,i}`` outward from the reference; a failed link breaks the chain: the
+    views beyond it get NaN, with an :class:`~transync.exceptions.UnlinkedViewsWarning`.
+
+    Parameters
+    ----------
+    images : list of arrays or paths
+        The views, in sequence order.
+    reference : int, default=0
+        The reference view.
+    n_features : int, default=2000
+        SIFT features per view.
+    features : list of (pts, desc), optional
+        Precomputed features (as returned by :func:`sift_features`).
+    **kw
+        Passed to :func:`estimate_pairwise_homographies` (``rng``, ``method``, ...).
+
+    Returns
+    -------
+    ndarray of shape (N, 3, 3)
+        Homographies of every view into the reference, determinant 1 (NaN beyond a broken link).
+
+    Raises
+    ------
+    ValueError, TypeError
+        Invalid images or options.
+
+    Warns
+    -----
+    UnlinkedViewsWarning
+        When some views have no estimate.
+
+    Examples
+    --------
+    >>> import cv2
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> base = cv2.GaussianBlur((rng.random((180, 240)) * 255).astype(np.uint8), (0, 0), 1.5)
+    >>> M = np.array([[1.0, 0.05, 8.0], [-0.03, 1.0, 5.0], [0.0, 0.0, 1.0]])
+    >>> view = cv2.warpPerspective(base, M, (240, 180))      # view 1 = view 0 moved by M
+    >>> H = chained_homographies([base, view], n_features=500, rng=0)
+    >>> H.shape
+    (2, 3, 3)
+    """
     images = load_images(images)
     n = len(images)
     reference = check_int(reference, "reference", minimum=0, maximum=max(n - 1, 0))
@@ -73,6 +156,40 @@ def evaluate_alignment(images, H_est, H_true, *, masks_true, reference=0, masks_
     (isolates the alignment). ``brenner_ratio_own_masks`` (with ``masks_est``): the estimated
     homographies and masks against the true homographies and masks (the full output).
     Views without an estimate count as 1000 px errors.
+
+    Parameters
+    ----------
+    images : sequence of images
+        The views.
+    H_est : array_like of shape (N, 3, 3)
+        Estimated homographies of every view into the reference (NaN: no estimate).
+    H_true : array_like of shape (N, 3, 3)
+        Ground-truth homographies.
+    masks_true : sequence of bool arrays
+        Ground-truth plane mask of every view.
+    reference : int, default=0
+        The reference view (left out of the corner errors).
+    masks_est : sequence of bool arrays, optional
+        Estimated plane masks: adds segmentation scores and ``brenner_ratio_own_masks``.
+    pairwise : bool, default=False
+        Also report corner errors of every overlapping pair (:func:`pairwise_corner_error`).
+
+    Returns
+    -------
+    dict
+        ``mean_error``, ``max_error``, ``median_error`` (pixels), ``acc_1px``, ``acc_3px``,
+        ``acc_5px``, ``brenner_ratio`` and, as asked, the pairwise and segmentation entries.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> images = [rng.random((60, 80)), rng.random((60, 80))]
+    >>> H = np.stack([np.eye(3), np.eye(3)])
+    >>> masks = [np.ones((60, 80), bool)] * 2
+    >>> r = evaluate_alignment(images, H, H, masks_true=masks)
+    >>> r["mean_error"], r["acc_1px"], round(r["brenner_ratio"], 3)
+    (0.0, 1.0, 1.0)
     """
     gray = [to_gray(im) for im in images]
     n = len(gray)

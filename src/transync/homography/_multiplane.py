@@ -32,6 +32,15 @@ class MultiPlaneResult:
     homographies : list of ndarray (3, 3)
         ``homographies[k - 1]`` maps points of view 1 into view 2 for plane ``k``.
     info : dict
+
+    Examples
+    --------
+    See :func:`extract_planes`, which returns one.
+
+    >>> import numpy as np
+    >>> r = MultiPlaneResult(labels=np.array([1, 1, 0]), homographies=[np.eye(3)])
+    >>> len(r.homographies), r.labels.tolist()
+    (1, [1, 1, 0])
     """
 
     labels: np.ndarray
@@ -64,6 +73,7 @@ def extract_planes(x1, x2, *, threshold=5.0, min_inliers=10, max_planes=None, me
     method : str, default="ransac"
         Robust estimator (as in :func:`estimate_pairwise_homographies`).
     max_iter : int, default=5000
+        Iterations of each robust fit.
     rng : None, int or Generator, default=None
         Orders the remaining correspondences before every robust fit, and with them RANSAC's
         samples (OpenCV's global random state is never used).
@@ -71,6 +81,11 @@ def extract_planes(x1, x2, *, threshold=5.0, min_inliers=10, max_planes=None, me
     Returns
     -------
     MultiPlaneResult
+
+    Raises
+    ------
+    ValueError, TypeError
+        ``x1`` and ``x2`` not matching ``(n, 2)`` finite arrays, bad options.
 
     Examples
     --------
@@ -120,6 +135,23 @@ def extract_planes(x1, x2, *, threshold=5.0, min_inliers=10, max_planes=None, me
 def misclassification_error(pred, truth) -> float:
     """Fraction of points whose label differs from the ground truth under the best one-to-one
     relabelling of the planes (label 0, outliers, maps to 0).
+
+    Parameters
+    ----------
+    pred : array_like of int
+        Predicted plane label of every point (0: outlier).
+    truth : array_like of int
+        True plane label of every point (0: outlier), the same size.
+
+    Returns
+    -------
+    float
+        Misclassified fraction in [0, 1].
+
+    Raises
+    ------
+    ValueError, TypeError
+        Labels that are not integer arrays of the same size.
 
     Examples
     --------

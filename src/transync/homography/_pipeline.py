@@ -83,6 +83,12 @@ class DenseOptions:
         matches and their partners stays within ``1 + sparse_tolerance`` times that of the
         synchronized sparse solution.
     sparse_tolerance : float, default=0.25
+        Relative slack of the ``dense_check`` (see above).
+
+    Raises
+    ------
+    ValueError, TypeError
+        A field out of range or of the wrong type (checked when the options are created).
 
     Examples
     --------
@@ -152,6 +158,13 @@ class PlaneAlignmentResult:
         flipped, against all-plane in the first round; ``plane_fraction``, per-view dense
         outcomes, stage times); ``seconds``: timing per stage; ``sync``: the sparse
         :class:`LinearMapSyncResult`; ``options``: the :class:`DenseOptions` used.
+
+    Examples
+    --------
+    See :func:`estimate_plane_homographies`.
+
+    >>> sorted(PlaneAlignmentResult.__dataclass_fields__)[:3]
+    ['converged', 'homographies', 'info']
     """
 
     homographies: np.ndarray
@@ -272,9 +285,37 @@ def _sparse_residual(i, Hi, H, corr):
 EXHAUSTIVE_UP_TO = 40
 
 
-def view_graph_pairs(H_to_ref, sizes, *, reference, k=3):
-    """Pairs (i, j) linking every view to its ``k`` nearest views (footprint centres in the
-    reference frame); views without an estimate are linked to every other view."""
+def view_graph_pairs(H_to_ref, sizes, *, reference, k=3) -> list[tuple[int, int]]:
+    """Pairs (i, j) linking every view to its ``k`` nearest views.
+
+    Distances are between the views' footprint centres in the reference frame; views without
+    an estimate are linked to every other view. The reference is not counted among the nearest
+    views (link it to every view yourself when that is wanted).
+
+    Parameters
+    ----------
+    H_to_ref : array_like of shape (N, 3, 3)
+        Homographies of every view into the reference (NaN: no estimate).
+    sizes : sequence of (width, height)
+        Image sizes in pixels.
+    reference : int
+        The reference view.
+    k : int, default=3
+        Nearest views per view.
+
+    Returns
+    -------
+    list of (int, int)
+        Sorted pairs ``i < j``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.geometry import translation
+    >>> H = np.stack([translation(10.0 * i, 0.0) for i in range(4)])   # views in a row
+    >>> view_graph_pairs(H, [(100, 100)] * 4, reference=0, k=1)
+    [(1, 2), (2, 3)]
+    """
     n = len(H_to_ref)
     centers = np.full((n, 2), np.nan)
     for i in range(n):
@@ -498,17 +539,22 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
     images : list of arrays (grey or RGB) or file paths
         At least 2 images, each at least 16 x 16 pixels, finite.
     reference : int, default=0
+        The reference view: its homography is the identity.
     dense : bool or DenseOptions, default=True
         Run the dense refinement (with these options).
     segment : bool, default=True
+        Segment the plane in every round; with False the masks are all True and the dense
+        refinement uses every pixel.
     pairs : "auto", "all", list of (i, j) or PairwiseHomographies, default="auto"
         The view graph, or precomputed pairwise estimates (then no matching is done). "auto"
         matches all pairs up to ``EXHAUSTIVE_UP_TO = 40`` views and, beyond, every view to the
         reference and to its ``n_neighbors`` nearest views.
     n_neighbors : int, default=3
+        Beyond ``EXHAUSTIVE_UP_TO`` views: nearest views each view is matched to.
     method : str, default="ransac"
         Robust estimator of :func:`estimate_pairwise_homographies` (USAC variants allowed).
     threshold : float, default=3.0
+        RANSAC reprojection threshold in pixels.
     n_features : int, default=2000
         SIFT features per view.
     robust : bool, default=True

@@ -40,6 +40,13 @@ class PlaneSegmentation:
         Canvas position of the reference view's origin.
     probability : ndarray (N, H, W)
         Plane probability of every view and canvas pixel (before smoothing).
+
+    Examples
+    --------
+    See :func:`segment_plane_evidence`, which returns one.
+
+    >>> sorted(PlaneSegmentation.__dataclass_fields__)
+    ['canvas_masks', 'count', 'masks', 'median', 'offset', 'probability']
     """
 
     masks: list
@@ -67,9 +74,38 @@ def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, sm
     Parameters and method as in :func:`segment_plane_evidence`, which also returns the
     evidence behind the masks.
 
+    Parameters
+    ----------
+    images : list of (h_i, w_i) grey images
+        The views.
+    homographies : ndarray of shape (N, 3, 3)
+        ``homographies[i]`` maps pixels of view ``i`` into the reference view.
+    reference, window, margin, smooth, min_views, threshold, rng
+        As in :func:`segment_plane_evidence`.
+
     Returns
     -------
     masks : list of (h_i, w_i) bool arrays
+        The plane mask of every view.
+
+    Raises
+    ------
+    ValueError, TypeError
+        As :func:`segment_plane_evidence`.
+
+    Examples
+    --------
+    >>> import cv2
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> base = cv2.GaussianBlur((rng.random((120, 160)) * 255).astype(np.uint8), (0, 0), 1.5)
+    >>> shifts = [(0.0, 0.0), (4.0, 2.0), (-3.0, 5.0)]
+    >>> Ms = [np.array([[1.0, 0.0, x], [0.0, 1.0, y], [0.0, 0.0, 1.0]]) for x, y in shifts]
+    >>> views = [cv2.warpPerspective(base, M, (160, 120)) for M in Ms]
+    >>> H = np.stack([np.linalg.inv(M) for M in Ms])        # view i -> view 0
+    >>> masks = segment_plane(views, H, rng=0)          # every pixel lies on the one plane
+    >>> [m.shape for m in masks], round(float(np.mean(masks[1])), 2)
+    ([(120, 160), (120, 160), (120, 160)], 1.0)
     """
     return segment_plane_evidence(images, homographies, reference=reference, window=window,
                                   margin=margin, smooth=smooth, min_views=min_views,
@@ -112,9 +148,11 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
     Parameters
     ----------
     images : list of (h_i, w_i) grey images
+        The views.
     homographies : ndarray (N, 3, 3)
         ``homographies[i]`` maps pixels of view ``i`` into the reference view.
     reference : int, default=0
+        The reference view.
     window : int, default=7
         Window of the local ZNCC (1 to 101 pixels).
     margin : float, default=0.2
@@ -133,6 +171,27 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
     Returns
     -------
     PlaneSegmentation
+        The masks, the canvas masks, the median image, the per-pixel view counts, the canvas
+        offset and every view's plane probability.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Fewer than two views, homographies of the wrong shape, bad options.
+
+    Examples
+    --------
+    >>> import cv2
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> base = cv2.GaussianBlur((rng.random((120, 160)) * 255).astype(np.uint8), (0, 0), 1.5)
+    >>> shifts = [(0.0, 0.0), (4.0, 2.0), (-3.0, 5.0)]
+    >>> Ms = [np.array([[1.0, 0.0, x], [0.0, 1.0, y], [0.0, 0.0, 1.0]]) for x, y in shifts]
+    >>> views = [cv2.warpPerspective(base, M, (160, 120)) for M in Ms]
+    >>> H = np.stack([np.linalg.inv(M) for M in Ms])        # view i -> view 0
+    >>> seg = segment_plane_evidence(views, H, rng=0)
+    >>> seg.probability.shape[0], seg.probability.shape[1:] == seg.count.shape
+    (3, True)
     """
     from sklearn.linear_model import LogisticRegression
 

@@ -53,6 +53,18 @@ class PairwiseHomographies:
         ``(i, j) -> (pts_i, pts_j, inlier)``, the ratio-test matches of each attempted pair.
     info : dict
         ``n_keypoints`` per view, ``seconds``.
+
+    Examples
+    --------
+    See :func:`estimate_pairwise_homographies`, which returns one.
+
+    >>> import numpy as np
+    >>> H = np.full((2, 2, 3, 3), np.nan)
+    >>> H[0, 1] = H[1, 0] = np.eye(3)
+    >>> pw = PairwiseHomographies(H=H, mask=~np.eye(2, dtype=bool), weights=np.ones((2, 2)),
+    ...                           failed=[])
+    >>> pw.H.shape, bool(pw.mask[0, 1])
+    ((2, 2, 3, 3), True)
     """
 
     H: np.ndarray
@@ -87,10 +99,35 @@ def _check_image(arr, k) -> np.ndarray:
 
 
 def load_images(images) -> list:
-    """Read file paths (``cv2.imread``) and pass arrays through; returns a list of arrays.
+    """Read file paths (``cv2.imread``) and pass arrays through.
 
     Every image is checked: (H, W) or (H, W, C) with C in (1, 3, 4), integer or float pixels,
     finite, at least 16 x 16 pixels.
+
+    Parameters
+    ----------
+    images : sequence of arrays or paths
+        The views (a stacked ``(N, H, W)`` or ``(N, H, W, C)`` array is split).
+
+    Returns
+    -------
+    list of ndarray
+        The images (read from disk where a path was given).
+
+    Raises
+    ------
+    TypeError
+        A single path or image instead of a sequence, or non-numeric pixels.
+    ValueError
+        Fewer than one image, images smaller than 16 x 16 pixels or not finite, bad shapes.
+    FileNotFoundError
+        A path that cannot be read.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> [im.shape for im in load_images([np.zeros((20, 30)), np.zeros((16, 16, 3))])]
+    [(20, 30), (16, 16, 3)]
     """
     if isinstance(images, np.ndarray) and images.ndim in (3, 4) and images.dtype != object:
         if images.ndim == 3 and images.shape[-1] in (3, 4) and images.shape[0] > 4:
@@ -127,6 +164,18 @@ def to_gray(image) -> np.ndarray:
     taken as [0, 1] (overshoot from interpolation is clipped), other floats as [0, 255]; other
     integer types as 8-bit when their maximum is <= 255, else rescaled to their maximum.
 
+    Parameters
+    ----------
+    image : array_like of shape (h, w) or (h, w, c)
+        Grey or color image (c in 1, 3, 4).
+
+    Returns
+    -------
+    ndarray of shape (h, w), uint8
+        Grey levels.
+
+    Examples
+    --------
     >>> import numpy as np
     >>> to_gray(np.full((2, 2, 3), 0.5)).tolist()
     [[128, 128], [128, 128]]
@@ -151,8 +200,31 @@ def to_gray(image) -> np.ndarray:
     return np.clip(np.round(arr), 0, 255).astype(np.uint8)
 
 
-def sift_features(gray, *, n_features=4000):
-    """SIFT keypoint coordinates (k, 2) float32 and descriptors (k, 128) float32."""
+def sift_features(gray, *, n_features=4000) -> tuple[np.ndarray, np.ndarray]:
+    """SIFT keypoint coordinates and descriptors of a grey image (OpenCV).
+
+    Parameters
+    ----------
+    gray : ndarray of shape (h, w), uint8
+        Grey image (see :func:`to_gray`).
+    n_features : int, default=4000
+        Largest number of keypoints kept (the strongest).
+
+    Returns
+    -------
+    points : ndarray of shape (k, 2), float32
+        Keypoint coordinates ``(x, y)`` in pixels.
+    descriptors : ndarray of shape (k, 128), float32
+        SIFT descriptors; both arrays are empty when no keypoint is found.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> pts, desc = sift_features((rng.random((64, 64)) * 255).astype(np.uint8), n_features=50)
+    >>> pts.shape[1], desc.shape[1], len(pts) <= 51
+    (2, 128, True)
+    """
     sift = cv2.SIFT_create(nfeatures=int(n_features))
     kp, desc = sift.detectAndCompute(gray, None)
     if desc is None or not kp:
@@ -277,6 +349,7 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
     Parameters
     ----------
     images : list of arrays or paths
+        The views (see :func:`load_images`).
     pairs : list of (i, j), default=None
         View graph; default all pairs.
     method : str, default="ransac"
@@ -288,7 +361,9 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
     threshold : float, default=3.0
         Reprojection threshold in pixels.
     max_iter : int, default=2000
+        Iterations of the robust estimator.
     confidence : float, default=0.995
+        Confidence of the robust estimator.
     min_inliers : int, default=20
         Pairs with fewer inliers are recorded as failed.
     n_features : int, default=4000
@@ -308,6 +383,27 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
     Returns
     -------
     PairwiseHomographies
+        ``H[i, j]`` maps pixels of view ``j`` into view ``i`` (both directions filled), with the
+        mask of estimated pairs, inlier counts as weights and the failed pairs with a reason.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Invalid images, pairs or options (an unknown ``method``, a ``ratio`` outside (0, 1]).
+
+    Examples
+    --------
+    >>> import cv2
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> base = cv2.GaussianBlur((rng.random((180, 240)) * 255).astype(np.uint8), (0, 0), 1.5)
+    >>> M = np.array([[1.0, 0.05, 8.0], [-0.03, 1.0, 5.0], [0.0, 0.0, 1.0]])
+    >>> view = cv2.warpPerspective(base, M, (240, 180))      # view 1 = view 0 moved by M
+    >>> pw = estimate_pairwise_homographies([base, view], n_features=500, rng=0)
+    >>> bool(pw.mask[0, 1]), pw.failed
+    (True, [])
+    >>> bool(np.allclose(pw.H[1, 0] / pw.H[1, 0][2, 2], M, atol=0.05))
+    True
     """
     import time
 
@@ -441,10 +537,13 @@ def estimate_rectified_pairwise(images, H_to_ref, pairs, *, reference=0, margin=
     Parameters
     ----------
     images : list of grey images
+        The views.
     H_to_ref : ndarray (N, 3, 3)
         Current homographies of every view into the reference (NaN: view skipped).
     pairs : list of (i, j)
+        The view pairs to estimate.
     reference : int, default=0
+        The reference view.
     margin : float, default=0.15
         The canvas extends the reference frame by this fraction of its size on every side
         (at most 2).
@@ -455,6 +554,30 @@ def estimate_rectified_pairwise(images, H_to_ref, pairs, *, reference=0, margin=
         within this distance (pixels); Lowe's ratio test among them.
     n_features, threshold, method, ratio, min_inliers, rng
         As in :func:`estimate_pairwise_homographies`.
+
+    Returns
+    -------
+    PairwiseHomographies
+        The pairwise homographies between the original views (pixels of ``j`` into ``i``).
+
+    Raises
+    ------
+    ValueError, TypeError
+        Invalid images, ``H_to_ref`` of the wrong shape, pairs out of range, bad options.
+
+    Examples
+    --------
+    >>> import cv2
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> base = cv2.GaussianBlur((rng.random((120, 160)) * 255).astype(np.uint8), (0, 0), 1.5)
+    >>> shifts = [(0.0, 0.0), (4.0, 2.0), (-3.0, 5.0)]
+    >>> Ms = [np.array([[1.0, 0.0, x], [0.0, 1.0, y], [0.0, 0.0, 1.0]]) for x, y in shifts]
+    >>> views = [cv2.warpPerspective(base, M, (160, 120)) for M in Ms]
+    >>> H = np.stack([np.linalg.inv(M) for M in Ms])        # view i -> view 0
+    >>> pw = estimate_rectified_pairwise(views, H, [(0, 1), (1, 2)], n_features=500, rng=0)
+    >>> pw.failed, np.round(pw.H[0, 1] / pw.H[0, 1][2, 2], 1)[:2].tolist()
+    ([], [[1.0, 0.0, -4.0], [0.0, 1.0, -2.0]])
     """
     from scipy.spatial import cKDTree
 

@@ -55,6 +55,23 @@ def solver_options(method: str) -> tuple[str, ...]:
     Read from the solver's signature: its keyword-only parameters except ``n1`` and ``n2``, which
     the front door sets from the graphs.
 
+    Parameters
+    ----------
+    method : str
+        One of :data:`METHODS`.
+
+    Returns
+    -------
+    tuple of str
+        The option names, in the solver's order.
+
+    Raises
+    ------
+    ValueError
+        Unknown ``method``.
+
+    Examples
+    --------
     >>> solver_options("sm")
     ('max_iter', 'tol')
     """
@@ -113,6 +130,14 @@ def match_graphs(g1: Graph, g2: Graph, *, method: str = "rrwm", affinity=None,
     DegenerateInputError
         The default Gaussian affinity underflows (``sigma2`` far below the squared scale of the
         points); the message suggests a ``sigma2``.
+
+    Examples
+    --------
+    >>> from transync.datasets import make_point_matching_problem
+    >>> p = make_point_matching_problem(n_inliers=10, rng=0)       # rotated, shuffled copy
+    >>> res = match_graphs(p.g1, p.g2, method="rrwm")
+    >>> bool((res.assignment == p.truth).all()), res.converged
+    (True, True)
     """
     check_choice(method, "method", tuple(METHODS))
     _check_options(method, options)

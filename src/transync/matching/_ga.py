@@ -43,6 +43,31 @@ class GAStepper(_BaseStepper):
     ``beta_rate``. The iterate is the real block of the slack-augmented matrix: non-negative with
     row and column sums at most 1. :meth:`set_iterate` sets that block and fills the slack row and
     column with the missing mass.
+
+    Parameters
+    ----------
+    affinity : Affinity or array_like/sparse of shape (n1 n2, n1 n2)
+        The affinity ``K``.
+    n1, n2 : int, optional
+        Graph sizes; required when ``affinity`` is a matrix.
+    beta0, beta_max, beta_rate, max_inner, inner_tol, sinkhorn_max_iter, sinkhorn_tol
+        As in :func:`ga`.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Invalid ``affinity`` or options (as :func:`ga`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> K = np.ones((4, 4)) + 3 * np.eye(4)              # n1 = n2 = 2
+    >>> K[1, 2] = K[2, 1] = 0.0
+    >>> s = GAStepper(K, n1=2, n2=2)
+    >>> while not s.step():
+    ...     pass
+    >>> s.result().assignment
+    array([0, 1])
     """
 
     method = "ga"

@@ -35,6 +35,26 @@ class IPFPStepper(_BaseStepper):
     The iterate ``x`` stays in the convex hull of the (partial) permutation matrices; the best
     discrete point met so far is kept and returned by :meth:`result`. The affinity's product
     ``K x`` is updated incrementally, so each step costs one product with ``K``.
+
+    Parameters
+    ----------
+    affinity : Affinity or array_like/sparse of shape (n1 n2, n1 n2)
+        The affinity ``K``.
+    n1, n2 : int, optional
+        Graph sizes; required when ``affinity`` is a matrix.
+    init, max_iter, tol
+        As in :func:`ipfp`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> K = np.ones((4, 4)) + 3 * np.eye(4)              # n1 = n2 = 2
+    >>> K[1, 2] = K[2, 1] = 0.0
+    >>> s = IPFPStepper(K, n1=2, n2=2)
+    >>> while not s.step():
+    ...     pass
+    >>> s.result().assignment
+    array([0, 1])
     """
 
     method = "ipfp"

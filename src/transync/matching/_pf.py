@@ -1,6 +1,7 @@
 """Path following for a general affinity (convex-to-concave, after Zaslavskiy et al. 2009).
 
-ALGORITHMS.md section 1.6, "variant for the general affinity K": maximize
+The form for a general affinity K (methods page *Pairwise quadratic assignment* of the
+documentation): maximize
 
 .. math:: f_\\lambda(x) = x^\\top K x - (1 - 2\\lambda)\\,\\mu\\,\\|x\\|^2,
           \\qquad \\mu \\ge \\lambda_{\\max}(K),
@@ -47,6 +48,31 @@ class PFStepper(_BaseStepper):
     ``dlambda`` (down to ``min_step``) and retries; small moves double ``dlambda`` (up to ``step``).
     The iterate is the Frank-Wolfe point: in the Birkhoff polytope (``n1 == n2``) or, for unequal
     sizes, in the polytope whose smaller side is stochastic and larger side sub-stochastic.
+
+    Parameters
+    ----------
+    affinity : Affinity or array_like/sparse of shape (n1 n2, n1 n2)
+        The affinity ``K``.
+    n1, n2 : int, optional
+        Graph sizes; required when ``affinity`` is a matrix.
+    max_iter, step, min_step, jump_tol, fw_max_iter, fw_tol
+        As in :func:`pf`.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Invalid ``affinity`` or options (as :func:`pf`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> K = np.ones((4, 4)) + 3 * np.eye(4)              # n1 = n2 = 2
+    >>> K[1, 2] = K[2, 1] = 0.0
+    >>> s = PFStepper(K, n1=2, n2=2)
+    >>> while not s.step():
+    ...     pass
+    >>> s.result().assignment
+    array([0, 1])
     """
 
     method = "pf"

@@ -50,6 +50,16 @@ class MatchingResult:
         Number of nodes of the second graph (used by :meth:`to_matrix`).
     info : dict
         Method-specific details (iteration counts of inner loops, normalisation constants, ...).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.matching import sm
+    >>> res = sm(np.ones((4, 4)) + 3 * np.eye(4), n1=2, n2=2)
+    >>> res.assignment.shape, res.soft.shape, res.method
+    ((2,), (2, 2), 'sm')
+    >>> int(res.to_matrix(2).sum())
+    2
     """
 
     assignment: np.ndarray

@@ -75,6 +75,32 @@ class RRWMStepper(_BaseStepper):
     ``S``, :meth:`set_iterate` replaces ``S`` and re-forms ``v``; the rounding uses ``v``.
 
     Parameters are those of :func:`rrwm`.
+
+    Parameters
+    ----------
+    affinity : Affinity or array_like/sparse of shape (n1 n2, n1 n2)
+        The affinity ``K``.
+    *args, **kwargs
+        ``n1``, ``n2`` and the options of :func:`rrwm` (``c``, ``amplification``, ``max_iter``,
+        ``tol``, ``sinkhorn_tol``, ``sinkhorn_max_iter``).
+    variant : {"original", "pygmtools"}, optional
+        Which published implementation to follow (default ``"original"``), as in :func:`rrwm`.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Invalid ``affinity``, ``variant`` or options (as :func:`rrwm`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> K = np.ones((4, 4)) + 3 * np.eye(4)              # n1 = n2 = 2
+    >>> K[1, 2] = K[2, 1] = 0.0
+    >>> s = RRWMStepper(K, n1=2, n2=2)
+    >>> while not s.step():
+    ...     pass
+    >>> s.result().assignment
+    array([0, 1])
     """
 
     method = "rrwm"

@@ -352,7 +352,8 @@ def _batch_augmented(M, *, tol: float, max_iter: int, which=None) -> None:
 
 
 def sinkhorn_batch(A, *, slack: str = "mass", domain: str = "scaling", tol: float | None = None,
-                   max_iter: int = 1000, half_sweeps: int | None = None, check_every: int = 1):
+                   max_iter: int = 1000, half_sweeps: int | None = None,
+                   check_every: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Sinkhorn normalisation of a stack of ``b`` kernels, each as its own 2-D call would give.
 
     The lock-step multi-graph solvers normalise all pairs at once with it. Each matrix stops on
@@ -367,6 +368,7 @@ def sinkhorn_batch(A, *, slack: str = "mass", domain: str = "scaling", tol: floa
         Marginals when ``n1 != n2``: the smaller side sums to one and the larger side's slack
         mass ``|n1 - n2|`` is spread (``"mass"``), or the sides alternate (``"none"``).
     domain : {"scaling", "log"}, default="scaling"
+        Whether ``A`` holds kernels or log-kernels.
     tol : float, optional
         Stop a matrix when its row-sum error falls below ``tol`` (tested every
         ``check_every`` sweeps); ``None``: no test.
@@ -375,12 +377,22 @@ def sinkhorn_batch(A, *, slack: str = "mass", domain: str = "scaling", tol: floa
     half_sweeps : int, optional
         Instead of ``tol``/``max_iter``: exactly this many half-sweeps (>= 1), rows first.
     check_every : int, default=1
+        Test the tolerance every this many sweeps.
 
     Returns
     -------
     X : ndarray of shape (b, n1, n2)
+        The normalised matrices.
     n_sweeps : ndarray of shape (b,)
+        Sweeps each matrix took.
     converged : ndarray of shape (b,) of bool
+        Whether each matrix met ``tol``.
+
+    Raises
+    ------
+    ValueError, TypeError
+        ``A`` not a non-empty 3-d stack (negative, non-finite or with an all-zero row or column
+        in the scaling domain), unknown ``slack`` or ``domain``, bad counts or tolerances.
 
     Examples
     --------
@@ -420,6 +432,30 @@ def sinkhorn_augmented_batch(M, *, tol: float, max_iter: int, which=None) -> Non
     a sweep, or ``max_iter`` sweeps; ``which`` restricts the work to some matrices. Every matrix
     gets exactly the iterate of ``sinkhorn_normalize(M[k], domain="augmented", ...)``.
 
+    Parameters
+    ----------
+    M : ndarray of shape (b, n1 + 1, n2 + 1), float
+        Non-negative kernels with their slack row and column (last); overwritten.
+    tol : float
+        Stop when the real block changes by less than this (entrywise L1) over a sweep.
+    max_iter : int
+        Maximum sweeps.
+    which : array_like of int or bool, optional
+        The matrices of the stack to normalize (default: all).
+
+    Returns
+    -------
+    None
+        ``M`` is normalized in place.
+
+    Raises
+    ------
+    ValueError
+        ``M`` not a writable float stack of that shape, negative or non-finite entries, an
+        all-zero row or column, bad ``tol`` or ``max_iter``.
+
+    Examples
+    --------
     >>> import numpy as np
     >>> from transync.matching import sinkhorn_augmented_batch
     >>> M = np.ones((2, 3, 3))

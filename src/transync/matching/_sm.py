@@ -33,6 +33,26 @@ class SMStepper(_BaseStepper):
     The iterate is the current unit-norm eigenvector estimate, reshaped to ``(n1, n2)``. The first
     step starts from the uniform vector ``1 / (n1 n2)`` exactly as pygmtools does, so that the two
     produce the same iterates on the same ``K``.
+
+    Parameters
+    ----------
+    affinity : Affinity or array_like/sparse of shape (n1 n2, n1 n2)
+        The affinity ``K``.
+    n1, n2 : int, optional
+        Graph sizes; required when ``affinity`` is a matrix.
+    max_iter, tol
+        As in :func:`sm`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> K = np.ones((4, 4)) + 3 * np.eye(4)              # n1 = n2 = 2
+    >>> K[1, 2] = K[2, 1] = 0.0
+    >>> s = SMStepper(K, n1=2, n2=2)
+    >>> while not s.step():
+    ...     pass
+    >>> s.result().assignment
+    array([0, 1])
     """
 
     method = "sm"

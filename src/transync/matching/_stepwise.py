@@ -71,6 +71,23 @@ class Stepper(Protocol):
         resets ``converged`` so that at least one more step is taken.
     result()
         Round the current state with the Hungarian algorithm and return a :class:`MatchingResult`.
+
+    Examples
+    --------
+    Every solver's stepper follows this protocol; driving one by hand:
+
+    >>> import numpy as np
+    >>> from transync.matching import RRWMStepper
+    >>> K = np.ones((4, 4)) + 3 * np.eye(4)
+    >>> K[1, 2] = K[2, 1] = 0.0
+    >>> s = RRWMStepper(K, n1=2, n2=2)
+    >>> s.step(), s.n_iter, s.iterate.shape
+    (False, 1, (2, 2))
+    >>> s.set_iterate(np.full((2, 2), 0.5))            # e.g. a synchronized matrix
+    >>> while not s.step():
+    ...     pass
+    >>> s.result().assignment
+    array([0, 1])
     """
 
     affinity: Affinity

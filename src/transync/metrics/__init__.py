@@ -3,7 +3,8 @@
 * Matchings (:mod:`._matching`, :mod:`._multimatching`): :func:`matching_accuracy`,
   :func:`matching_precision_recall`, :func:`affinity_score`, :func:`cycle_inconsistency`,
   :func:`multimatching_accuracy`, :func:`multimatching_precision_recall`.
-* Constraint violations of multi-matchings (:mod:`._constraints`, ALGORITHMS.md §5):
+* Constraint violations of multi-matchings (:mod:`._constraints`; methods page
+  *Synthetic protocols and evaluation measures*):
   :func:`constraint_violations` (CVR, CVVR, ACVV for capacity and transitivity).
 * Plane homographies (:mod:`._homography`): :func:`corner_error`, :func:`pairwise_corner_error`,
   :func:`corner_accuracy`, :func:`brenner_focus`, :func:`segmentation_scores`.

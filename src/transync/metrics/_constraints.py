@@ -1,4 +1,6 @@
-"""Constraint violations of (possibly soft) multi-matchings: CVR, CVVR, ACVV (ALGORITHMS.md §5).
+"""Constraint violations of (possibly soft) multi-matchings: CVR, CVVR, ACVV.
+
+Summary: methods page *Synthetic protocols and evaluation measures* of the documentation.
 
 Two families of constraints ``g(x) <= 1`` are measured, separately:
 
@@ -66,6 +68,13 @@ class ConstraintStats:
         Sum of ``|g(x)|`` over the evaluated constraints.
     sampled : bool
         The evaluated constraints are a uniform random sample.
+
+    Examples
+    --------
+    >>> s = ConstraintStats(n_constraints=10, n_evaluated=10, n_violated=2, violation=0.5,
+    ...                     magnitude=8.0)
+    >>> s.cvr, s.cvvr, s.acvv
+    (0.2, 0.0625, 0.25)
     """
 
     n_constraints: int
@@ -97,6 +106,24 @@ class ConstraintViolations:
 
     ``info`` holds ``input`` (``"pairwise"`` or ``"absolute"``), ``transitivity_mode``
     (``"exact"``, ``"exhaustive"`` or ``"sampled"``), ``n_pairs`` and ``n_object_triples``.
+
+    Attributes
+    ----------
+    capacity : ConstraintStats
+        Row, column and slot capacities (c1).
+    transitivity : ConstraintStats
+        Transitivity over triples of objects (c2).
+    info : dict
+        How the statistics were computed (exact or sampled, sizes).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.metrics import constraint_violations
+    >>> maps = {(0, 1): np.array([0, 1]), (1, 2): np.array([0, 1]), (0, 2): np.array([1, 0])}
+    >>> v = constraint_violations(maps)                         # one inconsistent triangle
+    >>> v.capacity.n_violated, v.transitivity.n_violated > 0
+    (0, True)
     """
 
     capacity: ConstraintStats
@@ -459,9 +486,9 @@ def constraint_violations(X, *, sizes=None, max_triples: int = 1_000_000, tol: f
     """Capacity (c1) and transitivity (c2) violations of a multi-matching: CVR, CVVR, ACVV.
 
     Definitions, what is exact and what is sampled: see :mod:`transync.metrics._constraints`
-    (module docstring) and ALGORITHMS.md §5. In short, for constraints ``g(x) <= 1``:
-    CVR = violated / constraints, CVVR = sum of ``g(x) - 1`` over violated / sum of ``|g(x)|``,
-    ACVV = sum of ``g(x) - 1`` over violated / violated.
+    (module docstring) and the methods page *Synthetic protocols and evaluation measures*. In
+    short, for constraints ``g(x) <= 1``: CVR = violated / constraints, CVVR = sum of ``g(x) - 1``
+    over violated / sum of ``|g(x)|``, ACVV = sum of ``g(x) - 1`` over violated / violated.
 
     Parameters
     ----------

@@ -1,4 +1,5 @@
-"""Accuracy measures for multi-view plane homographies: corner errors, Brenner focus, segmentation."""
+"""Accuracy measures for multi-view plane homographies: corner errors, Brenner focus,
+segmentation."""
 
 from __future__ import annotations
 
@@ -97,7 +98,31 @@ def corner_error(H_est, H_true, *, image_size) -> np.ndarray:
 
 
 def corner_accuracy(errors, thresholds=(1.0, 3.0, 5.0)) -> dict:
-    """Fraction of views whose corner error is at most each threshold (pixels)."""
+    """Fraction of views whose corner error is at most each threshold (pixels).
+
+    Parameters
+    ----------
+    errors : array_like of shape (N,)
+        Corner errors in pixels (``inf`` for a failed view), e.g. from :func:`corner_error`.
+    thresholds : sequence of float, default=(1.0, 3.0, 5.0)
+        Thresholds in pixels.
+
+    Returns
+    -------
+    dict
+        ``{"acc@<t>px": fraction}`` for every threshold ``t``.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Empty, NaN or negative errors; thresholds that are not a sequence of non-negative
+        numbers.
+
+    Examples
+    --------
+    >>> corner_accuracy([0.5, 2.0, float("inf")], thresholds=(1, 3))
+    {'acc@1px': 0.333..., 'acc@3px': 0.666...}
+    """
     errors = check_array(errors, "errors", ndim=1, finite=False)
     if errors.size == 0:
         raise ValueError("`errors` must hold at least one corner error, got an empty array")
@@ -116,7 +141,36 @@ def pairwise_corner_error(H_est, H_true, *, image_size, min_overlap=0.05) -> np.
     """Corner errors of every ordered pair of overlapping views (``inv(H_i) @ H_j``), in pixels.
 
     Two views overlap when the ground-truth footprint of view ``j`` covers at least
-    ``min_overlap`` of view ``i``. Returns a flat array over those pairs.
+    ``min_overlap`` of view ``i``.
+
+    Parameters
+    ----------
+    H_est : array_like of shape (N, 3, 3)
+        Estimated homographies of every view into the reference (NaN for a failed view: an
+        infinite error).
+    H_true : array_like of shape (N, 3, 3)
+        Ground-truth homographies, finite and invertible.
+    image_size : (width, height) or array_like of shape (N, 2)
+        Image sizes in pixels.
+    min_overlap : float, default=0.05
+        Fraction of view ``i`` that view ``j``'s footprint must cover for the pair to count.
+
+    Returns
+    -------
+    ndarray of shape (n_pairs,)
+        Mean corner transfer error of every overlapping ordered pair, in pixels of view ``i``.
+
+    Raises
+    ------
+    ValueError
+        Mis-shaped stacks, or non-finite or singular ground truth.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> H = np.stack([np.eye(3), np.eye(3)])
+    >>> pairwise_corner_error(H, H, image_size=(64, 48)).tolist()
+    [0.0, 0.0]
     """
     import cv2
 
@@ -157,10 +211,30 @@ def pairwise_corner_error(H_est, H_true, *, image_size, min_overlap=0.05) -> np.
 
 
 def brenner_focus(image, mask=None) -> float:
-    """Brenner focus measure: mean over ``mask`` of ``max(|I(x+2,y)-I(x,y)|, |I(x,y+2)-I(x,y)|)^2``.
+    """Brenner focus measure: mean of ``max(|I(x+2,y) - I(x,y)|, |I(x,y+2) - I(x,y)|)^2``.
 
     Images are converted to grey levels in [0, 1] (uint8 divided by 255). Sharp (well aligned)
     mean warped images score higher than blurred ones.
+
+    Parameters
+    ----------
+    image : array_like of shape (h, w) or (h, w, c)
+        Grey or color image (1, 3 or 4 channels), finite.
+    mask : array_like of shape (h, w), bool, optional
+        Pixels to average over; a difference counts when both of its pixels are inside.
+
+    Returns
+    -------
+    float
+        The measure (0.0 when no difference is inside the mask).
+
+    Raises
+    ------
+    TypeError
+        A non-numeric image.
+    ValueError
+        Empty, non-finite or mis-shaped image or mask; values so large that the squares
+        overflow.
 
     Examples
     --------
@@ -212,11 +286,38 @@ def brenner_focus(image, mask=None) -> float:
 
 
 def segmentation_scores(pred, truth, *, valid=None) -> dict:
-    """Pixel-wise precision, recall, F1 and IoU of binary masks (stacks allowed)."""
+    """Pixel-wise precision, recall, F1 and IoU of binary masks (stacks allowed).
+
+    Parameters
+    ----------
+    pred : array_like of bool
+        Predicted mask (or stack of masks).
+    truth : array_like of bool
+        Ground-truth mask, the same shape as ``pred``.
+    valid : array_like of bool, optional
+        Pixels to count (default: all).
+
+    Returns
+    -------
+    dict
+        ``{"precision", "recall", "f1", "iou"}``, floats; precision, recall and IoU are 1.0 when
+        their denominator is empty.
+
+    Raises
+    ------
+    ValueError
+        ``pred`` and ``truth`` of different shapes.
+
+    Examples
+    --------
+    >>> segmentation_scores([[True, True, False]], [[True, False, False]])
+    {'precision': 0.5, 'recall': 1.0, 'f1': 0.666..., 'iou': 0.5}
+    """
     p = np.asarray(pred, dtype=bool)
     t = np.asarray(truth, dtype=bool)
     if p.shape != t.shape:
-        raise ValueError(f"`pred` and `truth` must have the same shape, got {p.shape} and {t.shape}")
+        raise ValueError(f"`pred` and `truth` must have the same shape, got {p.shape} and "
+                         f"{t.shape}")
     if valid is not None:
         v = np.asarray(valid, dtype=bool)
         p, t = p[v], t[v]

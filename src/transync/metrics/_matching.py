@@ -38,7 +38,29 @@ def matching_accuracy(assignment, truth) -> float:
     """Fraction of inlier nodes matched to their true partner (Cho et al. 2010; Yan et al.).
 
     Inliers are the nodes with ``truth[u] >= 0``; matches of outlier nodes are ignored, as in
-    Cho et al.'s accuracy and Yan et al.'s ``cal_acc``. Returns 1.0 when there are no inliers.
+    Cho et al.'s accuracy and Yan et al.'s ``cal_acc``.
+
+    Parameters
+    ----------
+    assignment : array_like of shape (n1,), int
+        Predicted assignment (``-1``: unmatched).
+    truth : array_like of shape (n1,), int
+        True partner of every node, ``-1`` for outliers.
+
+    Returns
+    -------
+    float
+        Accuracy in [0, 1]; 1.0 when there are no inliers.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Invalid assignments, or of different lengths.
+
+    Examples
+    --------
+    >>> matching_accuracy([0, 2, 1, 3], [0, 1, 2, -1])
+    0.333...
     """
     a, t = _pair(assignment, truth)
     inl = t >= 0
@@ -54,8 +76,30 @@ def multimatching_accuracy(prediction, truth, *, pairs=None) -> float:
     that ``truth`` puts in the same universe slot. ``truth`` is a
     :class:`~transync.permutations.MultiMatching` (or its labels); ``prediction`` a
     ``MultiMatching``, labels, a result carrying ``.matching``, or a dict
-    ``{(i, j): assignment}``. One implementation: :meth:`MultiMatching.accuracy`.
+    ``{(i, j): assignment}``. One implementation:
+    :meth:`transync.permutations.MultiMatching.accuracy`.
 
+    Parameters
+    ----------
+    prediction : MultiMatching, sequence of label arrays, result with ``.matching``, or dict
+        The multi-matching to score.
+    truth : MultiMatching or sequence of label arrays
+        Ground-truth universe labels (``-1``: node without a true partner).
+    pairs : array_like of shape (P, 2), int, optional
+        The object pairs to count (default: every ``i < j``).
+
+    Returns
+    -------
+    float
+        Recovered fraction in [0, 1].
+
+    Raises
+    ------
+    ValueError, TypeError
+        Invalid labels or assignments, mismatched numbers of objects or nodes, bad ``pairs``.
+
+    Examples
+    --------
     >>> import numpy as np
     >>> truth = [np.array([0, 1]), np.array([1, 0])]
     >>> multimatching_accuracy([np.array([0, 1]), np.array([0, 1])], truth)
@@ -71,6 +115,29 @@ def matching_precision_recall(assignment, truth) -> dict[str, float]:
 
     precision = correct / predicted matches, recall = correct / true matches, where a predicted
     match of an outlier node counts as wrong.
+
+    Parameters
+    ----------
+    assignment : array_like of shape (n1,), int
+        Predicted assignment (``-1``: unmatched).
+    truth : array_like of shape (n1,), int
+        True partner of every node, ``-1`` for outliers.
+
+    Returns
+    -------
+    dict
+        ``{"precision", "recall", "f1"}``, floats; precision (recall) is 1.0 when nothing is
+        predicted (to recover).
+
+    Raises
+    ------
+    ValueError, TypeError
+        Invalid assignments, or of different lengths.
+
+    Examples
+    --------
+    >>> matching_precision_recall([0, -1, 1], [0, 1, 2])
+    {'precision': 0.5, 'recall': 0.333..., 'f1': 0.4}
     """
     a, t = _pair(assignment, truth)
     pred = a >= 0
@@ -90,6 +157,36 @@ def affinity_score(affinity, assignment, *, n2: int | None = None,
     ``affinity`` is anything with a ``score(X)`` method (a :class:`transync.matching.Affinity`) or a
     dense ``K`` in pygmtools' layout. With ``normalize_by`` (e.g. the ground truth assignment) the
     score is divided by that assignment's score, as in Cho et al.'s relative objective.
+
+    Parameters
+    ----------
+    affinity : Affinity or array_like of shape (n1 n2, n1 n2)
+        The affinity; a matrix uses pygmtools' layout (candidate ``(u, a)`` at ``a n1 + u``).
+    assignment : array_like of shape (n1,), int
+        The assignment to score.
+    n2 : int, optional
+        Size of the second graph; required when ``affinity`` is a matrix.
+    normalize_by : array_like of shape (n1,), int, optional
+        Reference assignment whose score divides the result (NaN when that score is 0).
+
+    Returns
+    -------
+    float
+        The objective (relative to the reference with ``normalize_by``).
+
+    Raises
+    ------
+    TypeError
+        A matrix ``affinity`` without ``n2``; invalid assignments.
+    ValueError
+        A matrix ``affinity`` of the wrong shape; invalid assignments.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> K = np.ones((4, 4))                 # n1 = n2 = 2: every pair of candidates scores 1
+    >>> affinity_score(K, [0, 1], n2=2)
+    4.0
     """
     a = check_assignment(assignment, "assignment")
     if hasattr(affinity, "score"):

@@ -1,4 +1,6 @@
-"""Precision, recall and F1 of a multi-matching against a universe ground truth (ALGORITHMS §5).
+"""Precision, recall and F1 of a multi-matching against a universe ground truth.
+
+Definitions: methods page *Synthetic protocols and evaluation measures* of the documentation.
 
 Real-to-real correspondences are pooled over the pairs of objects: a *true* correspondence is two
 nodes of different objects that the ground truth puts in the same universe slot; a *predicted*
@@ -49,7 +51,7 @@ def multimatching_precision_recall(prediction, truth, *, pairs=None) -> dict[str
     * precision = correct predicted matches / predicted matches between real nodes;
     * recall = correct predicted matches / true correspondences;
     * F1 = their harmonic mean;
-    * accuracy = the matching accuracy (MA) of ALGORITHMS.md §5, ``sum |M_ij & GT_ij| /
+    * accuracy = the matching accuracy (MA) of the thesis's ch. 7, ``sum |M_ij & GT_ij| /
       sum |GT_ij|``: the same number as ``recall`` and as
       :func:`~transync.metrics.multimatching_accuracy`, reported under the thesis's name.
 

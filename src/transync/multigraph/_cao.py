@@ -76,6 +76,18 @@ class CAOOutcome:
         Wall time of the call.
     variant : str
         The CAO variant that ran.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.multigraph import cao
+    >>> pairs = np.array([[0, 1], [0, 2], [1, 2]])
+    >>> initial = np.array([[0, 1], [0, 1], [1, 0]])              # pair (1, 2) contradicts
+    >>> def score(p_idx, assignments):                           # identity maps score best
+    ...     return (assignments == np.arange(2)).sum(1).astype(float)
+    >>> out = cao(initial, pairs, 3, score, variant="cao")
+    >>> out.assignments.tolist()
+    [[0, 1], [0, 1], [0, 1]]
     """
 
     assignments: np.ndarray

@@ -106,13 +106,9 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
         stays consistent and its total score never decreases. ``False``: the synchronization's
         configuration as is.
     rng : None, int or numpy.random.Generator
+        Seeds the synchronization's eigensolvers and the sampled consistency report.
     progress : bool, default=True
         tqdm progress bars on the long loops.
-
-    Pairwise solvers that stop at their iteration budget give one ``ConvergenceWarning`` (and
-    ``converged=False``). The online solvers are different: every synchronization point restarts
-    the pairs' stopping tests, and on hard problems they run to the budget by design; they do not
-    warn, and ``converged`` says whether every pair met its test after the last point.
 
     Returns
     -------
@@ -123,6 +119,14 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
     ValueError, TypeError
         Fewer than two graphs, graphs of different sizes, unknown options, a bad view graph, a
         mis-shaped ``K`` collection, an executor with the online solvers.
+
+    Warns
+    -----
+    ConvergenceWarning
+        Once, when pairwise solvers stop at their iteration budget (and ``converged=False``).
+        The online solvers are different: every synchronization point restarts the pairs'
+        stopping tests, and on hard problems they run to the budget by design; they do not
+        warn, and ``converged`` says whether every pair met its test after the last point.
 
     Examples
     --------

@@ -6,8 +6,9 @@ of all pairs lives in stacked ``(P, n1, n2)`` arrays, every outer step is a hand
 on the whole batch (one batched affinity product, one batched Sinkhorn, ...) and pairs that have
 met their own stopping test are frozen (masked out), so that with ``sync=None`` every pair
 follows exactly the pairwise solver's iterates. At the synchronization points (every
-``sync_every`` outer steps: RRWM iterations, GA beta levels, PF lambda steps; ALGORITHMS.md
-section 4.3 proposes every step, see ``SYNC_EVERY`` for why the defaults are sparser) the current doubly-stochastic iterates of all pairs go to ``sync`` and the state is
+``sync_every`` outer steps: RRWM iterations, GA beta levels, PF lambda steps; synchronizing after
+every step commits too early, see ``SYNC_EVERY`` and the methods page *Online synchronized
+solvers*) the current doubly-stochastic iterates of all pairs go to ``sync`` and the state is
 overwritten with ``(1 - damping) X + damping sync(X)``, as ``Stepper.set_iterate`` does for one
 pair; the solvers then continue (S-RRWM, S-GA, S-PF).
 
@@ -90,6 +91,17 @@ class LockstepOutcome:
         Time in the solver's steps and in ``sync`` (including the blend), separately.
     info : dict
         Solver details (``variant``, ``options`` used, ``steps_per_pair`` (P,) int, ...).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.multigraph import PairAffinities, run_lockstep
+    >>> K = np.ones((4, 4)) + 3 * np.eye(4)
+    >>> K[1, 2] = K[2, 1] = 0.0
+    >>> aff = PairAffinities.from_blocks({(0, 1): K, (0, 2): K}, [(0, 1), (0, 2)], n=2)
+    >>> out = run_lockstep(aff, solver="rrwm")
+    >>> out.assignments.tolist(), out.converged.tolist()
+    ([[0, 1], [0, 1]], [True, True])
     """
 
     soft: np.ndarray
@@ -526,7 +538,7 @@ def run_lockstep(affinities: PairAffinities, *, solver: str, sync=None,
         ``None``: plain pairwise matching of every pair (each reproduces the pairwise solver).
     sync_every : int, optional
         Synchronize after every ``sync_every`` outer steps. Default: RRWM 5 iterations, GA 4
-        beta levels, PF 4 lambda steps (ALGORITHMS.md section 4.3 proposes every level/step;
+        beta levels, PF 4 lambda steps (synchronizing after every level/step commits too early;
         measured, that commits too early: see ``SYNC_EVERY``). No
         synchronization follows the step in which every pair has finished (the caller discretizes
         the final iterates), nor, for PF, any step once every pair's lambda has reached 1. PF's
@@ -558,6 +570,22 @@ def run_lockstep(affinities: PairAffinities, *, solver: str, sync=None,
         Not a :class:`PairAffinities`, unknown solver or option, invalid option values,
         ``sync`` not callable or returning the wrong shape or non-finite/negative values,
         ``damping`` outside (0, 1].
+
+    Examples
+    --------
+    Two pairs of the same 2-node problem, plain (``sync=None``) and with a toy
+    synchronization that averages the two pairs' iterates:
+
+    >>> import numpy as np
+    >>> K = np.ones((4, 4)) + 3 * np.eye(4)
+    >>> K[1, 2] = K[2, 1] = 0.0
+    >>> aff = PairAffinities.from_blocks({(0, 1): K, (0, 2): K}, [(0, 1), (0, 2)], n=2)
+    >>> run_lockstep(aff, solver="ga").assignments.tolist()
+    [[0, 1], [0, 1]]
+    >>> mean = lambda X: np.broadcast_to(X.mean(0), X.shape).copy()
+    >>> out = run_lockstep(aff, solver="rrwm", sync=mean, sync_every=1)
+    >>> out.assignments.tolist(), out.n_sync > 0
+    ([[0, 1], [0, 1]], True)
     """
     if not isinstance(affinities, PairAffinities):
         raise TypeError(f"`affinities` must be a PairAffinities, got {type(affinities).__name__}")

@@ -53,6 +53,18 @@ class MultiMatchingResult:
         ``N``.
     info : dict
         Details per stage (number of synchronization calls, CAO history ...).
+
+    Examples
+    --------
+    >>> import functools
+    >>> from transync import match_collection
+    >>> from transync.datasets import make_graph_collection
+    >>> from transync.matching import gaussian_edge_affinity
+    >>> p = make_graph_collection(n_graphs=3, n_inliers=5, deformation=0.0, rng=0)
+    >>> res = match_collection(p.graphs, affinity=functools.partial(gaussian_edge_affinity,
+    ...                                                             sigma2=0.05), progress=False)
+    >>> res.accuracy(p.ground_truth), res.pairwise(0, 1).shape
+    (1.0, (5,))
     """
 
     pairs: np.ndarray

@@ -1,4 +1,5 @@
-"""Synchronization over the Birkhoff polytope (ALGORITHMS.md §1.7, §4.1-4.2).
+"""Synchronization over the Birkhoff polytope (documentation: methods page *Birkhoff-polytope
+synchronization*).
 
 Soft pairwise matches ``X_ij`` (doubly stochastic) are projected onto the convex hull of the
 *consistent configurations* ``S_k`` (block matrices ``S_k,ij = P_i^k P_j^kT`` of absolute
@@ -41,7 +42,8 @@ from ._result import CarriesMatching
 __all__ = ["BirkhoffSyncResult", "birkhoff_von_neumann", "synchronize_doubly_stochastic"]
 
 
-def birkhoff_von_neumann(X, *, tol: float = 1e-9, max_terms: int | None = None):
+def birkhoff_von_neumann(X, *, tol: float = 1e-9,
+                         max_terms: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Birkhoff-von Neumann decomposition of a doubly-stochastic matrix (greedy, §1.7).
 
     Repeatedly finds a permutation inside the support of the remainder (Hungarian on ``log X``,
@@ -65,6 +67,12 @@ def birkhoff_von_neumann(X, *, tol: float = 1e-9, max_terms: int | None = None):
         Positive weights, summing to 1 up to ``n * tol``.
     permutations : (K, n) int ndarray
         Assignments: ``X ~= sum_k weights[k] * assignment_to_matrix(permutations[k], n)``.
+
+    Raises
+    ------
+    ValueError, TypeError
+        ``X`` not square, negative, or with row or column sums off 1 by more than 1e-6; bad
+        ``tol`` or ``max_terms``; more terms needed than ``max_terms`` allows.
 
     Examples
     --------
@@ -150,6 +158,15 @@ class BirkhoffSyncResult(CarriesMatching):
         ``"gap_history"``, ``"n_atoms"``, ``"fully_corrective"``, ``"solver"`` (eigensolver of
         the k-hat step), ``"n_universe"``, ``"n_universe_rule"``, ``"warm_start"`` (atoms
         taken from ``init``, or None)...
+
+    Examples
+    --------
+    >>> from transync.datasets import make_permutation_collection
+    >>> from transync.synchronization import synchronize_doubly_stochastic
+    >>> data = make_permutation_collection(4, 5, rng=0)          # consistent input
+    >>> res = synchronize_doubly_stochastic(data.pairwise)
+    >>> len(res.weights), float(res.weights.sum()), data.accuracy(res.labels)
+    (1, 1.0, 1.0)
     """
 
     blocks: Mapping[tuple[int, int], np.ndarray]
@@ -444,21 +461,21 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
                                   rng=None) -> BirkhoffSyncResult:
     """Project soft pairwise matches onto the hull of consistent permutation configurations.
 
-    Conditional gradient of ALGORITHMS.md §4.2: start from the permutation synchronization of
-    the input (one atom of weight 1); at every iteration the residual ``G = X - Y`` on the
-    observed pairs defines a new vertex ``U`` maximizing ``<G, U U^T>`` ("solving for k-hat":
-    at most ``inner_sweeps`` Gauss-Seidel sweeps ``P_i <- Hungarian(sum_j w_ij G_ij P_j)``, run
-    from the heaviest atom, and on the first iteration of a cold start also from the spectral
-    rounding of ``G``; the best result is the vertex). "Solving for
-    alpha": the exact minimizer of the quadratic along the better of the Frank-Wolfe direction
-    ``U U^T - Y`` and the pairwise direction that moves weight from the active atom least
-    aligned with the residual to ``U``; with ``fully_corrective`` every improving start's vertex
-    joins the active set (eight heaviest atoms as starts) and all atom weights are re-optimized
-    exactly on the simplex. Atoms whose weight vanishes are dropped. Stops when the Frank-Wolfe
-    gap ``<G, U U^T - Y>`` is below ``tol * sum w_ij ||X_ij||^2``, or after ``max_iter``
-    iterations (``ConvergenceWarning``). The k-hat step is a heuristic, so "converged" means
-    that it found no improving vertex; noisy input usually needs hundreds of atoms to close
-    the gap, and a few iterations (warm-started across calls) are the intended use.
+    Conditional gradient (methods page *Birkhoff-polytope synchronization*): start from the
+    permutation synchronization of the input (one atom of weight 1); at every iteration the
+    residual ``G = X - Y`` on the observed pairs defines a new vertex ``U`` maximizing ``<G, U
+    U^T>`` ("solving for k-hat": at most ``inner_sweeps`` Gauss-Seidel sweeps ``P_i <-
+    Hungarian(sum_j w_ij G_ij P_j)``, run from the heaviest atom, and on the first iteration of a
+    cold start also from the spectral rounding of ``G``; the best result is the vertex). "Solving
+    for alpha": the exact minimizer of the quadratic along the better of the Frank-Wolfe direction
+    ``U U^T - Y`` and the pairwise direction that moves weight from the active atom least aligned
+    with the residual to ``U``; with ``fully_corrective`` every improving start's vertex joins the
+    active set (eight heaviest atoms as starts) and all atom weights are re-optimized exactly on
+    the simplex. Atoms whose weight vanishes are dropped. Stops when the Frank-Wolfe gap ``<G, U
+    U^T - Y>`` is below ``tol * sum w_ij ||X_ij||^2``, or after ``max_iter`` iterations
+    (``ConvergenceWarning``). The k-hat step is a heuristic, so "converged" means that it found no
+    improving vertex; noisy input usually needs hundreds of atoms to close the gap, and a few
+    iterations (warm-started across calls) are the intended use.
 
     **Warm start** (``init``, for repeated calls on slowly changing input, e.g. the
     synchronization points of an online solver): the atoms of a previous result on the same
@@ -469,11 +486,11 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
     rounding), which keeps a warm call cheap at large ``N``.
 
     Objects of different sizes (or ``n_universe`` larger than the objects) use the multi-simplex
-    model of ALGORITHMS.md §5: every node goes to exactly one of ``d`` universe slots, every slot
-    takes at most one node per object; the vertices are partial permutations
-    ``X_ij = X_i X_j^T`` and the input blocks must be sub-doubly-stochastic (non-negative, rows
-    and columns summing to at most 1). With equal sizes ``n`` and ``d = n`` the blocks must be
-    doubly stochastic and so is every output block.
+    model (methods page *Permutation synchronization*, partial matchings): every node goes to
+    exactly one of ``d`` universe slots, every slot takes at most one node per object; the vertices
+    are partial permutations ``X_ij = X_i X_j^T`` and the input blocks must be
+    sub-doubly-stochastic (non-negative, rows and columns summing to at most 1). With equal sizes
+    ``n`` and ``d = n`` the blocks must be doubly stochastic and so is every output block.
 
     The observation graph is not split into components: when it is disconnected, the output
     still places every object in the one universe, and maps between objects of different
@@ -488,7 +505,8 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
         ``(i, j, X_ij)`` triples or a dense ``(N, N, n, n)`` array (see
         :func:`synchronize_permutations`); stacked blocks ``X`` (P, n, n) of ``pairs`` (P, 2)
         pass cheaply as ``dict(zip(map(tuple, pairs.tolist()), X))``.
-    mask, weights : see :func:`synchronize_permutations`.
+    mask, weights : array_like or dict, optional
+        Pairs to use and their non-negative weights, as in :func:`synchronize_permutations`.
     max_iter : int, default=20
         Frank-Wolfe iterations. ``0`` returns the initialization: the consistent configuration
         closest to the input (one atom of weight 1, ``n_iter=0``), not a projection; with
@@ -498,8 +516,11 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
         the degree-normalized soft block matrix (``info["n_universe_rule"]``); with ``init``,
         the universe of ``init``.
     inner_sweeps : int, default=10
+        Largest number of Gauss-Seidel Hungarian sweeps of one k-hat step.
     tol : float, default=1e-6
+        Stop when the Frank-Wolfe gap is below ``tol * sum w_ij ||X_ij||^2``.
     fully_corrective : bool, default=False
+        Re-optimize all atom weights on the simplex at every iteration (slower, fewer atoms).
     solver : {"auto", "dense", "matrix_free"}, default="auto"
         Eigensolver of the k-hat step: dense ``eigh`` when ``sum n_i <= 2000`` under ``"auto"``,
         else matrix-free block Krylov on the residual block operator (warm-started from the
@@ -508,6 +529,7 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
         A previous result on the same number of objects, the same object sizes and the same
         universe size (any observed pairs): warm start, see above.
     rng : None, int or numpy.random.Generator
+        Seeds the matrix-free eigensolver.
 
     Returns
     -------

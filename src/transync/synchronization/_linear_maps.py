@@ -13,11 +13,11 @@ and a consistent input satisfies ``T[i, j] = inv(maps[i]) @ maps[j]``. In Bernar
 
 Method
 ------
-With ``U = [U_1; ...; U_N]`` (``U_i = M_i^{-1} G`` for any invertible gauge ``G``), consistency gives
-``sum_j w_ij T_ij U_j = d_i U_i`` with ``d_i = sum_j w_ij``. So ``U`` spans the ``d``-dimensional
-null space of ``Z = D^{-1} W - I`` (``W`` holds the weighted observed blocks, missing pairs are
-zero). With noise, ``U`` is taken as the ``d`` right singular vectors of ``Z`` with the smallest
-singular values, and the gauge is fixed by ``M_i = U_r U_i^{-1}``.
+With ``U = [U_1; ...; U_N]`` (``U_i = M_i^{-1} G`` for any invertible gauge ``G``), consistency
+gives ``sum_j w_ij T_ij U_j = d_i U_i`` with ``d_i = sum_j w_ij``. So ``U`` spans the
+``d``-dimensional null space of ``Z = D^{-1} W - I`` (``W`` holds the weighted observed blocks,
+missing pairs are zero). With noise, ``U`` is taken as the ``d`` right singular vectors of ``Z``
+with the smallest singular values, and the gauge is fixed by ``M_i = U_r U_i^{-1}``.
 
 The robust variant starts from cycle-consistency scores (the median over third objects ``k`` of
 the discrepancy between ``T_ik T_kj`` and ``T_ij``), then alternates the weighted null-space
@@ -87,6 +87,15 @@ class LinearMapSyncResult:
         ``singular_values`` (the d + 1 smallest of Z), ``spectral_gap``, ``residual``,
         ``components`` (component label per object), ``excluded`` (objects outside the
         reference's component), ``history`` (max map change per IRLS iteration).
+
+    Examples
+    --------
+    >>> from transync.datasets import make_noisy_linear_maps
+    >>> from transync.synchronization import synchronize_linear_maps
+    >>> prob = make_noisy_linear_maps(n_objects=5, noise=0.0, rng=0)
+    >>> res = synchronize_linear_maps(prob.observed, mask=prob.mask)
+    >>> res.maps.shape, res.reference, res.group
+    ((5, 3, 3), 0, 'GL')
     """
 
     maps: np.ndarray
@@ -634,6 +643,13 @@ def synchronize_homographies(H, *, mask=None, weights=None, reference=0, robust=
     -------
     LinearMapSyncResult
         ``residuals`` are mean corner transfer errors, in pixels when ``image_size`` is given.
+
+    Raises
+    ------
+    ValueError, TypeError
+        As :func:`synchronize_linear_maps`, and image sizes that are not positive.
+    DegenerateInputError
+        Disconnected observation graph (with ``disconnected="raise"``).
 
     Examples
     --------

@@ -102,6 +102,14 @@ class PermutationSyncResult(CarriesMatching):
         observed correspondences the output drops), timings.
 
     The result pickles (every method), so it can cross process and Dask executors.
+
+    Examples
+    --------
+    >>> from transync.datasets import make_permutation_collection
+    >>> from transync.synchronization import synchronize_permutations
+    >>> res = synchronize_permutations(make_permutation_collection(4, 5, rng=0).pairwise)
+    >>> res.n_universe, res.cycle_consistent, res.pairwise(0, 1).shape
+    (5, True, (5,))
     """
 
     matching: MultiMatching

@@ -259,3 +259,49 @@ def test_directed_graphs_separable(rng):
     np.testing.assert_allclose(A.rmatvec(X), np.stack([a.rmatvec(x) for a, x in zip(affs, X)]),
                                atol=1e-8)
     _check_score_assignments(A, rng)
+
+
+def test_from_factors_against_dense_pairs(rng):
+    """Per-graph factors indexed by pairs: products, diag, scores against ``pair(p).to_dense()``
+    and the explicit Kronecker sum (issue #12: the kernel's padded-adjacency affinity)."""
+    Ng, R, n1, n2 = 4, 2, 5, 5
+    F = rng.random((Ng, R, n1, n1))
+    G = rng.random((Ng + 1, R, n2, n2))
+    pairs = np.array([[0, 1], [3, 3], [0, 4], [2, 0], [0, 1]] * 15)   # > 64 pairs: grouped
+    node = rng.random((len(pairs), n1, n2))
+    A = PairAffinities.from_factors(F, G, pairs, node=node)
+    assert A.backend == "separable" and len(A) == len(pairs) and (A.n1, A.n2) == (n1, n2)
+    np.testing.assert_array_equal(A.pairs, pairs)
+    X = rng.random((len(pairs), n1, n2))
+    Y, D = A.matvec(X), A.diag()
+    for p in (0, 1, 3, 72):
+        i, j = pairs[p]
+        K = sum(np.kron(G[j, r], F[i, r]) for r in range(R)) + np.diag(node[p].ravel("F"))
+        np.testing.assert_allclose(A.pair(p).to_dense(), K, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(Y[p].ravel("F"), K @ X[p].ravel("F"), rtol=1e-12)
+        np.testing.assert_allclose(D[p].ravel("F"), np.diag(K), rtol=1e-12)
+    _check_score_assignments(A, rng)
+    sub = A.subset([3, 0])
+    np.testing.assert_allclose(sub.matvec(X[[3, 0]]), Y[[3, 0]], rtol=1e-12)
+    no_node = PairAffinities.from_factors(F, G, pairs[:2])
+    np.testing.assert_allclose(no_node.matvec(X[:2]) + node[:2] * X[:2], Y[:2], rtol=1e-12)
+    rect = PairAffinities.from_factors(F, G[:, :, :3, :3], [[1, 2]])     # n1 = 5, n2 = 3
+    Xr = rng.random((1, 5, 3))
+    K = sum(np.kron(G[2, r, :3, :3], F[1, r]) for r in range(R))
+    np.testing.assert_allclose(rect.matvec(Xr)[0].ravel("F"), K @ Xr[0].ravel("F"), rtol=1e-12)
+
+
+def test_from_factors_validation(rng):
+    F = rng.random((2, 1, 3, 3))
+    with pytest.raises(ValueError, match="`F` must have shape"):
+        PairAffinities.from_factors(F[:, :, :2], F, [[0, 1]])
+    with pytest.raises(ValueError, match="`G` must have shape"):
+        PairAffinities.from_factors(F, rng.random((2, 2, 3, 3)), [[0, 1]])
+    with pytest.raises(ValueError, match=r"`pairs\[:, 1\]` must index `G` in \[0, 2\)"):
+        PairAffinities.from_factors(F, F, [[0, 2]])
+    with pytest.raises(ValueError, match=r"`pairs` must have shape \(P, 2\)"):
+        PairAffinities.from_factors(F, F, [0, 1])
+    with pytest.raises(ValueError, match=r"`node` must have shape \(P, n1, n2\)"):
+        PairAffinities.from_factors(F, F, [[0, 1]], node=np.ones((1, 3, 2)))
+    with pytest.raises(ValueError, match="must have 4 dimensions"):
+        PairAffinities.from_factors(F[0], F, [[0, 1]])

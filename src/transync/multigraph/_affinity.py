@@ -52,6 +52,7 @@ import scipy.sparse as sp
 from .._validation import check_array, check_int, check_positive
 from ..graphs import Graph
 from ..matching import (
+    DEFAULT_SIGMA2,
     Affinity,
     DenseAffinity,
     FactorizedAffinity,
@@ -129,12 +130,12 @@ _FAST_KEYWORDS = {"sigma2", "attribute", "tol", "backend", "angle_weight"}
 def _fast_gaussian_options(affinity):
     """Keyword options when ``affinity`` is the default Gaussian edge affinity, else ``None``.
 
-    ``None`` (the default, ``sigma2=0.15``) or ``functools.partial(gaussian_edge_affinity,
+    ``None`` (the default, ``sigma2=DEFAULT_SIGMA2`` = 0.15) or ``functools.partial(gaussian_edge_affinity,
     **kw)`` with only ``sigma2``, ``attribute`` (scalar), ``tol``, ``backend`` in {"auto",
     "separable"} and ``angle_weight``.
     """
     if affinity is None:
-        return {"sigma2": 0.15}
+        return {"sigma2": DEFAULT_SIGMA2}
     if not (isinstance(affinity, functools.partial) and affinity.func is gaussian_edge_affinity
             and not affinity.args and set(affinity.keywords) <= _FAST_KEYWORDS):
         return None
@@ -506,7 +507,7 @@ class PairAffinities:
             remap[used] = np.arange(len(used))
             local = remap[pairs]
             if not mixed and (backend == "separable" or _all_separable(sub, local)):
-                sigma2 = opts.get("sigma2", 0.15)
+                sigma2 = opts.get("sigma2", DEFAULT_SIGMA2)
                 check_positive(opts.get("angle_weight", 0.1), "angle_weight", allow_zero=True)
                 fac = gaussian_edge_factors(sub, sigma2=sigma2, attribute=attribute,
                                             tol=opts.get("tol", 1e-10), pairs=local)
@@ -522,7 +523,7 @@ class PairAffinities:
                 kw = {k: v for k, v in opts.items() if k != "backend"}
                 affinity = functools.partial(gaussian_edge_affinity, backend="factorized", **kw)
         if affinity is None:          # the default, where the per-graph expansion does not apply
-            affinity = functools.partial(gaussian_edge_affinity, sigma2=0.15)
+            affinity = functools.partial(gaussian_edge_affinity, sigma2=DEFAULT_SIGMA2)
         if not callable(affinity):
             raise TypeError(f"`affinity` must be None or a callable (g_i, g_j) -> Affinity, got "
                             f"{type(affinity).__name__}")
@@ -543,6 +544,69 @@ class PairAffinities:
                                  f"expected ({n}, {n})")
             affs.append(a)
         return cls.from_affinities(affs, pairs)
+
+    @classmethod
+    def from_factors(cls, F, G, pairs, *, node=None) -> PairAffinities:
+        """Separable affinities from per-graph factors (the ``"separable"`` backend).
+
+        ``K_p = diag(vec(node[p])) + sum_r F[i_p, r] (x) G[j_p, r]`` for ``pairs[p] = (i_p,
+        j_p)``, i.e. ``K_p[(u, a), (v, b)] = node[p, u, a] [u == v, a == b] + sum_r F[i_p, r, u,
+        v] G[j_p, r, a, b]``; a product is ``Y_p = node_p * X_p + sum_r F_r X_p G_r^T``. With
+        ``F = G = A[:, None]`` (adjacencies) the edge term is ``A_i[u, v] A_j[a, b]``.
+
+        Parameters
+        ----------
+        F : array_like of shape (Ng1, R, n1, n1)
+            Factors of the first graph of each pair, indexed by ``pairs[:, 0]``.
+        G : array_like of shape (Ng2, R, n2, n2)
+            Factors of the second graph, indexed by ``pairs[:, 1]`` (``G`` may be ``F``).
+        pairs : array_like of shape (P, 2), int
+            Indices into ``F`` and ``G`` (any order, repeats allowed); kept as :attr:`pairs`.
+        node : array_like of shape (P, n1, n2), optional
+            Node (unary) term of every pair.
+
+        Raises
+        ------
+        ValueError, TypeError
+            Wrong shapes or dimensions, non-finite values, indices out of range.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> A = np.zeros((2, 1, 3, 3)); A[:, 0, 0, 1] = A[:, 0, 1, 0] = 1.0
+        >>> aff = PairAffinities.from_factors(A, A, [[0, 1]], node=np.ones((1, 3, 3)))
+        >>> aff.backend, aff.pair(0).to_dense().shape
+        ('separable', (9, 9))
+        """
+        F = check_array(F, "F", ndim=4)
+        G = check_array(G, "G", ndim=4)
+        if F.shape[0] == 0 or F.shape[1] == 0 or F.shape[2] == 0 or F.shape[2] != F.shape[3]:
+            raise ValueError(f"`F` must have shape (Ng, R, n1, n1) with Ng, R, n1 >= 1, got "
+                             f"{F.shape}")
+        if (G.shape[0] == 0 or G.shape[1] != F.shape[1] or G.shape[2] == 0
+                or G.shape[2] != G.shape[3]):
+            raise ValueError(f"`G` must have shape (Ng, R, n2, n2) with R={F.shape[1]} (as `F`) "
+                             f"and Ng, n2 >= 1, got {G.shape}")
+        pairs = check_array(pairs, "pairs", dtype=None)
+        if pairs.ndim != 2 or pairs.shape[1] != 2 or pairs.shape[0] == 0:
+            raise ValueError(f"`pairs` must have shape (P, 2) with P >= 1, got shape "
+                             f"{pairs.shape}")
+        if pairs.dtype.kind not in "iu":
+            raise TypeError(f"`pairs` must hold integer indices, got dtype {pairs.dtype}")
+        pairs = pairs.astype(np.int64)
+        for col, name, size in ((0, "F", F.shape[0]), (1, "G", G.shape[0])):
+            lo, hi = int(pairs[:, col].min()), int(pairs[:, col].max())
+            if lo < 0 or hi >= size:
+                raise ValueError(f"`pairs[:, {col}]` must index `{name}` in [0, {size}), got "
+                                 f"range [{lo}, {hi}]")
+        n1, n2 = F.shape[2], G.shape[2]
+        if node is not None:
+            node = check_array(node, "node", ndim=3)
+            if node.shape != (len(pairs), n1, n2):
+                raise ValueError(f"`node` must have shape (P, n1, n2) = ({len(pairs)}, {n1}, "
+                                 f"{n2}), got {node.shape}")
+        impl = _Separable(F, G, pairs[:, 0], pairs[:, 1], node)
+        return cls(impl, pairs)
 
     @classmethod
     def from_affinities(cls, affinities, pairs) -> PairAffinities:

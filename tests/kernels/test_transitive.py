@@ -1,0 +1,383 @@
+"""Transitive alignments and assignment kernels (issue #12 items 3; ALGORITHMS.md §2)."""
+
+import numpy as np
+import pytest
+from scipy.optimize import linear_sum_assignment
+
+from transync.exceptions import DegenerateInputError
+from transync.kernels import (
+    Alignment,
+    aligned_features,
+    assignment_kernel,
+    cosine_normalize,
+    median_gamma,
+    min_eigenvalue_ratio,
+    place_graphs,
+    prune_by_size,
+    relaxed_features,
+    synchronize_alignments,
+)
+
+
+def _planted(N, n, rng):
+    """Universe labels (N, n) and all pairwise permutations P_ij they induce."""
+    labels = np.array([rng.permutation(n) for _ in range(N)])
+    inv = np.argsort(labels, axis=1)                     # inv[j, slot] = node
+    iu, ju = np.triu_indices(N, 1)
+    pairs = np.column_stack([iu, ju])
+    A = inv[ju[:, None], labels[iu]]                     # a[u] = node of j in u's slot
+    return labels, pairs, A
+
+
+def _random_features(N, f, rng, low=2, high=6):
+    return [rng.random((int(rng.integers(low, high + 1)), f)) for _ in range(N)]
+
+
+def _oa_assignments(Fp):
+    """Pairwise-optimal (non-transitive) assignments: Hungarian on <F_i[u], F_j[v]>."""
+    N, n, _ = Fp.shape
+    iu, ju = np.triu_indices(N, 1)
+    A = np.empty((iu.size, n), dtype=np.int64)
+    for p, (i, j) in enumerate(zip(iu, ju)):
+        r, c = linear_sum_assignment(Fp[i] @ Fp[j].T, maximize=True)
+        A[p, r] = c
+    return np.column_stack([iu, ju]), A
+
+
+def _padded(feats, n):
+    out = np.zeros((len(feats), n, feats[0].shape[1] + 1))
+    for g, F in enumerate(feats):
+        out[g, : len(F), :-1] = F
+        out[g, : len(F), -1] = 1
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# synchronize_alignments
+# ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("method", ["orthogonal", "spectral"])
+def test_planted_alignment_is_recovered(method, rng):
+    labels, pairs, A = _planted(7, 5, rng)
+    al = synchronize_alignments(A, pairs, 7, n=5, method=method, rng=0)
+    assert isinstance(al, Alignment) and al.labels.shape == (7, 5)
+    assert al.n_graphs == 7 and al.n_universe == 5
+    for p, (i, j) in enumerate(pairs):
+        np.testing.assert_array_equal(al.pairwise(i, j), A[p])
+    assert al.objective == A.size
+    assert al.embedding is None
+
+
+def test_corrupted_pairs_are_repaired_and_output_is_transitive(rng):
+    labels, pairs, A = _planted(10, 6, rng)
+    noisy = A.copy()
+    bad = rng.choice(len(A), 6, replace=False)
+    for p in bad:
+        noisy[p] = rng.permutation(6)
+    al = synchronize_alignments(noisy, pairs, 10, n=6, rng=0)
+    for p, (i, j) in enumerate(pairs):
+        np.testing.assert_array_equal(al.pairwise(i, j), A[p])
+    # transitivity: P_ik = P_jk o P_ij
+    np.testing.assert_array_equal(al.pairwise(0, 2), al.pairwise(1, 2)[al.pairwise(0, 1)])
+
+
+def test_embedding_is_kept_on_request(rng):
+    _, pairs, A = _planted(5, 4, rng)
+    al = synchronize_alignments(A, pairs, 5, n=4, keep_embedding=True)
+    Q = al.embedding
+    assert Q.shape == (5, 4, 4)
+    np.testing.assert_allclose(Q[0] @ Q[1].T, np.eye(4)[A[0]], atol=1e-6)
+    assert "embedding" not in al.info
+
+
+def test_one_graph_and_pair_order(rng):
+    al = synchronize_alignments(np.zeros((0, 3), dtype=int), np.zeros((0, 2), dtype=int), 1, n=3)
+    np.testing.assert_array_equal(al.labels, [[0, 1, 2]])
+    # pairs given as (j, i) with the inverse map mean the same
+    labels, pairs, A = _planted(4, 4, rng)
+    inv = np.argsort(A, axis=1)
+    al = synchronize_alignments(inv, pairs[:, ::-1], 4, n=4)
+    for p, (i, j) in enumerate(pairs):
+        np.testing.assert_array_equal(al.pairwise(i, j), A[p])
+
+
+def test_synchronize_alignments_validation(rng):
+    _, pairs, A = _planted(4, 3, rng)
+    with pytest.raises(ValueError, match="permutations of range"):
+        synchronize_alignments(np.where(A == 2, 1, A), pairs, 4, n=3)
+    with pytest.raises(ValueError, match="shape"):
+        synchronize_alignments(A[:, :2], pairs, 4, n=3)
+    with pytest.raises(ValueError, match="itself"):
+        synchronize_alignments(A[:1], np.array([[1, 1]]), 4, n=3)
+    with pytest.raises(ValueError, match=r"indices in \[0, 3\)"):
+        synchronize_alignments(A, pairs, 3, n=3)
+    with pytest.raises(ValueError, match="method"):
+        synchronize_alignments(A, pairs, 4, n=3, method="birkhoff")
+    with pytest.raises(TypeError, match="integers"):
+        synchronize_alignments(A.astype(float), pairs, 4, n=3)
+    with pytest.raises(ValueError, match="at least one pair"):
+        synchronize_alignments(A[:0], pairs[:0], 4, n=3)
+    with pytest.raises(DegenerateInputError, match="disconnected"):
+        synchronize_alignments(A[[0, 5]], pairs[[0, 5]], 4, n=3)   # {0, 1} and {2, 3}
+
+
+def _planted_padded(sizes, n, rng):
+    """Planted real-node slots and padded pairwise permutations whose matches into dummies are
+    scrambled (real-to-real matches follow the truth)."""
+    N = len(sizes)
+    labels = np.array([rng.permutation(n) for _ in range(N)])   # real nodes: first sizes[g]
+    _, pairs, A = _planted(N, n, np.random.default_rng(0))      # shapes only
+    inv = np.argsort(labels, axis=1)
+    A = inv[pairs[:, 1][:, None], labels[pairs[:, 0]]]
+    for p, (i, j) in enumerate(pairs):
+        free = np.flatnonzero(A[p] >= sizes[j])            # the nodes sent to dummies of j
+        A[p, free] = rng.permutation(A[p, free])
+    return labels, pairs, A
+
+
+@pytest.mark.parametrize("method", ["orthogonal", "spectral"])
+def test_real_only_synchronization_ignores_dummy_matches(method, rng):
+    sizes = np.array([6, 4, 5, 6, 3, 5, 6, 4])
+    labels, pairs, A = _planted_padded(sizes, 6, rng)
+    al = synchronize_alignments(A, pairs, 8, n=6, sizes=sizes, method=method,
+                                keep_embedding=True, rng=0)
+    assert np.array_equal(np.sort(al.labels, axis=1), np.tile(np.arange(6), (8, 1)))
+    for p, (i, j) in enumerate(pairs):
+        got = al.pairwise(i, j)[: sizes[i]]
+        want = A[p, : sizes[i]]
+        real = want < sizes[j]
+        np.testing.assert_array_equal(got[real], want[real])
+    E = al.embedding
+    assert E.shape == (8, 6, 6) and not E[1, 4:].any() and not E[4, 3:].any()
+    # inductive placement with sizes: a copy of graph 1 (4 real nodes) comes back to its slots
+    inv = np.argsort(al.labels, axis=1)
+    new = inv[:, al.labels[1]][None]                       # consistent maps to every graph
+    lab, Q = place_graphs(new, al.labels, sizes=[4], fitted_sizes=sizes, embedding=E,
+                          method=method)
+    np.testing.assert_array_equal(lab[0, :4], al.labels[1, :4])
+    assert not Q[0, 4:].any()
+    with pytest.raises(ValueError, match="together"):
+        place_graphs(new, al.labels, sizes=[4])
+    with pytest.raises(ValueError, match="node counts"):
+        synchronize_alignments(A, pairs, 8, n=6, sizes=sizes + 1)
+
+
+# ---------------------------------------------------------------------------------------------
+# aligned / relaxed features
+# ---------------------------------------------------------------------------------------------
+
+def test_aligned_features_by_hand(rng):
+    feats = _random_features(4, 3, rng, 1, 5)
+    n = 5
+    labels = np.array([rng.permutation(n) for _ in range(4)])
+    X = aligned_features(feats, labels, n)
+    assert X.shape == (4, n, 4)
+    for g, F in enumerate(feats):
+        for u in range(n):
+            want = np.r_[F[u], 1.0] if u < len(F) else np.zeros(4)
+            np.testing.assert_array_equal(X[g, labels[g, u]], want)
+
+
+def test_aligned_features_are_invariant_to_relabelling(rng):
+    feats = _random_features(3, 2, rng)
+    n = 6
+    labels = np.array([rng.permutation(n) for _ in range(3)])
+    X = aligned_features(feats, labels)
+    # relabel graph 1's real nodes: node pi[u'] of the old graph becomes u'
+    k = len(feats[1])
+    pi = rng.permutation(k)
+    feats2 = list(feats)
+    feats2[1] = feats[1][pi]
+    labels2 = labels.copy()
+    labels2[1, :k] = labels[1, pi]
+    np.testing.assert_array_equal(aligned_features(feats2, labels2), X)
+
+
+def test_relaxed_features_with_hard_embedding_equal_aligned(rng):
+    feats = _random_features(4, 2, rng)
+    n = 6
+    labels = np.array([rng.permutation(n) for _ in range(4)])
+    E = np.eye(n)[labels]                                # Q_i[u] = e_{labels[i, u]}
+    np.testing.assert_allclose(relaxed_features(feats, E), aligned_features(feats, labels))
+
+
+def test_feature_validation(rng):
+    feats = _random_features(2, 2, rng, 2, 3)
+    labels = np.array([[0, 1, 2], [2, 1, 0]])
+    with pytest.raises(ValueError, match="shape"):
+        aligned_features(feats, labels[:1])
+    with pytest.raises(ValueError, match="permutations"):
+        aligned_features(feats, np.array([[0, 0, 1], [2, 1, 0]]))
+    with pytest.raises(ValueError, match="more than the universe"):
+        aligned_features([np.ones((4, 2)), feats[1]], labels)
+    with pytest.raises(ValueError, match="columns"):
+        aligned_features([feats[0], np.ones((2, 3))], labels)
+    with pytest.raises(TypeError, match="sequence"):
+        aligned_features("features", labels)
+    with pytest.raises(ValueError, match="one \\(n, d\\) block per graph"):
+        relaxed_features(feats, np.zeros((3, 3, 3)))
+
+
+# ---------------------------------------------------------------------------------------------
+# kernels
+# ---------------------------------------------------------------------------------------------
+
+def test_linear_and_gaussian_kernels_by_hand(rng):
+    feats = _random_features(5, 3, rng)
+    n = 6
+    labels = np.array([rng.permutation(n) for _ in range(5)])
+    X = aligned_features(feats, labels, n)
+    K = assignment_kernel(X, normalize=False)
+    gamma = 0.7
+    G = assignment_kernel(X, kernel="gaussian", gamma=gamma, normalize=False)
+    for i in range(5):
+        for j in range(5):
+            assert K[i, j] == pytest.approx(float(np.sum(X[i] * X[j])), rel=1e-12)
+            want = sum(X[i, a, -1] * X[j, a, -1]
+                       * np.exp(-gamma * np.sum((X[i, a] - X[j, a]) ** 2)) for a in range(n))
+            assert G[i, j] == pytest.approx(want, rel=1e-12, abs=1e-14)
+    np.testing.assert_allclose(np.diag(G), [len(F) for F in feats])
+    Kn = assignment_kernel(X)
+    np.testing.assert_allclose(Kn, K / np.sqrt(np.outer(np.diag(K), np.diag(K))), rtol=1e-12)
+
+
+@pytest.mark.parametrize("kernel", ["linear", "gaussian", "relaxed"])
+def test_cross_gram_matches_the_full_gram(kernel, rng):
+    feats = _random_features(7, 2, rng)
+    n = 6
+    labels = np.array([rng.permutation(n) for _ in range(7)])
+    if kernel == "relaxed":
+        Q = np.linalg.qr(rng.normal(size=(7, n, n)))[0]
+        X = relaxed_features(feats, Q)
+    else:
+        X = aligned_features(feats, labels, n)
+    gamma = 1.3 if kernel == "gaussian" else None
+    full = assignment_kernel(X, kernel=kernel, gamma=gamma)
+    cross = assignment_kernel(X[5:], X[:5], kernel=kernel, gamma=gamma)
+    np.testing.assert_allclose(cross, full[5:, :5], rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(np.diag(full), 1.0)
+
+
+def _non_transitive_kernel(Fp, pairs, A, kernel, gamma=None):
+    """The kernel built from pairwise maps P_ij directly (no synchronization), normalized."""
+    N = Fp.shape[0]
+    Fi, Fj = Fp[pairs[:, 0]], Fp[pairs[:, 1][:, None], A]          # (P, n, f + 1)
+    if kernel == "linear":
+        vals, diag = np.einsum("puf,puf->p", Fi, Fj), np.einsum("guf,guf->g", Fp, Fp)
+    else:
+        vals = (Fi[..., -1] * Fj[..., -1] * np.exp(-gamma * ((Fi - Fj) ** 2).sum(-1))).sum(1)
+        diag = Fp[..., -1].sum(1)
+    K = np.zeros((N, N))
+    K[pairs[:, 0], pairs[:, 1]] = vals
+    return cosine_normalize(K + K.T + np.diag(diag))
+
+
+def test_transitive_kernels_are_psd_where_pairwise_optimal_is_not():
+    """The same kernels built from the unsynchronized pairwise-optimal maps are indefinite."""
+    rng = np.random.default_rng(7)
+    feats = _random_features(12, 2, rng, 2, 5)
+    n = max(len(F) for F in feats)
+    Fp = _padded(feats, n)
+    pairs, A = _oa_assignments(Fp)
+    gamma = median_gamma(Fp)
+    assert min_eigenvalue_ratio(_non_transitive_kernel(Fp, pairs, A, "linear")) < -5e-4
+    assert min_eigenvalue_ratio(_non_transitive_kernel(Fp, pairs, A, "gaussian", gamma)) < -1e-3
+    al = synchronize_alignments(A, pairs, 12, n=n, keep_embedding=True, rng=0)
+    X = aligned_features(feats, al.labels)
+    for K in (assignment_kernel(X), assignment_kernel(X, kernel="gaussian", gamma=gamma),
+              assignment_kernel(relaxed_features(feats, al.embedding), kernel="relaxed")):
+        np.testing.assert_array_equal(K, K.T)
+        assert min_eigenvalue_ratio(K) >= -1e-9
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_kernels_psd_on_random_alignments(seed):
+    rng = np.random.default_rng(100 + seed)
+    feats = _random_features(20, 4, rng, 1, 9)
+    labels = np.array([rng.permutation(9) for _ in range(20)])
+    X = aligned_features(feats, labels)
+    Q = np.linalg.qr(rng.normal(size=(20, 9, 9)))[0]
+    for K in (assignment_kernel(X), assignment_kernel(X, kernel="gaussian"),
+              assignment_kernel(relaxed_features(feats, Q), kernel="relaxed"),
+              assignment_kernel(X, kernel="gaussian", gamma=50.0, normalize=False)):
+        assert min_eigenvalue_ratio(K) >= -1e-9
+
+
+def test_median_gamma_rule(rng):
+    feats = _random_features(6, 2, rng)
+    X = aligned_features(feats, np.array([rng.permutation(6) for _ in range(6)]))
+    g = median_gamma(X)
+    assert g > 0 and g == median_gamma(X)
+    both = X[:, :, -1][:, None] * X[:, :, -1][None]
+    d2 = ((X[:, None] - X[None]) ** 2).sum(-1)
+    iu, ju = np.triu_indices(6, 1)
+    assert g == pytest.approx(1 / np.median(d2[iu, ju][both[iu, ju] > 0]))
+    same = aligned_features([np.ones((2, 1))] * 3, np.tile(np.arange(2), (3, 1)))
+    assert median_gamma(same) == 1.0
+
+
+def test_assignment_kernel_validation(rng):
+    X = aligned_features(_random_features(3, 2, rng, 2, 3), np.tile(np.arange(3), (3, 1)))
+    with pytest.raises(ValueError, match="kernel"):
+        assignment_kernel(X, kernel="rbf")
+    with pytest.raises(ValueError, match="gamma"):
+        assignment_kernel(X, gamma=1.0)
+    with pytest.raises(ValueError, match="gamma"):
+        assignment_kernel(X, kernel="gaussian", gamma=-1.0)
+    with pytest.raises(ValueError, match="other"):
+        assignment_kernel(X, X[:, :2])
+    with pytest.raises(ValueError, match="dimensions"):
+        assignment_kernel(X[0])
+
+
+# ---------------------------------------------------------------------------------------------
+# inductive placement
+# ---------------------------------------------------------------------------------------------
+
+def test_place_graphs_recovers_fitted_labels(rng):
+    labels, pairs, A = _planted(6, 5, rng)
+    al = synchronize_alignments(A, pairs, 6, n=5, keep_embedding=True)
+    inv = np.argsort(al.labels, axis=1)
+    # copies of fitted graphs 2 and 4, matched (consistently) to every fitted graph
+    new = np.stack([inv[:, al.labels[t]] for t in (2, 4)])          # (2, N, n)
+    lab, Q = place_graphs(new, al.labels, embedding=al.embedding)
+    np.testing.assert_array_equal(lab, al.labels[[2, 4]])
+    np.testing.assert_allclose(Q, al.embedding[[2, 4]], atol=1e-8)
+    # a relabelled copy: node u' of the new graph is node pi[u'] of graph 2
+    pi = rng.permutation(5)
+    lab, _ = place_graphs(new[:1, :, pi], al.labels)
+    np.testing.assert_array_equal(lab[0], al.labels[2, pi])
+    with pytest.raises(ValueError, match="labels"):
+        place_graphs(new, al.labels[:3])
+
+
+# ---------------------------------------------------------------------------------------------
+# pruning
+# ---------------------------------------------------------------------------------------------
+
+def test_prune_by_size():
+    sizes = np.array([10] * 18 + [11, 60, 12, 12, 9])
+    y = np.array([0] * 12 + [1] * 8 + [2] * 3)
+    keep, rule = prune_by_size(sizes, y, quantile=0.95, min_class_size=4)
+    cap = np.floor(np.quantile(sizes, 0.95))
+    assert cap == 12
+    np.testing.assert_array_equal(keep, np.flatnonzero((sizes <= cap) & (y < 2)))
+    assert "n_i <= 12" in rule and "dropped classes [2]" in rule and "2/3 classes" in rule
+    keep, rule = prune_by_size(sizes, y, quantile=None, max_nodes=11, min_class_size=0)
+    np.testing.assert_array_equal(keep, np.flatnonzero(sizes <= 11))
+    assert "max_nodes 11" in rule
+    keep, rule = prune_by_size(sizes, y, quantile=None, min_class_size=0)
+    assert keep.size == sizes.size and "no size cap" in rule
+
+
+def test_prune_by_size_validation():
+    with pytest.raises(ValueError, match="`y`"):
+        prune_by_size([3, 4], [0])
+    with pytest.raises(ValueError, match="quantile"):
+        prune_by_size([3, 4], [0, 1], quantile=1.5)
+    with pytest.raises(ValueError, match="positive"):
+        prune_by_size([0, 4], [0, 1])
+    with pytest.raises(ValueError, match="keeps no graph"):
+        prune_by_size([3, 4], [0, 1], min_class_size=5)
+    with pytest.raises(TypeError, match="max_nodes"):
+        prune_by_size([3, 4], [0, 1], max_nodes=2.5)

@@ -350,7 +350,7 @@ def test_every_option_has_help_and_shows_its_default(command):
             continue
         assert action.help, f"{command} {action.option_strings[0]} has no help"
         if action.default not in (None, False):
-            assert "default" in sub._get_formatter()._get_help_string(action), \
+            assert "(default" in sub._get_formatter()._get_help_string(action), \
                 f"{command} {action.option_strings[0]} does not show its default"
         if action.choices:
             assert "{" + ",".join(map(str, action.choices)) + "}" in text

@@ -177,10 +177,19 @@ def test_paired_ttest_matches_scipy_and_checks_folds():
     bad = cosine_normalize(_gram(rng, 30, 3))
     a = repeated_cv(good, y, n_splits=3, n_repeats=4, C_grid=[1.0])
     b = repeated_cv(bad, y, n_splits=3, n_repeats=4, C_grid=[1.0])
-    t, p = paired_ttest(a, b)
+    t, p = paired_ttest(a, b, over="repeats")
     ref = ttest_rel(a.per_repeat, b.per_repeat)
     assert t == pytest.approx(ref.statistic) and p == pytest.approx(ref.pvalue)
     assert t > 0
+    # default: Nadeau-Bengio's corrected resampled test, by its formula; never more significant
+    # than the plain test over the same fold differences
+    from scipy.stats import t as student_t
+
+    d = (a.accuracies - b.accuracies).ravel()
+    tc = d.mean() / np.sqrt((1 / d.size + 1 / (3 - 1)) * d.var(ddof=1))
+    t3, p3 = paired_ttest(a, b)
+    assert t3 == pytest.approx(tc) and p3 == pytest.approx(2 * student_t.sf(abs(tc), d.size - 1))
+    assert p3 >= ttest_rel(a.accuracies.ravel(), b.accuracies.ravel()).pvalue
     t2, p2 = paired_ttest(a, b, over="folds")
     ref2 = ttest_rel(a.accuracies.ravel(), b.accuracies.ravel())
     assert t2 == pytest.approx(ref2.statistic) and p2 == pytest.approx(ref2.pvalue)

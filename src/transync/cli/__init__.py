@@ -41,7 +41,7 @@ class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
     def _get_help_string(self, action):
         text = action.help or ""
         default = action.default
-        if (default not in (None, False, argparse.SUPPRESS) and "default" not in text
+        if (default not in (None, False, argparse.SUPPRESS) and "(default" not in text
                 and action.option_strings):
             shown = " ".join(map(str, default)) if isinstance(default, (list, tuple)) else default
             text = f"{text} (default: {shown})" if text else f"default: {shown}"

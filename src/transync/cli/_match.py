@@ -205,7 +205,7 @@ def add_parsers(sub) -> None:
                         "k nearest neighbours")
     p.add_argument("--sigma2", type=positive_float, default=DEFAULT_SIGMA2,
                    help="width of the Gaussian edge-length affinity exp(-(d1 - d2)^2 / sigma2), "
-                        "after scaling both point sets to unit size (the library's default)")
+                        "after scaling both point sets to unit size (the library's value)")
     p.add_argument("--out", help="JSON output file (default: print)")
     p.set_defaults(func=_cmd_match)
 

@@ -423,8 +423,8 @@ def random_walk_kernel(graphs, *, lamda: float = 1e-2, node_labels=None, normali
     2003; the labelled form of GraKeL's ``RandomWalkLabeled``):
 
     .. math::
-        k(G, H) = \mathbf 1^	op (I - \lambda W_	imes)^{-1} \mathbf 1, \qquad
-        (W_	imes X)_{ua} = M_{ua} \, (A_G (M \odot X) A_H)_{ua},
+        k(G, H) = \mathbf 1^\top (I - \lambda W_\times)^{-1} \mathbf 1, \qquad
+        (W_\times X)_{ua} = M_{ua} \, (A_G (M \odot X) A_H)_{ua},
 
     with ``M[u, a] = [label_u == label_a]``. The fixed point ``X = 1 + lamda W X`` is iterated
     on all pairs of a batch at once (two batched products per step) to relative change

@@ -21,6 +21,7 @@ REGISTRY = {
     "sync": "transync.experiments.sync",
     "multigraph": "transync.experiments.multigraph",
     "cmu": "transync.experiments.cmu",
+    "kernels": "transync.experiments.kernels",
 }
 
 __all__ = ["REGISTRY", "Experiment", "ExperimentReport", "ExperimentStore", "Sweep", "mean_se",

@@ -98,6 +98,73 @@ def test_params_clone_and_pickle(rng):
     assert not hasattr(clone(tak), "gram_")
 
 
+def test_executor_object_survives_clone_grid_search_and_pickle(rng):
+    graphs, which = _duplicates(rng, n_base=2, copies=4)
+    new = [_relabel(graphs[1], rng)]
+    with ThreadPoolExecutor(2) as pool:
+        tak = TransitiveAssignmentKernel(matcher="node", executor=pool, random_state=0)
+        c = clone(tak)
+        assert c is not tak and c.executor is pool and c.get_params() == tak.get_params()
+        pipe = Pipeline([("tak", tak), ("svc", SVC(kernel="precomputed"))])
+        search = GridSearchCV(pipe, {"svc__C": [0.1, 1.0]},
+                              cv=StratifiedKFold(2, shuffle=True, random_state=0))
+        search.fit(graphs, which)
+        assert search.best_estimator_.named_steps["tak"].executor is pool
+        assert search.best_score_ == 1.0                   # duplicates: a perfect split
+        fitted = TransitiveAssignmentKernel(matcher="node", executor=pool,
+                                            random_state=0).fit(graphs)
+        row = fitted.transform(new)
+        back = pickle.loads(pickle.dumps(fitted))          # the pool is dropped, not pickled
+        assert fitted.executor is pool
+    assert back.executor is None
+    np.testing.assert_array_equal(back.gram_, fitted.gram_)
+    np.testing.assert_allclose(back.transform(new), row, atol=1e-12)
+    for executor in (None, "serial", 2):                    # plain values: kept as they are
+        est = TransitiveAssignmentKernel(executor=executor)
+        assert clone(est).executor == executor
+        assert pickle.loads(pickle.dumps(est)).executor == executor
+
+
+def test_transform_uses_the_options_of_fit(rng):
+    graphs, _ = _duplicates(rng, labels=2)
+    tak = TransitiveAssignmentKernel(matcher="node", random_state=0).fit(graphs)
+    new = [_relabel(graphs[k], rng) for k in (0, 4)]
+    before = tak.transform(new)
+    for params in ({"kernel": "gaussian"}, {"kernel": "relaxed"}, {"matcher": "rrwm"},
+                   {"sync": "spectral"}, {"times": [0.5, 2.0]}, {"sync_dummies": True},
+                   {"normalize": False}, {"node_labels": False}, {"sigma2": 5.0},
+                   {"gamma": 3.0}, {"n_universe": 20}, {"drop_label_mismatches": False}):
+        tak.set_params(**params)
+        np.testing.assert_array_equal(tak.transform(new), before, err_msg=str(params))
+    assert (tak.kernel_, tak.matcher_, tak.sync_) == ("linear", "node", "orthogonal")
+    assert tak.times_ is None and tak.sync_dummies_ is False and tak.normalize_ is True
+    refit = tak.fit(graphs)                                 # a refit applies them
+    assert refit.kernel_ == "relaxed" and refit.times_.tolist() == [0.5, 2.0]
+
+
+def test_node_label_errors_name_the_graph_and_a_failed_fit_sets_nothing(rng, monkeypatch):
+    g = _rigid_graph(6, rng, labels=2)
+    bad = Graph(g.adjacency, node_labels=g.node_labels.astype(float))
+    tak = TransitiveAssignmentKernel(matcher="node")
+    with pytest.raises(TypeError, match=r"`X\[1\].node_labels` must hold integer labels, got "
+                                        r"dtype float64"):
+        tak.fit([g, bad])
+    tak.fit([g, _relabel(g, rng)])
+    with pytest.raises(TypeError, match=r"`X\[0\].node_labels` must hold integer labels"):
+        tak.transform([bad])
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("matching failed")
+
+    import transync.kernels._estimator as est
+
+    monkeypatch.setattr(est, "match_pairs", boom)
+    fresh = TransitiveAssignmentKernel(matcher="node")
+    with pytest.raises(RuntimeError, match="matching failed"):
+        fresh.fit([g, _relabel(g, rng)])
+    assert not [k for k in vars(fresh) if k.endswith("_")]   # no partly fitted state
+
+
 def test_errors():
     tak = TransitiveAssignmentKernel(matcher="node")
     g = _random_graph(4, 0.6, np.random.default_rng(0))
@@ -157,18 +224,21 @@ def test_duplicates_are_identical_and_relabelling_leaves_gram_unchanged(matcher)
     np.testing.assert_allclose(K2, K, atol=1e-9)
 
 
+@pytest.mark.parametrize("sync", ["orthogonal", "spectral"])
 @pytest.mark.parametrize("kernel", ["linear", "gaussian", "relaxed"])
-def test_inductive_transform_matches_transductive_rows(kernel):
+def test_inductive_transform_matches_transductive_rows(kernel, sync):
     rng = np.random.default_rng(8)
     graphs, which = _duplicates(rng, labels=2)
-    tak = TransitiveAssignmentKernel(matcher="rrwm", kernel=kernel, random_state=0).fit(graphs)
+    tak = TransitiveAssignmentKernel(matcher="rrwm", kernel=kernel, sync=sync,
+                                     random_state=0).fit(graphs)
     assert tak.label_values_ is not None                  # "auto": every graph has labels
     assert tak.transform(graphs) is not tak.gram_
     np.testing.assert_array_equal(tak.transform(graphs), tak.gram_)
     new = [_relabel(graphs[k], rng) for k in (0, 4, 8)]
-    # the relaxed Q_i are a polar fixed point only up to the sweeps' tolerance (relative
-    # objective change 1e-6), and the placement is one more polar step: agreement to ~1e-2
-    atol = 1e-2 if kernel == "relaxed" else 1e-9
+    # relaxed: a copy's maps to the other base graphs (solved new -> fitted) need not equal the
+    # fitted maps (solved i < j) exactly, and the orthogonal Q_i of duplicates differ (measured
+    # max 0.023 here); the spectral placement solves the eigenvector equation (max 2e-4)
+    atol = {"linear": 1e-9, "gaussian": 1e-9}.get(kernel, 3e-2 if sync == "orthogonal" else 1e-3)
     np.testing.assert_allclose(tak.transform(new), tak.gram_[[0, 4, 8]], atol=atol)
 
 
@@ -200,6 +270,25 @@ def test_node_labels_enter_the_kernel(rng):
         with_labels.transform([Graph(g.adjacency)])
     unseen = Graph(g.adjacency, node_labels=np.full(6, 7))
     assert with_labels.transform([unseen]).shape == (1, 5)
+
+
+def test_label_mismatches_are_dropped_from_the_synchronization(rng):
+    """Graphs with different label compositions: matches across labels are not synchronized
+    (fewer correspondences per node), unless ``drop_label_mismatches=False``."""
+    graphs = [_rigid_graph(6, rng, labels=3) for _ in range(4)]
+    drop = TransitiveAssignmentKernel(matcher="node", random_state=0).fit(graphs)
+    keep = TransitiveAssignmentKernel(matcher="node", drop_label_mismatches=False,
+                                      random_state=0).fit(graphs)
+    assert drop.drop_label_mismatches_ and not keep.drop_label_mismatches_
+    i, j = drop.pairs_.T
+    A = drop.assignments_
+    real = A < 6
+    mismatched = (np.stack([graphs[k].node_labels for k in i])
+                  != np.stack([graphs[k].node_labels for k in j])[np.arange(len(A))[:, None],
+                                                                     np.minimum(A, 5)]) & real
+    assert mismatched.any()
+    d_keep, d_drop = keep.alignment_.info["degrees"], drop.alignment_.info["degrees"]
+    assert (d_keep >= d_drop).all() and d_keep.sum() - d_drop.sum() == 2 * mismatched.sum()
 
 
 def test_universe_can_be_larger(rng):
@@ -277,6 +366,20 @@ def test_mutag_psd_and_non_transitive_kernel_indefinite(mutag50, kernel):
     K[i, j] = vals
     K_nt = cosine_normalize(K + K.T + np.diag(diag))
     assert min_eigenvalue_ratio(K_nt) < -1e-4
+
+
+@pytest.mark.dataset("tu")
+@pytest.mark.parametrize("sync", ["orthogonal", "spectral"])
+@pytest.mark.parametrize("kernel", ["linear", "relaxed"])
+def test_mutag_copies_are_placed_like_their_originals(mutag, sync, kernel):
+    """transform(copies of fitted graphs) against gram_: the inductive rows approximate the
+    transductive ones (the review measured mean |diff| 0.04-0.08 with spectral before)."""
+    graphs = list(mutag.graphs[::6][:30])
+    tak = TransitiveAssignmentKernel(matcher="node", sync=sync, kernel=kernel,
+                                     random_state=0).fit(graphs)
+    copies = [Graph(g.adjacency.copy(), node_labels=g.node_labels.copy()) for g in graphs[:10]]
+    d = np.abs(tak.transform(copies) - tak.gram_[:10])
+    assert d.mean() < 2e-3 and d.max() < 3e-2
 
 
 @pytest.mark.dataset("tu")

@@ -153,9 +153,11 @@ def test_real_only_synchronization_ignores_dummy_matches(method, rng):
     inv = np.argsort(al.labels, axis=1)
     new = inv[:, al.labels[1]][None]                       # consistent maps to every graph
     lab, Q = place_graphs(new, al.labels, sizes=[4], fitted_sizes=sizes, embedding=E,
-                          method=method)
+                          method=method, degrees=al.info["degrees"],
+                          eigenvalues=al.info["eigenvalues"])
     np.testing.assert_array_equal(lab[0, :4], al.labels[1, :4])
     assert not Q[0, 4:].any()
+    np.testing.assert_allclose(Q[0], E[1], atol=1e-6)      # the values, not only the zeros
     with pytest.raises(ValueError, match="together"):
         place_graphs(new, al.labels, sizes=[4])
     with pytest.raises(ValueError, match="node counts"):
@@ -214,6 +216,8 @@ def test_feature_validation(rng):
         aligned_features([feats[0], np.ones((2, 3))], labels)
     with pytest.raises(TypeError, match="sequence"):
         aligned_features("features", labels)
+    with pytest.raises(TypeError, match="sequence"):               # padded: rows not all real
+        aligned_features(np.ones((2, 3, 2)), labels)
     with pytest.raises(ValueError, match="one \\(n, d\\) block per graph"):
         relaxed_features(feats, np.zeros((3, 3, 3)))
 
@@ -349,6 +353,82 @@ def test_place_graphs_recovers_fitted_labels(rng):
     np.testing.assert_array_equal(lab[0], al.labels[2, pi])
     with pytest.raises(ValueError, match="labels"):
         place_graphs(new, al.labels[:3])
+
+
+def _copy_of(t, A, pairs, N, n):
+    """The maps of a copy of fitted graph ``t`` to every fitted graph: ``t``'s observed maps
+    (inverted where ``t`` is the second graph of the pair) and the identity to ``t`` itself."""
+    new = np.empty((N, n), dtype=np.int64)
+    for p, (i, j) in enumerate(pairs):
+        if i == t:
+            new[j] = A[p]
+        if j == t:
+            new[i] = np.argsort(A[p])
+    new[t] = np.arange(n)
+    return new
+
+
+@pytest.mark.parametrize("real_only", [False, True])
+@pytest.mark.parametrize("method", ["orthogonal", "spectral"])
+def test_copies_are_placed_on_their_originals_on_noisy_input(method, real_only, rng):
+    """Labels: the refined fitted labels are a fixed point of the placement rule (both methods).
+    Embedding: spectral placement solves the degree-normalized eigenvector equation, exact for a
+    copy; orthogonal placement is one more polar block update, exact at the polar fixed point."""
+    N, n = 10, 6
+    sizes = rng.integers(3, n + 1, N)
+    sizes[0] = n
+    _, pairs, A = _planted(N, n, rng)
+    for p in rng.choice(len(A), 8, replace=False):         # inconsistent input
+        A[p] = rng.permutation(n)
+    sz = sizes if real_only else None
+    al = synchronize_alignments(A, pairs, N, n=n, sizes=sz, method=method, keep_embedding=True,
+                                tol=1e-12, max_iter=2000, rng=0)
+    ts = [0, 3, 7]
+    new = np.stack([_copy_of(t, A, pairs, N, n) for t in ts])
+    kw = dict(sizes=sizes[ts], fitted_sizes=sizes) if real_only else {}
+    lab, Q = place_graphs(new, al.labels, embedding=al.embedding, method=method,
+                          degrees=al.info["degrees"], eigenvalues=al.info["eigenvalues"], **kw)
+    for r, t in enumerate(ts):
+        k = sizes[t] if real_only else n
+        np.testing.assert_array_equal(lab[r, :k], al.labels[t, :k])
+    np.testing.assert_allclose(Q, al.embedding[ts], atol=1e-9 if method == "spectral" else 1e-5)
+
+
+def test_label_mismatches_are_not_synchronized_nor_voted(rng):
+    """A real-to-real match between different node labels is dropped from the synchronization
+    (objective, degrees) and from the placement vote."""
+    N, n = 4, 4
+    _, pairs, A = _planted(N, n, rng)
+    sizes = np.full(N, n)
+    node_labels = [np.zeros(n, dtype=np.int64) for _ in range(N)]
+    full = synchronize_alignments(A, pairs, N, n=n, sizes=sizes, node_labels=node_labels)
+    assert full.objective == pairs.shape[0] * n            # consistent: every match kept
+    node_labels[3] = np.r_[1, np.zeros(n - 1, dtype=np.int64)]   # node 0 of graph 3 differs
+    al = synchronize_alignments(A, pairs, N, n=n, sizes=sizes, node_labels=node_labels)
+    assert al.objective == full.objective - (pairs[:, 1] == 3).sum()
+    assert al.info["degrees"][3, 0] == 1.0                 # no kept correspondence
+    np.testing.assert_array_equal(al.info["degrees"][3, 1:], N)
+    # placement: a copy of graph 3 votes only with its same-label nodes
+    new = _copy_of(3, A, pairs, N, n)[None]
+    lab, _ = place_graphs(new, al.labels, sizes=[n], fitted_sizes=sizes,
+                          node_labels=[node_labels[3]], fitted_node_labels=node_labels)
+    np.testing.assert_array_equal(lab[0], al.labels[3])
+    # labels seen nowhere: no vote at all, every slot scores 0 (identity, ties by index)
+    lab, _ = place_graphs(new, al.labels, sizes=[n], fitted_sizes=sizes,
+                          node_labels=[np.full(n, 9)], fitted_node_labels=node_labels)
+    np.testing.assert_array_equal(lab[0], np.arange(n))
+    assert not np.array_equal(al.labels[3], np.arange(n))
+    with pytest.raises(ValueError, match="needs `sizes`"):
+        synchronize_alignments(A, pairs, N, n=n, node_labels=node_labels)
+    with pytest.raises(ValueError, match="together"):
+        place_graphs(new, al.labels, sizes=[n], fitted_sizes=sizes, node_labels=node_labels)
+    with pytest.raises(TypeError, match=r"`node_labels\[1\]` must hold integer labels"):
+        synchronize_alignments(A, pairs, N, n=n, sizes=sizes,
+                               node_labels=[np.zeros(n, dtype=int), np.zeros(n) + 0.5] * 2)
+    with pytest.raises(ValueError, match="eigenvalues"):
+        place_graphs(new, al.labels, embedding=np.zeros((N, n, n)), method="spectral")
+    with pytest.raises(ValueError, match="refine"):
+        synchronize_alignments(A, pairs, N, n=n, refine=-1)
 
 
 # ---------------------------------------------------------------------------------------------

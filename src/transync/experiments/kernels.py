@@ -270,8 +270,15 @@ def prepare(path, key: str | None = None) -> PreparedSet:
 
 # --------------------------------------------------------------------------- disk cache
 
+#: Version of the kernels' computations in the cache keys: bump it whenever a change of
+#: ``transync.kernels`` changes a Gram matrix, so that stale cached entries are not reused.
+#: 2: refined synchronization, cross-label matches dropped, exact spectral placement.
+CACHE_VERSION = 2
+
+
 def _hash(obj) -> str:
-    return hashlib.sha1(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:12]
+    blob = json.dumps({"v": CACHE_VERSION, "obj": obj}, sort_keys=True, default=str)
+    return hashlib.sha1(blob.encode()).hexdigest()[:12]
 
 
 def _slug(text: str) -> str:

@@ -25,7 +25,7 @@ Matchers (:data:`PAIRWISE_MATCHERS`)
             (each pair stops on :func:`transync.matching.sm`'s own test, same start, same
             defaults), then the Hungarian rounding of the eigenvector.
 ``"node"``  node-only linear assignment on ``N`` (the fast, structure-blind ablation): one batched
-            cost construction, one :func:`scipy.optimize.linear_sum_assignment` per pair.
+            cost construction, one :func:`transync.permutations.solve_lap` per pair.
 
 Pair ``(i, j)`` is solved at size ``m = max(n_i, n_j)``, the smallest padding that admits a
 full permutation; the remaining slots ``m..n-1`` are dummies in both graphs (node affinity
@@ -71,7 +71,6 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from .._blas import blas_limit
 from .._progress import progress_bar
@@ -79,6 +78,7 @@ from .._validation import as_generator, check_array, check_choice, check_int, ch
 from ..matching import sm as _sm_reference
 from ..multigraph import PairAffinities, run_lockstep
 from ..parallel import map_chunks, split_chunks
+from ..permutations import solve_lap
 
 __all__ = ["DUMMY_AFFINITY", "LABEL_MISMATCH", "PAIRWISE_MATCHERS",
            "default_sigma2", "match_pairs"]
@@ -273,13 +273,13 @@ def _power_iteration(aff, max_iter, tol):
 
 
 def _round(scores):
-    """Maximizing assignment of every (n, n) block after rounding to ``_SCORE_DECIMALS``."""
+    """Maximizing assignment (:func:`transync.permutations.solve_lap`) of every (n, n) block
+    after rounding to ``_SCORE_DECIMALS`` (ties then broken by node index)."""
     top = np.abs(scores).max((1, 2))
     q = np.round(scores / np.where(top > 0, top, 1.0)[:, None, None], _SCORE_DECIMALS)
     out = np.empty(scores.shape[:2], np.int32)
-    for p, s in enumerate(q):
-        rows, cols = linear_sum_assignment(s, maximize=True)
-        out[p, rows] = cols
+    for p, s in enumerate(q):                     # one LAP per pair (square: all matched)
+        out[p] = solve_lap(s)
     return out
 
 

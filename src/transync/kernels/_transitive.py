@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from .._validation import check_array, check_choice, check_int, check_positive
+from ..permutations import solve_lap
 from ..synchronization import synchronize_permutations
 from ._evaluate import cosine_normalize
 
@@ -66,7 +66,10 @@ class Alignment:
     info : dict
         The synchronization's report (``transync.synchronization.synchronize_permutations``'s
         ``info``, e.g. ``"relaxed_objective_history"``, ``"input_consistency"``,
-        ``"seconds_total"``), plus ``"seconds_input"`` (building its input).
+        ``"seconds_total"``, ``"eigenvalues"``), plus ``"seconds_input"`` (building its input)
+        and ``"degrees"`` ((N, n): row sums of the synchronized block matrix, 1 + the node's
+        kept correspondences; 0 on dummies left out), which with ``"eigenvalues"`` places the
+        spectral embedding of new graphs (:func:`place_graphs`).
     """
 
     labels: np.ndarray
@@ -105,19 +108,44 @@ def _check_permutation_rows(a: np.ndarray, name: str) -> None:
                          f"{int(bad[0])} is not one: {flat[bad[0]].tolist()!r:.80}")
 
 
-def _check_int_array(x, name: str, ndim: int) -> np.ndarray:
+def _check_int_array(x, name: str, ndim: int, keep_dtype: bool = False) -> np.ndarray:
+    """Integer array of ``ndim`` dims, as int64 (or its own integer dtype with ``keep_dtype``:
+    no int64 copy of a large int32 assignment array)."""
     arr = check_array(x, name, ndim=ndim, dtype=None)
     if arr.size == 0:
         return arr.astype(np.int64)
     if arr.dtype.kind not in "iu":
         raise TypeError(f"`{name}` must hold integers, got dtype {arr.dtype}")
+    if keep_dtype and arr.dtype.kind == "i":
+        return arr
     return arr.astype(np.int64, copy=False)
 
 
+def _padded_node_labels(node_labels, sizes: np.ndarray, n: int, name: str) -> np.ndarray:
+    """(N, n) int64 labels of the real nodes, ``-1`` on the dummies (validated per graph)."""
+    if isinstance(node_labels, (str, bytes)) or not isinstance(node_labels,
+                                                               (Sequence, np.ndarray)):
+        raise TypeError(f"`{name}` must be a sequence of integer arrays (one per graph), got "
+                        f"{type(node_labels).__name__}")
+    if len(node_labels) != sizes.size:
+        raise ValueError(f"`{name}` must have one entry per graph ({sizes.size}), got "
+                         f"{len(node_labels)}")
+    out = np.full((sizes.size, n), -1, dtype=np.int64)
+    for g, lab in enumerate(node_labels):                  # one copy per graph
+        lab = check_array(lab, f"{name}[{g}]", ndim=1, dtype=None)
+        if lab.dtype.kind not in "iub":
+            raise TypeError(f"`{name}[{g}]` must hold integer labels, got dtype {lab.dtype}")
+        if lab.shape[0] != sizes[g]:
+            raise ValueError(f"`{name}[{g}]` must have length {int(sizes[g])} (the graph's "
+                             f"real node count), got {lab.shape[0]}")
+        out[g, : lab.shape[0]] = lab
+    return out
+
+
 def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
-                           sizes=None, method: str = "orthogonal",
+                           sizes=None, node_labels=None, method: str = "orthogonal",
                            keep_embedding: bool = False, max_iter: int = 100, tol: float = 1e-6,
-                           rng=None) -> Alignment:
+                           refine: int | None = None, rng=None) -> Alignment:
     r"""Project pairwise permutations of padded graphs onto the transitive space.
 
     Solves (the methods page *Transitive assignment kernels*, step 5)
@@ -148,12 +176,22 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
         node matched to a dummy is unmatched) and the dummies of each graph fill its free slots
         in order: the dummies' arbitrary matches among themselves are not fed to the
         synchronization as if they were observations. Default: full padded permutations.
+    node_labels : sequence of N int arrays of shape (n_i,), optional
+        Categorical node labels (requires ``sizes``): a correspondence between two real nodes
+        with different labels is dropped (unmatched) as well. A matcher that multiplies the node
+        affinity by label equality gives such pairs affinity 0, so which node takes which is a
+        tie broken by index, not an observation.
     method : {"orthogonal", "spectral"}, default="orthogonal"
     keep_embedding : bool, default=False
         Keep the relaxed solution as ``Alignment.embedding`` (needed by the relaxed kernel).
     max_iter, tol : int, float
-        Polar sweeps of ``"orthogonal"`` (and its discrete refinement sweeps) and their relative
-        tolerance, passed on to ``synchronize_permutations``.
+        Polar sweeps of ``"orthogonal"`` and their relative tolerance, passed on to
+        ``synchronize_permutations``.
+    refine : int, optional
+        Projected-power sweeps on the discrete objective after rounding; default ``max_iter``
+        for *both* methods, so that the labels are a fixed point of the rule
+        ``P_t = Hungarian(sum_j P_tj P_j)`` with which :func:`place_graphs` places new graphs
+        (0: plain Pachauri et al. for ``"spectral"``).
     rng : None, int or numpy.random.Generator
         Seeds the matrix-free eigensolver.
 
@@ -210,13 +248,22 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
         if real.shape != (N,) or real.min() < 1 or real.max() > n:
             raise ValueError(f"`sizes` must hold {N} node counts in [1, {n}], got "
                              f"{real.tolist()!r:.80}")
+    L = None
+    if node_labels is not None:
+        if real is None:
+            raise ValueError("`node_labels` needs `sizes` (dropped correspondences leave partial "
+                             "maps; full padded permutations cannot hold them)")
+        L = _padded_node_labels(node_labels, real, n, "node_labels")
+    refine = max_iter if refine is None else check_int(refine, "refine", minimum=0)
     if N == 1:
         labels = np.arange(n, dtype=np.int64)[None]
         emb = np.eye(n)[None] if keep_embedding else None
         if emb is not None and real is not None:
             emb[0, int(real[0]):] = 0.0
+        deg = np.ones((1, n)) if real is None else (np.arange(n) < real[0])[None] * 1.0
         return Alignment(labels=labels, embedding=emb, objective=0.0,
-                         info={"method": method, "note": "one graph: identity alignment"})
+                         info={"method": method, "note": "one graph: identity alignment",
+                               "degrees": deg, "eigenvalues": np.ones(n)})
     if pr.shape[0] == 0:
         raise ValueError(f"`pairs` must contain at least one pair for n_graphs={N}")
     t0 = time.perf_counter()
@@ -225,17 +272,21 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
         # the parser's fast path: int tuple keys and int64 rows of one length
         observed = dict(zip(keys, list(A)))
     else:
-        A = np.where(A < real[pr[:, 1]][:, None], A, -1)
+        keep = A < real[pr[:, 1]][:, None]
+        if L is not None:                                  # different labels: a tie, no match
+            keep &= L[pr[:, 0]] == L[pr[:, 1][:, None], A]
+        A = np.where(keep, A, -1)
         observed = dict(zip(keys, [a[:k] for a, k in zip(A, real[pr[:, 0]].tolist())]))
     seconds_input = time.perf_counter() - t0
     res = synchronize_permutations(observed, n_universe=n, method=method,
                                    sizes=np.full(N, n, dtype=np.int64) if real is None else real,
                                    disconnected="raise",
                                    keep_embedding=bool(keep_embedding), max_iter=max_iter,
-                                   tol=tol, rng=rng)
+                                   tol=tol, refine=refine, rng=rng)
     info = dict(res.info)
     emb = info.pop("embedding", None)
     info["seconds_input"] = seconds_input
+    info["degrees"] = _degrees(A, pr, N, n, real)
     if real is None:
         labels = np.stack(res.labels).astype(np.int64)
         if emb is not None:
@@ -249,6 +300,20 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
     return Alignment(labels=labels, embedding=emb, objective=float(res.objective), info=info)
 
 
+def _degrees(A: np.ndarray, pr: np.ndarray, N: int, n: int, real) -> np.ndarray:
+    """(N, n) row sums of the synchronized block matrix (identity diagonal blocks, one entry per
+    kept correspondence, both directions); 0 on the dummies of a real-only synchronization."""
+    valid = A >= 0
+    if real is not None:
+        valid &= np.arange(n)[None, :] < real[pr[:, 0]][:, None]
+    src = (pr[:, 0][:, None] * n + np.arange(n)[None, :])[valid]
+    dst = (pr[:, 1][:, None] * n + A)[valid]
+    deg = np.bincount(np.concatenate([src, dst]), minlength=N * n).reshape(N, n) + 1.0
+    if real is not None:
+        deg[np.arange(n)[None, :] >= real[:, None]] = 0.0
+    return deg
+
+
 def _fill_dummies(real_labels, n: int) -> np.ndarray:
     """(N, n) labels: the real nodes' slots, then the free slots in increasing order."""
     out = np.empty((len(real_labels), n), dtype=np.int64)
@@ -258,27 +323,45 @@ def _fill_dummies(real_labels, n: int) -> np.ndarray:
     return out
 
 
-def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, embedding=None,
+def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_labels=None,
+                 fitted_node_labels=None, embedding=None, degrees=None, eigenvalues=None,
                  method: str = "orthogonal"):
     """Place new graphs in a fitted universe (inductive use; methods page *Transitive assignment
     kernels*, step 7).
 
     ``P_t = Hungarian(sum_j P_tj P_j)``: node ``u`` of new graph ``t`` goes to the slot that most
     fitted graphs ``j`` put its partner ``assignments[t, j, u]`` in. With ``embedding``, also the
-    relaxed ``Q_t``: ``polar(sum_j P_tj Q_j)`` (orthogonal; the block update of the polar
-    sweeps) or ``(1/N) sum_j P_tj U_j`` (spectral; one step of the eigenvector equation).
+    relaxed ``Q_t``: ``polar(sum_j P_tj Q_j)`` (``"orthogonal"``; the block update of the polar
+    sweeps), or, for ``"spectral"``, the eigenvector equation of the degree-normalized block
+    matrix ``D^{-1/2} T D^{-1/2}`` solved for the new rows with the fitted ones fixed,
+
+    .. math:: Q_t[u, k] = \\frac{1}{\\lambda_k \\sqrt{c_t(u)}} \\sum_j \\sum_v P_{tj}[u, v]\\,
+              \\frac{U_j[v, k]}{\\sqrt{d_j(v)}},
+
+    ``c_t(u)`` the number of correspondences of ``u`` that vote. A copy of a fitted graph (its
+    maps to the others, and the identity to itself) gets that graph's rows back exactly, on
+    any input; its labels come back when they are a fixed point of the rule (the refinement of
+    :func:`synchronize_alignments` makes them one).
 
     Parameters
     ----------
     assignments : ndarray of shape (M, N, n), int
-        Permutation from each new graph ``t`` to each fitted graph ``j`` (padded).
+        Permutation from each new graph ``t`` to each fitted graph ``j`` (padded); int32 is
+        used as it is (no int64 copy).
     labels : ndarray of shape (N, n), int
         The fitted alignment's labels.
     sizes, fitted_sizes : arrays of shape (M,) and (N,), int, optional
         Real node counts (give both or neither): only real-to-real correspondences vote, as in
         :func:`synchronize_alignments` with ``sizes``; the new graphs' dummies fill their free
         slots in order (and get zero rows in the relaxed ``Q_t``).
+    node_labels, fitted_node_labels : sequences of int arrays of shapes (n_t,) and (n_j,)
+        Node labels of the new and the fitted graphs (give both, with ``sizes``): a
+        correspondence between nodes of different labels does not vote, as in
+        :func:`synchronize_alignments` with ``node_labels``.
     embedding : ndarray of shape (N, n, d), optional
+    degrees, eigenvalues : arrays of shapes (N, n) and (>= d,), optional
+        ``Alignment.info["degrees"]`` and ``Alignment.info["eigenvalues"]``; needed to place the
+        ``"spectral"`` embedding (a column with a non-positive eigenvalue is left at zero).
     method : {"orthogonal", "spectral"}
 
     Returns
@@ -289,7 +372,8 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, embeddin
     Raises
     ------
     ValueError
-        Rows that are not permutations, shapes that do not match, a bad ``method``.
+        Rows that are not permutations, shapes that do not match, a bad ``method``, labels
+        without sizes or one set of labels or sizes without the other.
 
     Examples
     --------
@@ -300,7 +384,7 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, embeddin
     array([[0, 1, 2]])
     """
     check_choice(method, "method", SYNC_METHODS)
-    A = _check_int_array(assignments, "assignments", 3)
+    A = _check_int_array(assignments, "assignments", 3, keep_dtype=True)
     lab = _check_int_array(labels, "labels", 2)
     M, N, n = A.shape
     if lab.shape != (N, n):
@@ -309,7 +393,9 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, embeddin
     _check_permutation_rows(A, "assignments")
     if (sizes is None) != (fitted_sizes is None):
         raise ValueError("`sizes` and `fitted_sizes` must be given together")
-    real = fit_real = None
+    if (node_labels is None) != (fitted_node_labels is None):
+        raise ValueError("`node_labels` and `fitted_node_labels` must be given together")
+    real = fit_real = L_new = L_fit = None
     if sizes is not None:
         real = _check_int_array(sizes, "sizes", 1)
         fit_real = _check_int_array(fitted_sizes, "fitted_sizes", 1)
@@ -317,38 +403,72 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, embeddin
             if arr.shape != (k,) or arr.min() < 1 or arr.max() > n:
                 raise ValueError(f"`{name}` must hold {k} node counts in [1, {n}], got "
                                  f"{arr.tolist()!r:.80}")
+    if node_labels is not None:
+        if real is None:
+            raise ValueError("`node_labels` needs `sizes` and `fitted_sizes`")
+        L_new = _padded_node_labels(node_labels, real, n, "node_labels")
+        L_fit = _padded_node_labels(fitted_node_labels, fit_real, n, "fitted_node_labels")
     E = None
     if embedding is not None:
         E = check_array(embedding, "embedding", ndim=3)
         if E.shape[:2] != (N, n):
             raise ValueError(f"`embedding` must have shape (N, n, d) = ({N}, {n}, d), got "
                              f"shape {E.shape}")
+        Q = np.zeros((M, n, E.shape[2]))
+        if method == "spectral":
+            if degrees is None or eigenvalues is None:
+                raise ValueError("`degrees` and `eigenvalues` (Alignment.info) are needed to "
+                                 "place a spectral embedding")
+            deg = check_array(degrees, "degrees", ndim=2)
+            lam = check_array(eigenvalues, "eigenvalues", ndim=1)
+            if deg.shape != (N, n):
+                raise ValueError(f"`degrees` must have shape (N, n) = ({N}, {n}), got shape "
+                                 f"{deg.shape}")
+            if lam.shape[0] < E.shape[2]:
+                raise ValueError(f"`eigenvalues` must hold the {E.shape[2]} leading "
+                                 f"eigenvalues of the embedding, got {lam.shape[0]}")
+            lam = lam[: E.shape[2]]
+            # a column whose eigenvalue is not positive cannot be extended: left at zero
+            lam_inv = np.where(lam > 1e-12, 1.0 / np.where(lam > 1e-12, lam, 1.0), 0.0)
+            dinv = np.where(deg > 0, 1.0 / np.sqrt(np.where(deg > 0, deg, 1.0)), 0.0)
+            E = E * dinv[:, :, None]                      # D^{-1/2} U, once
     out = np.empty((M, n), dtype=np.int64)
     step = max(1, _SLOT_BLOCK_ELEMENTS // max(N * n, 1))
+    jj = np.arange(N)[None, :, None]
     for s in range(0, M, step):                           # blocks of new graphs bound memory
         blk = A[s:s + step]
         b = blk.shape[0]
-        slots = lab[np.arange(N)[None, :, None], blk]                 # (b, N, n)
+        slots = lab[jj, blk]                                              # (b, N, n)
         code = (np.arange(b)[:, None, None] * n + np.arange(n)[None, None, :]) * n + slots
-        votes = None
+        valid = None
         if real is not None:                              # real u -> real partner only
-            votes = ((np.arange(n)[None, None, :] < real[s:s + b, None, None])
-                     & (blk < fit_real[None, :, None])).ravel().astype(float)
+            valid = ((np.arange(n)[None, None, :] < real[s:s + b, None, None])
+                     & (blk < fit_real[None, :, None]))
+            if L_new is not None:                         # ... of the same label
+                valid &= L_new[s:s + b, None, :] == L_fit[jj, blk]
+        votes = None if valid is None else valid.ravel().astype(float)
         S = np.bincount(code.ravel(), weights=votes, minlength=b * n * n).reshape(b, n, n)
         for t in range(b):                                # one LAP per new graph
             k = n if real is None else int(real[s + t])
-            r, c = linear_sum_assignment(S[t, :k], maximize=True)
-            out[s + t, r] = c
+            c = solve_lap(S[t, :k])                       # k <= n rows: all placed
+            out[s + t, :k] = c
             if k < n:
                 out[s + t, k:] = np.setdiff1d(np.arange(n), c)
-    Q = None
-    if E is not None:
-        Q = np.empty((M, n, E.shape[2]))
-        for t in range(M):                                # (N, n, d) gathered per new graph
-            Q[t] = E[np.arange(N)[:, None], A[t]].sum(0)
-        if method == "spectral":
-            Q /= N
-        elif real is None:
+        if E is None:
+            continue
+        for t in range(b):                                # (N, n, d) gathered per new graph
+            rows = E[np.arange(N)[:, None], blk[t]]
+            if valid is None:
+                Q[s + t] = rows.sum(0)
+                cnt = np.full(n, float(N))
+            else:
+                Q[s + t] = np.einsum("ju,jud->ud", valid[t], rows)
+                cnt = valid[t].sum(0).astype(float)
+            if method == "spectral":                      # eigenvector equation, row by row
+                c = np.where(cnt > 0, 1.0 / np.sqrt(np.maximum(cnt, 1.0)), 0.0)
+                Q[s + t] *= c[:, None] * lam_inv[None, :]
+    if E is not None and method == "orthogonal":
+        if real is None:
             U, _, Vt = np.linalg.svd(Q, full_matrices=False)   # polar factor, batched
             Q = U @ Vt
         else:
@@ -356,15 +476,16 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, embeddin
                 k = int(real[t])
                 U, _, Vt = np.linalg.svd(Q[t, :k], full_matrices=False)
                 Q[t, :k] = U @ Vt
-        if real is not None:
-            Q[np.arange(n)[None, :] >= real[:, None]] = 0.0
+    if E is None:
+        Q = None
+    elif real is not None:
+        Q[np.arange(n)[None, :] >= real[:, None]] = 0.0
     return out, Q
 
 
 def _check_features(features, name: str = "features") -> list[np.ndarray]:
-    if isinstance(features, np.ndarray) and features.ndim == 3:
-        features = list(features)
-    if isinstance(features, (str, bytes)) or not isinstance(features, Sequence):
+    # a padded (N, n, f) array is refused: its rows would all count as real nodes
+    if isinstance(features, (str, bytes, np.ndarray)) or not isinstance(features, Sequence):
         raise TypeError(f"`{name}` must be a sequence of (n_i, f) arrays, got "
                         f"{type(features).__name__}")
     if len(features) == 0:

@@ -86,6 +86,10 @@ def _draw_panel(ax, sw, metric, summary, styles):
             err = np.where(np.isfinite(se), se, 0.0)
             ax.errorbar(x[ok], mean[ok], yerr=err[ok], fmt=st["marker"], color=st["color"],
                         ms=5, capsize=2, lw=1.0)
+    if numeric and all(isinstance(v, int) for v in values):
+        from matplotlib.ticker import MaxNLocator
+
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))       # no "2.5 frames"
     if not numeric:
         long = any(len(value_label(v)) > 6 for v in values)
         ax.set_xticks(np.arange(len(values)), [value_label(v) for v in values],

@@ -61,7 +61,21 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``argparse`` parser of every subcommand (each sets ``func``)."""
+    """The ``argparse`` parser of every subcommand (each sets ``func``).
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The ``transync`` parser; parsing a command line gives a namespace whose ``func``
+        attribute runs the chosen subcommand.
+
+    Examples
+    --------
+    >>> from transync.cli import build_parser
+    >>> args = build_parser().parse_args(["experiment", "--list"])
+    >>> args.command, callable(args.func)
+    ('experiment', True)
+    """
     from .. import __version__
     from . import _datasets, _experiment, _homography, _kernel, _match
 
@@ -78,8 +92,29 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv=None) -> int:
-    """Run the command line ``argv`` (default: ``sys.argv[1:]``); returns the exit status."""
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line ``argv`` (default: ``sys.argv[1:]``); returns the exit status.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after the program name; ``None`` reads ``sys.argv[1:]``. A ``--debug``
+        anywhere in it shows the full traceback of an error.
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success, 1 when the output pipe was closed, 2 for an error
+        (reported as one line on standard error), 130 when interrupted. Usage errors exit with
+        status 2 through ``argparse`` (``SystemExit``).
+
+    Examples
+    --------
+    >>> from transync.cli import main
+    >>> main(["experiment", "--list"])
+    cmu ...
+    0
+    """
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv
     argv = [a for a in argv if a != "--debug"]

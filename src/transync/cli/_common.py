@@ -12,7 +12,14 @@ __all__ = ["CLIError", "emit", "new_output_folder", "positive_int"]
 
 
 class CLIError(Exception):
-    """A user error the command line reports as one line (exit status 2)."""
+    """A user error the command line reports as one line (exit status 2).
+
+    Examples
+    --------
+    >>> from transync.cli._common import CLIError
+    >>> str(CLIError("no such file: points.txt"))
+    'no such file: points.txt'
+    """
 
 
 def positive_int(text: str) -> int:

@@ -132,7 +132,8 @@ def add_parsers(sub) -> None:
     p.add_argument("--out", default="transync-demo", help="output folder")
     p.add_argument("--workers", type=positive_int, default=1,
                    help="worker processes for the trials (1 = in this process)")
-    p.add_argument("--experiments", nargs="+", default=["pairwise", "sync", "homography"],
+    p.add_argument("--experiments", nargs="+",
+                   default=["pairwise", "sync", "multigraph", "homography"],
                    help="which quick experiments to run (see `transync experiment --list`)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     p.set_defaults(func=_cmd_demo)
@@ -141,7 +142,7 @@ def add_parsers(sub) -> None:
     p.add_argument("name", nargs="?", help="experiment name (see --list)")
     p.add_argument("--list", action="store_true", help="list the experiments")
     p.add_argument("--quick", action="store_true",
-                   help="small version (about a minute; what `transync demo` runs)")
+                   help="small version (seconds to a minute; what `transync demo` runs)")
     p.add_argument("--out", help="output folder (default: results/NAME)")
     p.add_argument("--data", metavar="PATH",
                    help="data of the experiments on real data (cmu: a folder in the CMU layout, "

@@ -64,7 +64,34 @@ __all__ = ["Experiment", "ExperimentReport", "ExperimentStore", "Sweep", "run_ex
 
 @dataclass(frozen=True)
 class Sweep:
-    """One swept variable: ``config = base | {variable: value, "method": method}``."""
+    """One swept variable: ``config = base | {variable: value, "method": method}``.
+
+    Parameters
+    ----------
+    name : str
+        Name of the sweep (a panel of the figure, a section of ``summary.md``).
+    variable : str
+        The configuration key the sweep varies.
+    values : sequence
+        The values of ``variable``, in plotting order (numbers or strings; JSON-serializable).
+    methods : sequence of str
+        The methods compared at each value (``config["method"]``).
+    base : mapping, optional
+        The fixed part of every configuration of the sweep.
+    metrics : sequence of str, default=("accuracy",)
+        The metrics of the trial's result that are summarized and plotted (``"seconds"``, the
+        time per trial, is always added).
+    xlabel : str, optional
+        Label of the figure's x axis (default: ``variable``).
+
+    Examples
+    --------
+    >>> from transync.experiments import Sweep
+    >>> sweep = Sweep(name="noise", variable="noise", values=[0.0, 0.1], methods=["a"],
+    ...               base={"n": 10})
+    >>> [config for _, _, config in sweep.configs()]
+    [{'n': 10, 'noise': 0.0, 'method': 'a'}, {'n': 10, 'noise': 0.1, 'method': 'a'}]
+    """
 
     name: str
     variable: str
@@ -82,21 +109,88 @@ class Sweep:
 
 @dataclass(frozen=True)
 class Experiment:
-    """A named set of sweeps sharing one ``trial(config, rng) -> {metric: value}`` function."""
+    """A named set of sweeps sharing one ``trial(config, rng) -> {metric: value}`` function.
+
+    Parameters
+    ----------
+    name : str
+        Name of the experiment (key of the stored trials, name of the figure).
+    sweeps : sequence of Sweep
+        The swept variables.
+    trial : callable
+        ``trial(config, rng) -> {metric: value}``: one random problem solved by
+        ``config["method"]``; ``rng`` is a :class:`numpy.random.Generator` derived from the
+        experiment, sweep, value, trial index and seed (the same for every method). It must be
+        picklable (a module-level function) to run on several workers.
+    trials : int, default=20
+        Trials per configuration (:func:`run_experiment` may override it).
+    description : str, default=""
+        One line shown by ``transync experiment --list``.
+    finish : callable, optional
+        ``finish(records, summary, out_dir) -> list of paths``: figures and tables beyond the
+        standard plot (e.g. a thesis table built from the stored records); run with ``plot``.
+
+    Examples
+    --------
+    >>> from transync.experiments import Experiment, Sweep
+    >>> def trial(config, rng):
+    ...     return {"accuracy": 1.0 - config["noise"]}
+    >>> exp = Experiment(name="toy", trial=trial, trials=2, sweeps=[
+    ...     Sweep(name="noise", variable="noise", values=[0.0, 0.5], methods=["a"])])
+    >>> exp.name, len(exp.sweeps), exp.trials
+    ('toy', 1, 2)
+    """
 
     name: str
     sweeps: Sequence[Sweep]
     trial: Callable[[dict, np.random.Generator], Mapping[str, float]]
     trials: int = 20
     description: str = ""
-    #: optional ``finish(records, summary, out_dir) -> list of paths``: figures and tables beyond
-    #: the standard plot (e.g. a thesis table built from the stored records); run with ``plot``
     finish: Callable[[list, list, Path], Sequence[Path]] | None = None
 
 
 @dataclass(frozen=True)
 class ExperimentReport:
-    """What a run produced: all stored records (old and new), the summary and output paths."""
+    """What a run produced: all stored records (old and new), the summary and output paths.
+
+    Attributes
+    ----------
+    experiment : str
+        Name of the experiment.
+    records : list of dict
+        The stored trials of this run's configurations and seed (earlier runs' included): dicts
+        with keys ``sweep``, ``config``, ``trial``, ``metrics``, ``error`` (``None`` on
+        success) and ``seconds``.
+    summary : list of dict
+        The rows of :func:`summarize` (also written to ``summary.csv`` and ``summary.md``).
+    n_new : int
+        Trials run by this call (the others were already stored).
+    n_failed : int
+        Trials of this call that raised (their error is stored in the record).
+    out_dir : pathlib.Path
+        The output folder.
+    figure : pathlib.Path or None
+        The figure written (``None`` when run with ``plot=False``).
+    seconds : float
+        Wall-clock time of the run.
+    extra_files : tuple of pathlib.Path
+        The files written by ``Experiment.finish``.
+    n_other : int
+        Trials in the store that belong to other configurations or seeds (not reported).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from transync.experiments import Experiment, Sweep, run_experiment
+    >>> def trial(config, rng):
+    ...     return {"accuracy": 1.0 - config["noise"]}
+    >>> exp = Experiment(name="toy", trial=trial, trials=2, sweeps=[
+    ...     Sweep(name="noise", variable="noise", values=[0.0, 0.5], methods=["a"])])
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     report = run_experiment(exp, d, progress=False, plot=False)
+    >>> report.n_new, report.n_failed, len(report.records), report.figure is None
+    (4, 0, 4, True)
+    """
 
     experiment: str
     records: list
@@ -133,9 +227,32 @@ class ExperimentStore:
     ``results.sqlite`` itself (no ``-wal`` file to copy along), at the price of one ``fsync`` per
     trial. A file that is not a readable SQLite database raises
     :class:`~transync.exceptions.ExperimentStoreError` naming it; it is never overwritten.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The database file (created with its folder when missing).
+
+    Raises
+    ------
+    ExperimentStoreError
+        The folder or file cannot be written, or the file is not a readable experiment store.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from transync.experiments import ExperimentStore
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     store = ExperimentStore(Path(d) / "results.sqlite")
+    ...     store.add("toy", "key", 0, "noise", {"noise": 0.0}, {"accuracy": 1.0}, None, 0.1)
+    ...     rows = store.records("toy")
+    ...     store.close()
+    >>> rows[0]["metrics"], rows[0]["error"]
+    ({'accuracy': 1.0}, None)
     """
 
-    def __init__(self, path):
+    def __init__(self, path) -> None:
         self.path = Path(path)
         _prepare_folder(self.path.parent)
         self._con = None
@@ -396,7 +513,8 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
     Parameters
     ----------
     experiment : Experiment
-    out_dir : path
+        The sweeps and trial function to run.
+    out_dir : str or path-like
         Folder for ``results.sqlite``, ``summary.csv``, ``summary.md`` and ``<name>.png``.
     trials : int, optional
         Trials per configuration (default: ``experiment.trials``).
@@ -411,6 +529,12 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
         Write the figure (and run ``experiment.finish``, whose files are listed in
         ``extra_files``).
 
+    Returns
+    -------
+    ExperimentReport
+        The records of this run's configurations (stored earlier or now), their summary, the
+        number of new and failed trials and the files written.
+
     Raises
     ------
     ValueError, TypeError
@@ -421,6 +545,20 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
     KeyboardInterrupt
         Re-raised after the pool is stopped and the store closed; every finished trial is
         stored and rerunning resumes.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from transync.experiments import Experiment, Sweep, run_experiment
+    >>> def trial(config, rng):
+    ...     return {"accuracy": 1.0 - config["noise"]}
+    >>> exp = Experiment(name="toy", trial=trial, trials=2, sweeps=[
+    ...     Sweep(name="noise", variable="noise", values=[0.0, 0.5], methods=["a", "b"])])
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     first = run_experiment(exp, d, progress=False, plot=False)
+    ...     again = run_experiment(exp, d, progress=False, plot=False)  # resumes: nothing to do
+    >>> first.n_new, again.n_new, len(again.records)
+    (8, 0, 8)
     """
     n_trials = check_int(trials if trials is not None else experiment.trials, "trials", minimum=1)
     workers = check_int(workers, "workers", minimum=1)
@@ -553,7 +691,30 @@ def _execute(experiment: Experiment, store: ExperimentStore, todo: list, workers
 
 
 def mean_se(values) -> tuple[float, float, int]:
-    """Mean, standard error and count of the finite values (None skipped); (nan, 0, 0) if none."""
+    """Mean, standard error and count of the finite values (None skipped); (nan, 0, 0) if none.
+
+    Parameters
+    ----------
+    values : iterable of float or None
+        The values; ``None``, NaN and infinite values are skipped.
+
+    Returns
+    -------
+    mean : float
+        Mean of the finite values (NaN if there are none).
+    se : float
+        Standard error of the mean, ``std(ddof=1) / sqrt(n)`` (0 for fewer than two values).
+    n : int
+        Number of finite values.
+
+    Examples
+    --------
+    >>> from transync.experiments import mean_se
+    >>> mean_se([1.0, 3.0, None, float("nan")])
+    (2.0, 1.0, 2)
+    >>> mean_se([])
+    (nan, 0.0, 0)
+    """
     vals = np.array([v for v in values if v is not None], dtype=float)
     vals = vals[np.isfinite(vals)]
     n = vals.size
@@ -597,7 +758,34 @@ def value_label(value) -> str:
 
 
 def summarize(experiment: Experiment, records: list[dict]) -> list[dict]:
-    """Mean and standard error per (sweep, value, method, metric) over successful trials."""
+    """Mean and standard error per (sweep, value, method, metric) over successful trials.
+
+    Parameters
+    ----------
+    experiment : Experiment
+        The experiment whose sweeps define the rows (records of other sweeps are ignored).
+    records : list of dict
+        Stored trials, as in :attr:`ExperimentReport.records`.
+
+    Returns
+    -------
+    list of dict
+        One row per sweep, value, method and metric (the sweep's metrics and ``"seconds"``), with
+        keys ``sweep``, ``variable``, ``value``, ``method``, ``metric``, ``mean``, ``se``, ``n``
+        (successful trials) and ``failed`` (trials that raised).
+
+    Examples
+    --------
+    >>> from transync.experiments import Experiment, Sweep, summarize
+    >>> exp = Experiment(name="toy", trial=None, sweeps=[
+    ...     Sweep(name="noise", variable="noise", values=[0.0], methods=["a"])])
+    >>> records = [dict(sweep="noise", config={"noise": 0.0, "method": "a"}, trial=t,
+    ...                 metrics={"accuracy": acc, "seconds": 0.1}, error=None, seconds=0.1)
+    ...            for t, acc in enumerate([0.5, 1.0])]
+    >>> row = summarize(exp, records)[0]
+    >>> row["metric"], row["mean"], row["se"], row["n"], row["failed"]
+    ('accuracy', 0.75, 0.25, 2, 0)
+    """
     by_sweep = {sw.name: sw for sw in experiment.sweeps}
     groups: dict[tuple, list[dict]] = {}
     failures: dict[tuple, int] = {}

@@ -180,6 +180,7 @@ def graphlet3_kernel(graphs, *, normalize: bool = True) -> np.ndarray:
     Parameters
     ----------
     graphs : sequence of Graph or (n_g, n_g) arrays
+        Undirected graphs; any non-zero entry is an edge (as in :func:`graphlet3_counts`).
     normalize : bool, default=True
         Cosine-normalize the result (unit diagonal).
 
@@ -563,6 +564,7 @@ def grakel_kernel(graphs, name: str, *, node_labels=None, n_iter: int = 5, lamda
     Returns
     -------
     ndarray of shape (N, N)
+        The Gram matrix of the graphs (unit diagonal with ``normalize``).
 
     Raises
     ------

@@ -111,10 +111,12 @@ def spectrum(K) -> np.ndarray:
     Parameters
     ----------
     K : array_like of shape (n, n)
+        Square kernel matrix (its symmetric part is used).
 
     Returns
     -------
     ndarray of shape (n,)
+        The eigenvalues, in ascending order.
 
     Examples
     --------
@@ -140,6 +142,7 @@ def min_eigenvalue_ratio(K) -> float:
     Returns
     -------
     float
+        ``lambda_min / lambda_max`` of the symmetric part (0 for an all-zero matrix).
 
     Raises
     ------
@@ -191,6 +194,16 @@ class CVResult:
         The candidate values of ``C``.
     info : dict
         ``inner_splits``, ``random_state``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.kernels import repeated_cv
+    >>> y = np.repeat([0, 1], 6)
+    >>> X = np.c_[y, 1 - y] + 0.1 * np.random.default_rng(0).normal(size=(12, 2))
+    >>> res = repeated_cv(X @ X.T, y, n_splits=3, n_repeats=2, C_grid=[1.0])
+    >>> res.n_repeats, res.n_splits, res.per_repeat.shape, float(res.mean)
+    (2, 3, (2,), 1.0)
     """
 
     accuracies: np.ndarray
@@ -306,6 +319,7 @@ def repeated_cv(K, y, *, n_splits: int = 10, n_repeats: int = 10, C_grid=None,
     Returns
     -------
     CVResult
+        Fold accuracies, their mean and spread, and the ``C`` (and kernel) chosen per fold.
 
     Raises
     ------

@@ -204,6 +204,7 @@ def default_sigma2(features, *, rng=None) -> float:
     Returns
     -------
     float
+        The width ``sigma2`` > 0 of the Gaussian node affinity.
 
     Examples
     --------
@@ -331,7 +332,8 @@ def _pair_order(pairs, sizes, tile):
 
 
 def match_pairs(features, adjacencies, pairs, *, n, matcher="rrwm", sigma2=None, node_labels=None,
-                dummy_affinity=None, executor=None, chunk_size=None, progress=False, rng=None):
+                dummy_affinity=None, executor=None, chunk_size=None, progress=False,
+                rng=None) -> np.ndarray:
     """Match graph pairs padded to ``n`` nodes; one full permutation of ``range(n)`` per pair.
 
     .. math:: \\max_{X \\in \\Pi_n} \\mathrm{vec}(X)^\\top K_{ij}\\, \\mathrm{vec}(X), \\quad

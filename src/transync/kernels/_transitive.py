@@ -70,6 +70,16 @@ class Alignment:
         and ``"degrees"`` ((N, n): row sums of the synchronized block matrix, 1 + the node's
         kept correspondences; 0 on dummies left out), which with ``"eigenvalues"`` places the
         spectral embedding of new graphs (:func:`place_graphs`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.kernels import synchronize_alignments
+    >>> pairs = np.array([[0, 1], [0, 2], [1, 2]])
+    >>> P = np.array([[1, 0, 2], [1, 2, 0], [2, 1, 0]])   # consistent: P_02 = P_12 o P_01
+    >>> al = synchronize_alignments(P, pairs, 3, n=3)
+    >>> al.n_graphs, al.n_universe, al.pairwise(0, 1).tolist(), al.embedding is None
+    (3, 3, [1, 0, 2], True)
     """
 
     labels: np.ndarray
@@ -198,6 +208,8 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
     Returns
     -------
     Alignment
+        The labels of the synchronized universe, the number of kept correspondences, the
+        relaxed embedding when asked for, and the synchronization's report.
 
     Raises
     ------
@@ -325,7 +337,7 @@ def _fill_dummies(real_labels, n: int) -> np.ndarray:
 
 def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_labels=None,
                  fitted_node_labels=None, embedding=None, degrees=None, eigenvalues=None,
-                 method: str = "orthogonal"):
+                 method: str = "orthogonal") -> tuple[np.ndarray, np.ndarray | None]:
     """Place new graphs in a fitted universe (inductive use; methods page *Transitive assignment
     kernels*, step 7).
 
@@ -359,15 +371,21 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
         correspondence between nodes of different labels does not vote, as in
         :func:`synchronize_alignments` with ``node_labels``.
     embedding : ndarray of shape (N, n, d), optional
+        The fitted relaxed embedding (:attr:`Alignment.embedding`); given, the new graphs'
+        relaxed ``Q_t`` are computed too.
     degrees, eigenvalues : arrays of shapes (N, n) and (>= d,), optional
         ``Alignment.info["degrees"]`` and ``Alignment.info["eigenvalues"]``; needed to place the
         ``"spectral"`` embedding (a column with a non-positive eigenvalue is left at zero).
     method : {"orthogonal", "spectral"}
+        The synchronization method of the fitted alignment (how ``Q_t`` is placed).
 
     Returns
     -------
     labels : ndarray of shape (M, n), int64
+        ``labels[t, u]``: the slot of padded node ``u`` of new graph ``t`` (each row a
+        permutation of ``range(n)``).
     embedding : ndarray of shape (M, n, d) or None
+        The new graphs' relaxed ``Q_t`` (``None`` without ``embedding``).
 
     Raises
     ------
@@ -563,6 +581,7 @@ def relaxed_features(features, embedding) -> np.ndarray:
     Parameters
     ----------
     features : sequence of N arrays of shape (n_i, f)
+        Node features of each graph (real nodes only; padded with zero rows to ``n``).
     embedding : ndarray of shape (N, n, d)
         :attr:`Alignment.embedding` (padded node ``u`` of graph ``i`` -> row ``Q_i[u]``).
 
@@ -600,6 +619,24 @@ def median_gamma(aligned, *, rng=0) -> float:
     ``i != j`` (all pairs up to 2000 of them, else 2000 sampled pairs, seeded by ``rng``, so
     the value is reproducible); a zero median falls back to the mean, and no positive distance
     at all to ``1.0``.
+
+    Parameters
+    ----------
+    aligned : ndarray of shape (N, n, f + 1)
+        Aligned features from :func:`aligned_features` (last column: real-node indicator).
+    rng : None, int or numpy.random.Generator, default=0
+        Seeds the sampling of pairs when there are more than 2000.
+
+    Returns
+    -------
+    float
+        ``gamma`` > 0 for ``assignment_kernel(..., kernel="gaussian")``; 1.0 for fewer than
+        two graphs.
+
+    Raises
+    ------
+    ValueError
+        ``aligned`` not a finite 3-d array.
 
     Examples
     --------
@@ -671,19 +708,24 @@ def assignment_kernel(aligned, other=None, *, kernel: str = "linear", gamma=None
     other : ndarray of shape (M, n, f + 1), optional
         Second set (default ``aligned``): returns the (N, M) cross Gram matrix.
     kernel : {"linear", "gaussian", "relaxed"}, default="linear"
+        The kernel (see above).
     gamma : float > 0, optional
         Gaussian width (``"gaussian"`` only).
     normalize : bool, default=True
+        Cosine-normalize the kernel (unit diagonal for ``other=None``).
 
     Returns
     -------
     ndarray of shape (N, M)
+        The Gram matrix (``M = N`` and exactly symmetric when ``other`` is ``None``).
 
     Raises
     ------
     ValueError
         Shapes that do not match, a bad ``kernel``, a non-positive ``gamma``, ``gamma`` with a
         kernel that has none.
+    TypeError
+        ``normalize`` not a bool.
 
     Examples
     --------

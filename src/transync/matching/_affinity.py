@@ -69,6 +69,14 @@ class Affinity(ABC):
     ----------
     n1, n2 : int
         Sizes of the two graphs.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.matching import Affinity, as_affinity
+    >>> aff = as_affinity(np.eye(4), n1=2, n2=2)       # K = I: the score counts the matches
+    >>> isinstance(aff, Affinity), aff.shape, aff.score(np.eye(2))
+    (True, (2, 2), 2.0)
     """
 
     n1: int
@@ -167,9 +175,30 @@ class DenseAffinity(_MatrixAffinity):
     """A dense ``K`` of shape ``(n1 n2, n1 n2)`` in pygmtools' column-major layout.
 
     ``K`` must be real, finite and non-negative (it need not be symmetric: the solvers that need
-    symmetry use ``(K + K^T) / 2``, which has the same objective). ``name`` is the argument name
-    used in error messages.
+    symmetry use ``(K + K^T) / 2``, which has the same objective).
 
+    Parameters
+    ----------
+    K : array_like of shape (n1 * n2, n1 * n2)
+        The affinity matrix; candidate ``(i, a)`` has index ``a * n1 + i``.
+    n1, n2 : int
+        Sizes of the two graphs.
+    name : str, default="K"
+        The argument name used in error messages.
+
+    Raises
+    ------
+    ValueError, TypeError
+        ``K`` of the wrong shape, not real, or with NaN, infinite or negative entries.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.matching import DenseAffinity
+    >>> aff = DenseAffinity(np.eye(4), 2, 2)
+    >>> aff.matvec(np.array([[1.0, 0.0], [0.0, 1.0]]))
+    array([[1., 0.],
+           [0., 1.]])
     >>> DenseAffinity(np.ones((4, 4)), 3, 3)
     Traceback (most recent call last):
     ...
@@ -196,7 +225,30 @@ class DenseAffinity(_MatrixAffinity):
 
 
 class SparseAffinity(_MatrixAffinity):
-    """A ``scipy.sparse`` ``K`` of shape ``(n1 n2, n1 n2)`` in pygmtools' layout."""
+    """A ``scipy.sparse`` ``K`` of shape ``(n1 n2, n1 n2)`` in pygmtools' layout.
+
+    Parameters
+    ----------
+    K : sparse matrix or array_like of shape (n1 * n2, n1 * n2)
+        The affinity matrix (stored as CSR); candidate ``(i, a)`` has index ``a * n1 + i``.
+    n1, n2 : int
+        Sizes of the two graphs.
+    name : str, default="K"
+        The argument name used in error messages.
+
+    Raises
+    ------
+    ValueError, TypeError
+        ``K`` of the wrong shape, not real, or with NaN, infinite or negative entries.
+
+    Examples
+    --------
+    >>> import scipy.sparse as sp
+    >>> from transync.matching import SparseAffinity
+    >>> aff = SparseAffinity(sp.identity(6), 2, 3)
+    >>> aff.shape, float(aff.diag().sum())
+    ((2, 3), 6.0)
+    """
 
     def __init__(self, K, n1: int, n2: int, *, name: str = "K"):
         n1, n2 = _check_sizes(n1, n2)
@@ -261,9 +313,31 @@ class FactorizedAffinity(Affinity):
     Parameters
     ----------
     node : ndarray of shape (n1, n2) or None
+        Unary term (the diagonal of ``K``); ``None`` for none.
     edge : ndarray of shape (m1, m2) or None
+        Affinity of each pair of directed edges (edge ``e1`` of graph 1, ``e2`` of graph 2);
+        ``None`` for zeros.
     edges1 : int ndarray of shape (m1, 2)
+        Directed edges ``(i, j)`` of graph 1.
     edges2 : int ndarray of shape (m2, 2)
+        Directed edges ``(a, b)`` of graph 2.
+    n1, n2 : int
+        Sizes of the two graphs.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Mis-shaped terms, edge lists with indices out of range, NaN, infinite or negative
+        affinities.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.matching import FactorizedAffinity
+    >>> edges = np.array([[0, 1], [1, 0]])
+    >>> aff = FactorizedAffinity(None, np.ones((2, 2)), edges, edges, 2, 2)
+    >>> aff.score(np.eye(2)), aff.score(np.eye(2)[::-1])
+    (2.0, 2.0)
     """
 
     def __init__(self, node, edge, edges1, edges2, n1: int, n2: int):
@@ -321,10 +395,32 @@ class SeparableAffinity(Affinity):
     ``K[(i, a), (j, b)] = node[i, a] [i == j, a == b] + sum_r F[r, i, j] G[r, a, b]``; the
     product is ``Y = node * X + sum_r F_r X G_r^T`` at ``O(R (n1^2 n2 + n1 n2^2))``.
 
-    Attributes
+    Parameters
     ----------
-    max_error : float
-        Bound on ``|K_exact - K|`` entrywise, estimated when the expansion was built (0 if exact).
+    node : ndarray of shape (n1, n2) or None
+        Unary term (added to the diagonal of ``K``); ``None`` for none.
+    F : ndarray of shape (R, n1, n1)
+        Factors on graph 1.
+    G : ndarray of shape (R, n2, n2)
+        Factors on graph 2.
+    max_error : float, default=0.0
+        Bound on ``|K_exact - K|`` entrywise, estimated when the expansion was built (0 if exact);
+        stored as the attribute of the same name.
+
+    Raises
+    ------
+    ValueError, TypeError
+        Mis-shaped factors (``R`` or a size of 0, ``G`` with another rank than ``F``), a
+        mis-shaped or negative ``node``, a negative ``max_error``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.matching import SeparableAffinity
+    >>> F, G = np.ones((1, 2, 2)), np.ones((1, 3, 3))      # rank 1: K is all ones
+    >>> aff = SeparableAffinity(None, F, G)
+    >>> aff.rank, aff.shape, bool(np.allclose(aff.to_dense(), 1.0))
+    (1, (2, 3), True)
     """
 
     def __init__(self, node, F, G, *, max_error: float = 0.0):
@@ -392,8 +488,37 @@ class SeparableAffinity(Affinity):
 def as_affinity(K, *, n1: int | None = None, n2: int | None = None, name: str = "K") -> Affinity:
     """Wrap a pygmtools-style ``K`` (dense or sparse) as an :class:`Affinity`; pass through others.
 
-    Raises ``ValueError`` when ``K`` is not square, not ``(n1 n2, n1 n2)``, has NaN/inf or
-    negative entries.
+    Parameters
+    ----------
+    K : Affinity, array_like or sparse matrix
+        An :class:`Affinity` (returned as is) or a matrix of shape ``(n1 n2, n1 n2)`` in
+        pygmtools' column-major layout.
+    n1, n2 : int, optional
+        Sizes of the two graphs: required for a matrix, checked against an :class:`Affinity`.
+    name : str, default="K"
+        The argument name used in error messages.
+
+    Returns
+    -------
+    Affinity
+        ``K`` itself, a :class:`SparseAffinity` for a sparse matrix, else a
+        :class:`DenseAffinity`.
+
+    Raises
+    ------
+    ValueError
+        ``K`` is not square, not ``(n1 n2, n1 n2)``, has NaN/inf or negative entries, or is an
+        :class:`Affinity` of other sizes than ``n1``, ``n2``.
+    TypeError
+        ``n1`` or ``n2`` missing for a matrix.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.matching import as_affinity
+    >>> aff = as_affinity(np.eye(6), n1=2, n2=3)
+    >>> type(aff).__name__, aff.shape, as_affinity(aff) is aff
+    ('DenseAffinity', (2, 3), True)
     """
     if isinstance(K, Affinity):
         if (n1 is not None and n1 != K.n1) or (n2 is not None and n2 != K.n2):
@@ -412,9 +537,39 @@ def gaussian_node_affinity(g1: Graph, g2: Graph, *, sigma2: float = 1.0,
                            attribute: str = "features") -> np.ndarray:
     """Unary affinity ``exp(-||f1_i - f2_a||^2 / sigma2)`` of shape ``(n1, n2)``.
 
-    ``attribute`` is ``"features"`` (``node_features``) or ``"points"``. Raises
-    :class:`~transync.exceptions.DegenerateInputError` when every entry underflows (``sigma2`` far
-    below the squared scale of the features); the message suggests a ``sigma2``.
+    Parameters
+    ----------
+    g1, g2 : Graph
+        The two graphs, with node features (or points) of the same dimension.
+    sigma2 : float, default=1.0
+        Kernel width.
+    attribute : {"features", "points"}, default="features"
+        Compare the graphs' ``node_features`` or their ``points``.
+
+    Returns
+    -------
+    ndarray of shape (n1, n2)
+        ``exp(-||f1_i - f2_a||^2 / sigma2)``, the unary term of a Lawler QAP (``node_affinity``
+        of :func:`gaussian_edge_affinity`).
+
+    Raises
+    ------
+    ValueError, TypeError
+        Arguments that are not graphs, an unknown ``attribute``, a graph without it, features of
+        different dimensions, a non-positive ``sigma2``.
+    DegenerateInputError
+        Every entry underflows (``sigma2`` far below the squared scale of the features); the
+        message suggests a ``sigma2``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.graphs import Graph
+    >>> from transync.matching import gaussian_node_affinity
+    >>> g = Graph.from_points(np.array([[0.0, 0.0], [1.0, 0.0]]), edges="full")
+    >>> gaussian_node_affinity(g, g, attribute="points").round(3)
+    array([[1.   , 0.368],
+           [0.368, 1.   ]])
     """
     if not isinstance(g1, Graph) or not isinstance(g2, Graph):
         raise TypeError(f"`g1` and `g2` must be Graph objects, got {type(g1).__name__} and "
@@ -506,6 +661,7 @@ def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = DEFAULT_SIGM
     Parameters
     ----------
     g1, g2 : Graph
+        The two graphs (points, adjacency weights or edge features, per ``attribute``).
     sigma2 : float, default=0.15
         Kernel width (Cho et al. use 0.15 on U(0, 1) attributes; Yan et al. 0.05).
     attribute : {"length", "weight", "features", "length+angle"}, optional
@@ -513,6 +669,8 @@ def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = DEFAULT_SIGM
         or distance plus wrapped angle difference weighted by ``angle_weight``
         (``exp(-(dd^2 + angle_weight * dtheta^2) / sigma2)``). Default: ``"features"`` when both
         graphs have edge features, else ``"length"`` when both have points, else ``"weight"``.
+    angle_weight : float, default=0.1
+        Weight of the squared angle difference for ``attribute="length+angle"``.
     node_affinity : ndarray of shape (n1, n2), optional
         Unary term on the diagonal of ``K``.
     backend : {"auto", "separable", "factorized", "sparse", "dense"}, default="auto"
@@ -524,6 +682,8 @@ def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = DEFAULT_SIGM
     Returns
     -------
     Affinity
+        The affinity in the chosen backend (:class:`SeparableAffinity`,
+        :class:`FactorizedAffinity`, :class:`SparseAffinity` or :class:`DenseAffinity`).
 
     Raises
     ------
@@ -534,6 +694,18 @@ def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = DEFAULT_SIGM
         ``sigma2`` so small for the scale of the attributes that fewer edge pairs than edges keep
         an affinity above 1e-300 (points in pixels with the unit-square default, say): the
         message suggests a ``sigma2``. Never a silent all-zero affinity.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.graphs import Graph
+    >>> from transync.matching import gaussian_edge_affinity
+    >>> g = Graph.from_points(np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 2.0]]), edges="full")
+    >>> aff = gaussian_edge_affinity(g, g, backend="factorized")
+    >>> type(aff).__name__, aff.shape
+    ('FactorizedAffinity', (3, 3))
+    >>> bool(aff.score(np.eye(3)) > aff.score(np.eye(3)[[1, 0, 2]]))   # truth scores higher
+    True
     """
     if not isinstance(g1, Graph) or not isinstance(g2, Graph):
         raise TypeError(f"`g1` and `g2` must be Graph objects, got {type(g1).__name__} and "
@@ -698,7 +870,34 @@ def _common_attribute(graphs, attribute):
 
 @dataclass(frozen=True)
 class GaussianEdgeFactors:
-    """Per-graph factors of the Gaussian edge kernel (see :func:`gaussian_edge_factors`)."""
+    """Per-graph factors of the Gaussian edge kernel (see :func:`gaussian_edge_factors`).
+
+    Parameters
+    ----------
+    F, G : ndarray of shape (N, R, n, n)
+        Factors of the ``N`` graphs: ``K_ij ~= sum_r F[i, r] (x) G[j, r]``.
+    max_error : float
+        Entrywise error of the expansion against the exact kernel.
+    attributes : ndarray of shape (N, n, n)
+        The graphs' scalar edge attributes (0 off the edges).
+    masks : ndarray of shape (N, n, n)
+        The graphs' edge masks.
+    sigma2 : float
+        Kernel width.
+    attribute : str
+        The edge attribute used (``"length"``, ``"weight"`` or ``"features"``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.graphs import Graph
+    >>> from transync.matching import gaussian_edge_factors
+    >>> rng = np.random.default_rng(0)
+    >>> gs = [Graph.from_points(rng.random((4, 2)), edges="full") for _ in range(2)]
+    >>> fac = gaussian_edge_factors(gs)
+    >>> fac.F.shape[0], fac.F.shape[2:], fac.attribute, bool(fac.max_error < 1e-8)
+    (2, (4, 4), 'length', True)
+    """
 
     F: np.ndarray
     G: np.ndarray
@@ -714,7 +913,7 @@ class GaussianEdgeFactors:
 
 
 def gaussian_edge_factors(graphs, *, sigma2: float = DEFAULT_SIGMA2, attribute: str | None = None,
-                          tol: float = 1e-10, pairs=None):
+                          tol: float = 1e-10, pairs=None) -> GaussianEdgeFactors:
     """Per-graph separable factors of :func:`~transync.matching.gaussian_edge_affinity`.
 
     One tensor-Chebyshev expansion ``exp(-(x - y)^2 / sigma2) ~= sum_r a_r(x) b_r(y)`` over the
@@ -726,6 +925,7 @@ def gaussian_edge_factors(graphs, *, sigma2: float = DEFAULT_SIGMA2, attribute: 
     Parameters
     ----------
     graphs : sequence of Graph
+        Graphs with the same number of nodes (a list or tuple).
     sigma2, attribute, tol
         As in :func:`~transync.matching.gaussian_edge_affinity` (scalar attributes only:
         ``"length"``, ``"weight"``, ``"features"``).

@@ -118,7 +118,8 @@ class IPFPStepper(_BaseStepper):
         if self._best is not None and self._best_score > res.objective:
             best = self._best.copy()
             return MatchingResult(assignment=best, soft=res.soft,
-                                  objective=self.affinity.score(assignment_to_matrix(best, self.n2)),
+                                  objective=self.affinity.score(
+                                      assignment_to_matrix(best, self.n2)),
                                   n_iter=res.n_iter, converged=res.converged, method=self.method,
                                   n2=self.n2, info=res.info)
         return res

@@ -78,7 +78,8 @@ def hungarian(scores, *, n1: int | None = None, n2: int | None = None,
     Returns
     -------
     MatchingResult
-        ``soft`` is None; ``objective`` is the linear score (for an affinity: ``vec(X)^T K vec(X)``).
+        ``soft`` is None; ``objective`` is the linear score (for an affinity:
+        ``vec(X)^T K vec(X)``).
         When ``n1 > n2`` the ``n1 - n2`` left-over rows are ``-1``.
 
     Raises

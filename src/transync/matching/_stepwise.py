@@ -229,7 +229,8 @@ def _moderate(affinity: Affinity, *, limit: float = 1e100) -> Affinity:
 
 
 def _symmetric(affinity: Affinity, *, rtol: float = 1e-10) -> Affinity:
-    """``affinity`` itself if it is symmetric (checked on one random probe), else its symmetric part."""
+    """``affinity`` itself if it is symmetric (checked on one random probe), else its symmetric
+    part."""
     probe = np.random.default_rng(12345).random((affinity.n1, affinity.n2))
     a, b = affinity.matvec(probe), affinity.rmatvec(probe)
     scale = max(float(np.abs(a).max(initial=0.0)), 1e-300)

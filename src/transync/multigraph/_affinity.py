@@ -101,7 +101,8 @@ def check_pairs(pairs, n_graphs: int, name: str = "pairs") -> np.ndarray:
                          f"[{arr.min()}, {arr.max()}]")
     bad = np.flatnonzero(arr[:, 0] >= arr[:, 1])
     if bad.size:
-        raise ValueError(f"`{name}` rows must be (i, j) with i < j, got {tuple(arr[bad[0]].tolist())} at "
+        row = tuple(arr[bad[0]].tolist())
+        raise ValueError(f"`{name}` rows must be (i, j) with i < j, got {row} at "
                          f"row {bad[0]}")
     if len(np.unique(arr, axis=0)) != len(arr):
         raise ValueError(f"`{name}` must not repeat a pair")
@@ -130,7 +131,8 @@ _FAST_KEYWORDS = {"sigma2", "attribute", "tol", "backend", "angle_weight"}
 def _fast_gaussian_options(affinity):
     """Keyword options when ``affinity`` is the default Gaussian edge affinity, else ``None``.
 
-    ``None`` (the default, ``sigma2=DEFAULT_SIGMA2`` = 0.15) or ``functools.partial(gaussian_edge_affinity,
+    ``None`` (the default, ``sigma2=DEFAULT_SIGMA2`` = 0.15) or
+    ``functools.partial(gaussian_edge_affinity,
     **kw)`` with only ``sigma2``, ``attribute`` (scalar), ``tol``, ``backend`` in {"auto",
     "separable"} and ``angle_weight``.
     """
@@ -460,21 +462,45 @@ class _Loop:
 class PairAffinities:
     """Affinities ``K_p`` of ``P`` graph pairs behind batched products.
 
-    Build with :meth:`from_graphs`, :meth:`from_blocks` or :meth:`from_affinities`.
+    Build with :meth:`from_graphs`, :meth:`from_blocks`, :meth:`from_factors` or
+    :meth:`from_affinities`; the constructor itself takes an internal backend object.
+
+    Parameters
+    ----------
+    impl : object
+        The internal backend computing the products (built by the ``from_*`` constructors,
+        which check their inputs and raise ``ValueError`` or ``TypeError`` on bad ones).
+    pairs : int ndarray of shape (P, 2)
+        ``pairs[p] = (i, j)``; rows of ``X[p]`` are nodes of graph ``i``.
+    max_error : float, default=0.0
+        Entrywise bound on the error of the separable expansion (0 for the others).
 
     Attributes
     ----------
     pairs : int ndarray of shape (P, 2)
-        ``pairs[p] = (i, j)``; rows of ``X[p]`` are nodes of graph ``i``.
+        As given.
     n1, n2 : int
         Sizes of the graphs of every pair.
     backend : {"separable", "dense", "sparse", "loop"}
         How products are computed (module docstring).
     max_error : float
-        Entrywise bound on the error of the separable expansion (0 for the others).
+        As given.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from transync.graphs import Graph
+    >>> from transync.multigraph import PairAffinities
+    >>> rng = np.random.default_rng(0)
+    >>> graphs = [Graph.from_points(rng.random((4, 2)), edges="full") for _ in range(3)]
+    >>> aff = PairAffinities.from_graphs(graphs)                # all 3 pairs
+    >>> aff.pairs.tolist(), aff.backend, (aff.n1, aff.n2)
+    ([[0, 1], [0, 2], [1, 2]], 'separable', (4, 4))
+    >>> aff.score(np.broadcast_to(np.eye(4), (3, 4, 4))).shape  # one score per pair
+    (3,)
     """
 
-    def __init__(self, impl, pairs: np.ndarray, *, max_error: float = 0.0):
+    def __init__(self, impl, pairs: np.ndarray, *, max_error: float = 0.0) -> None:
         self._impl = impl
         self.pairs = pairs
         self.n1, self.n2 = impl.n1, impl.n2

@@ -318,11 +318,12 @@ def _plot_datasets(data, path) -> Path:
         ax.set_ylabel(label)
         ax.set_yscale("log")
         ax.grid(alpha=0.3, axis="y")
-    axes[0].legend(fontsize=7, frameon=False)
-    fig.suptitle("Fig. 5.3a: homography accuracy per generated data set (mean ± s.e.)",
-                 fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    axes[1].legend(fontsize=7, frameon=False, loc="center left", bbox_to_anchor=(1.0, 0.5))
+    fig.suptitle("Fig. 5.3a: homography accuracy per generated data set", fontsize=10)
+    fig.text(0.01, 0.005, "Bars: mean over trials; error bars: ± 1 standard error of the mean.",
+             fontsize=7.5, color="0.3")
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)
     return path
 
@@ -346,10 +347,12 @@ def _plot_precision_recall(data, path) -> Path:
         ax.set_xlabel("iteration (segmentation round)")
         ax.set_ylabel(f"plane pixel {key}")
         ax.grid(alpha=0.3)
-    axes[1].legend(fontsize=7, frameon=False)
-    fig.suptitle("Fig. 5.5: plane segmentation per iteration (mean ± s.e.)", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    axes[1].legend(fontsize=7, frameon=False, loc="center left", bbox_to_anchor=(1.0, 0.5))
+    fig.suptitle("Fig. 5.5: plane segmentation per iteration", fontsize=10)
+    fig.text(0.01, 0.005, "Lines: mean over trials; band: ± 1 standard error of the mean.",
+             fontsize=7.5, color="0.3")
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)
     return path
 

@@ -120,6 +120,8 @@ def match_graphs(g1: Graph, g2: Graph, *, method: str = "rrwm", affinity=None,
     Returns
     -------
     MatchingResult
+        The assignment (``assignment[u] = v``, ``-1`` unmatched), the solver's soft matrix when
+        it has one, the objective ``x^T K x``, iterations and convergence.
 
     Raises
     ------

@@ -80,11 +80,13 @@ class RRWMStepper(_BaseStepper):
     ----------
     affinity : Affinity or array_like/sparse of shape (n1 n2, n1 n2)
         The affinity ``K``.
-    *args, **kwargs
-        ``n1``, ``n2`` and the options of :func:`rrwm` (``c``, ``amplification``, ``max_iter``,
-        ``tol``, ``sinkhorn_tol``, ``sinkhorn_max_iter``).
+    *args
+        ``n1``, ``n2`` and the options of :func:`rrwm`, positionally.
     variant : {"original", "pygmtools"}, optional
         Which published implementation to follow (default ``"original"``), as in :func:`rrwm`.
+    **kwargs
+        ``n1``, ``n2`` and the options of :func:`rrwm` (``c``, ``amplification``, ``max_iter``,
+        ``tol``, ``sinkhorn_tol``, ``sinkhorn_max_iter``).
 
     Raises
     ------

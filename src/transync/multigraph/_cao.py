@@ -170,6 +170,8 @@ def cao(initial, pairs, n_graphs: int, score: Callable, *, variant: str = "cao-p
     Returns
     -------
     CAOOutcome
+        The consistent pairwise assignments of every pair, their affinity scores and the
+        iterations run.
 
     Raises
     ------

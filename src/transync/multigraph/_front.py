@@ -113,6 +113,9 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
     Returns
     -------
     MultiMatchingResult
+        The pairwise assignments of every pair (cycle-consistent when synchronized, with the
+        universe labels in ``matching``), per-pair and total affinity scores, input and output
+        consistency, timings per stage.
 
     Raises
     ------

@@ -563,6 +563,8 @@ def run_lockstep(affinities: PairAffinities, *, solver: str, sync=None,
     Returns
     -------
     LockstepOutcome
+        Final soft iterates, rounding scores and Hungarian assignments of every pair, with
+        per-pair iterations and convergence flags.
 
     Raises
     ------

@@ -780,9 +780,9 @@ PSD_TOL = 1e-9
 def _psd(spectra, sets, methods, out: Path) -> Path:
     lines = ["# Positive semidefiniteness of the Gram matrices", "",
              f"Smallest over largest eigenvalue λ_min / λ_max of each cosine-normalized Gram "
-             f"matrix; PSD when ≥ −{PSD_TOL:g} (issue #12's test), marked ✗ otherwise, with "
-             "the number of eigenvalues below that threshold and the share of the spectrum's "
-             "absolute mass they carry.", "",
+             f"matrix; PSD when ≥ −{PSD_TOL:g}, marked ✗ otherwise, with the number of "
+             "eigenvalues below that threshold and the share of the spectrum's absolute mass "
+             "they carry.", "",
              "| kernel | " + " | ".join(_set_name(s) for s in sets) + " |",
              "|---|" + "---|" * len(sets)]
     for m in methods:

@@ -14,7 +14,7 @@ and from warm starts), "solving for alpha" is the exact line search of the quadr
 Frank-Wolfe step), or a fully corrective re-optimization of all weights on the simplex
 (active-set QP on the Gram matrix of the atoms).
 
-Vectorized throughout (issue #10): the observed pairs are directed edges sorted by source object,
+Vectorized throughout: the observed pairs are directed edges sorted by source object,
 so one object's Gauss-Seidel update is one row gather over its incident blocks plus one
 Hungarian per start configuration (all starts in lock-step); maps, blocks and Gram rows of the
 atoms are batched gathers; the weight problem lives on the ``K x K`` Gram matrix, never on the

@@ -4,9 +4,9 @@ One home for every layer that spreads independent work (multi-graph matching, as
 kernels).
 
 The multi-graph solvers and the kernels split the pairs of a collection into chunks
-(:func:`split_chunks`) and run one function per chunk (:func:`map_chunks`). The chunks are independent, so they can run in
-this process, on local processes, or on any ``concurrent.futures``-like executor, a
-``dask.distributed.Client`` included; the results are the same whichever runs them.
+(:func:`split_chunks`) and run one function per chunk (:func:`map_chunks`). The chunks are
+independent, so they can run in this process, on local processes, or on any
+``concurrent.futures``-like executor, a ``dask.distributed.Client`` included; the results are the same whichever runs them.
 
 ``executor`` accepts
 

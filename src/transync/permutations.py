@@ -236,6 +236,7 @@ def is_partial_permutation_matrix(X, *, atol: float = 1e-8) -> bool:
     Returns
     -------
     bool
+        Whether every entry is 0 or 1 with at most one 1 in each row and column.
 
     Raises
     ------

@@ -73,6 +73,8 @@ def data_home(required: bool = True, *, subfolder: str | None = None) -> Path | 
     Returns
     -------
     pathlib.Path or None
+        The data home (or its ``subfolder``); ``None`` when none is found and ``required``
+        is false.
 
     Raises
     ------

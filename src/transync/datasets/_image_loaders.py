@@ -244,6 +244,7 @@ def load_oxford_sequence(folder) -> HomographySequence:
     Returns
     -------
     HomographySequence
+        The images and the ground-truth homographies of every image into the first.
 
     Raises
     ------
@@ -283,6 +284,7 @@ def load_hpatches_sequence(folder) -> HomographySequence:
     Returns
     -------
     HomographySequence
+        The images and the ground-truth homographies of every image into the first.
 
     Raises
     ------
@@ -459,6 +461,7 @@ def load_adelaidermf(name, folder=None) -> AdelaideRMFPair:
     Returns
     -------
     AdelaideRMFPair
+        The two images, the correspondences and their plane labels (0 = gross outlier).
 
     Raises
     ------

@@ -129,6 +129,7 @@ def make_permutation_collection(n_objects: int, n_nodes: int, *, corruption: flo
     Returns
     -------
     PermutationCollection
+        The corrupted pairwise assignments, the mask of observed pairs and the ground truth.
 
     Raises
     ------

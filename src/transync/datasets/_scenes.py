@@ -124,7 +124,8 @@ def _source_patch_size(n_needed: int) -> int:
 
 class _PatchDealer:
     """Deals distinct source crops in a random order, each with a random rotation by a multiple
-    of 90 degrees, mirror and gain; it only cycles (with a new orientation) when the pool runs out."""
+    of 90 degrees, mirror and gain; it only cycles (with a new orientation) when the pool runs
+    out."""
 
     def __init__(self, size, rng):
         self.pool = _patch_pool(size)
@@ -162,7 +163,8 @@ def _noise_patch(size, rng):
 
     p = np.zeros((size, size), np.float32)
     for sigma in (1.0, 2.0, 4.0, 8.0):
-        p += cv2.GaussianBlur(rng.normal(0, 1, (size, size)).astype(np.float32), (0, 0), sigma) * sigma
+        noise = rng.normal(0, 1, (size, size)).astype(np.float32)
+        p += cv2.GaussianBlur(noise, (0, 0), sigma) * sigma
     return (p - p.mean()) / (p.std() + 1e-6) * 45.0 + 128.0
 
 
@@ -248,6 +250,8 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
     Returns
     -------
     PlanarScene
+        The rendered views, their true homographies into the reference and the true plane
+        masks.
 
     Raises
     ------

@@ -108,6 +108,7 @@ def make_noisy_linear_maps(n_objects=10, dim=3, *, group="GL", noise=0.05, outli
     Returns
     -------
     TransformProblem
+        The noisy pairwise maps, the observation mask and the true absolute maps.
 
     Examples
     --------

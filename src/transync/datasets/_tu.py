@@ -77,7 +77,8 @@ class TUDataset:
         attributes) or None, ``edge_features`` float64 ``(n, n)`` holding each edge's label on the
         edge and 0 elsewhere, or None (TU edge labels are often 0-based: a label 0 reads like "no
         edge" there, so find edges with ``adjacency != 0`` / ``Graph.mask``, never with
-        ``edge_features != 0``, as :class:`~transync.graphs.Graph` prescribes). Node ``u`` of graph ``g`` is the ``u``-th node of ``g`` in
+        ``edge_features != 0``, as :class:`~transync.graphs.Graph` prescribes). Node ``u`` of
+        graph ``g`` is the ``u``-th node of ``g`` in
         ``DS_graph_indicator.txt``.
     y : ndarray of shape (n_graphs,), int64
         The class labels as written in ``DS_graph_labels.txt`` (not re-encoded).

@@ -81,6 +81,7 @@ def extract_planes(x1, x2, *, threshold=5.0, min_inliers=10, max_planes=None, me
     Returns
     -------
     MultiPlaneResult
+        One homography and one inlier set per extracted plane, and each point's plane label.
 
     Raises
     ------

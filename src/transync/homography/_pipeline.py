@@ -580,6 +580,8 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
     Returns
     -------
     PlaneAlignmentResult
+        Homographies of every view into the reference, plane masks, mean warped image, the
+        sparse estimate and per-round diagnostics.
 
     Raises
     ------

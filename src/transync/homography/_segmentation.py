@@ -219,7 +219,8 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
         s.sort(axis=0)
         idx = np.clip((count - 1) // 2, 0, n - 1)
         idx2 = np.clip(count // 2, 0, n - 1)
-        med = 0.5 * (np.take_along_axis(s, idx[None], 0)[0] + np.take_along_axis(s, idx2[None], 0)[0])
+        med = 0.5 * (np.take_along_axis(s, idx[None], 0)[0]
+                     + np.take_along_axis(s, idx2[None], 0)[0])
         return np.where(count > 0, med, 0.0).astype(np.float32)
 
     med = _median(warped)

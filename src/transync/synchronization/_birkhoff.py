@@ -534,6 +534,8 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
     Returns
     -------
     BirkhoffSyncResult
+        The doubly-stochastic absolute maps (atoms and weights), the synchronized pairwise
+        blocks and the objective history.
 
     Raises
     ------

@@ -375,7 +375,8 @@ def _keep_connected(w_new, w_fallback, obs):
         return w_new
     # restore rejected edges (with their fallback weight, scaled down) until connected
     out = w_new.copy()
-    rejected = np.argwhere(obs & ~support & (np.arange(obs.shape[0])[:, None] < np.arange(obs.shape[0])))
+    upper = np.arange(obs.shape[0])[:, None] < np.arange(obs.shape[0])
+    rejected = np.argwhere(obs & ~support & upper)
     order = np.argsort(-w_fallback[rejected[:, 0], rejected[:, 1]])
     for k in order:
         i, j = rejected[k]
@@ -439,6 +440,8 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
     Returns
     -------
     LinearMapSyncResult
+        The synchronized absolute maps (normalized as requested) and the consistent pairwise
+        maps they imply.
 
     Raises
     ------

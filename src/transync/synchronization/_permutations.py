@@ -427,6 +427,8 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
     Returns
     -------
     PermutationSyncResult
+        The consistent multi-matching (universe labels), its objective and the method's
+        diagnostics in ``info``.
 
     Raises
     ------

@@ -129,7 +129,8 @@ def _orth(X: np.ndarray) -> np.ndarray:
     try:
         for _ in range(2):
             G = X.T @ X
-            L = np.linalg.cholesky(G + 1e-14 * np.trace(G) / max(G.shape[0], 1) * np.eye(G.shape[0]))
+            jitter = 1e-14 * np.trace(G) / max(G.shape[0], 1)
+            L = np.linalg.cholesky(G + jitter * np.eye(G.shape[0]))
             X = sla.solve_triangular(L, X.T, lower=True, check_finite=False).T
         return X
     except np.linalg.LinAlgError:

@@ -8,7 +8,7 @@ import json
 import shutil
 from pathlib import Path
 
-__all__ = ["CLIError", "emit", "new_output_folder", "positive_int"]
+__all__ = ["CLIError", "emit", "int_at_least", "new_output_folder", "positive_int"]
 
 
 class CLIError(Exception):
@@ -22,15 +22,41 @@ class CLIError(Exception):
     """
 
 
-def positive_int(text: str) -> int:
-    """``argparse`` type: an integer >= 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
-    return value
+def int_at_least(minimum: int):
+    """``argparse`` type factory: an integer >= ``minimum``.
+
+    Parameters
+    ----------
+    minimum : int
+        The smallest accepted value.
+
+    Returns
+    -------
+    callable
+        ``parse(text) -> int``, raising ``argparse.ArgumentTypeError`` otherwise.
+
+    Examples
+    --------
+    >>> int_at_least(2)("3")
+    3
+    """
+    what = "a positive integer" if minimum == 1 else f"an integer >= {minimum}"
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
+        return value
+
+    parse.__name__ = f"integer >= {minimum}"
+    return parse
+
+
+#: ``argparse`` type: an integer >= 1.
+positive_int = int_at_least(1)
 
 
 def positive_float(text: str) -> float:

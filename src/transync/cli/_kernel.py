@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import time
 
-from ._common import CLIError, new_output_folder, positive_int
+from ._common import CLIError, int_at_least, new_output_folder, positive_int
 
 __all__ = ["add_parser"]
 
@@ -24,25 +24,8 @@ SYNCS = ("orthogonal", "spectral")
 KERNEL_VARIANTS = ("linear", "gaussian", "relaxed")
 
 
-def _at_least_2(text: str) -> int:
-    import argparse
-
-    value = positive_int(text)
-    if value < 2:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 2, got {value}")
-    return value
-
-
-def _seed(text: str) -> int:
-    import argparse
-
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
-    return value
+_at_least_2 = int_at_least(2)
+_seed = int_at_least(0)
 
 
 def _load(spec: str):

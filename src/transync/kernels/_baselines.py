@@ -32,6 +32,7 @@ from .._validation import check_array, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning
 from ..graphs import Graph
 from ..parallel import map_chunks, split_chunks
+from ._checks import check_feature_list
 from ._evaluate import cosine_normalize
 from ._pairwise import default_sigma2
 
@@ -69,24 +70,6 @@ def _check_graphs(graphs, name: str = "graphs") -> list[np.ndarray]:
             raise ValueError(f"`{name}[{k}]` must be undirected (symmetric adjacency)")
         np.fill_diagonal(B, False)
         out.append(B.astype(np.float64))
-    return out
-
-
-def _check_features(features, name: str = "features") -> list[np.ndarray]:
-    if isinstance(features, (str, bytes, np.ndarray)) or not isinstance(features, Sequence):
-        raise TypeError(f"`{name}` must be a list of (n_g, f) arrays, got "
-                        f"{type(features).__name__}")
-    if len(features) == 0:
-        raise ValueError(f"`{name}` must hold at least one graph, got an empty sequence")
-    out = [check_array(F, f"{name}[{k}]", ndim=2) for k, F in enumerate(features)]
-    f = out[0].shape[1]
-    for k, F in enumerate(out):
-        if F.shape[0] == 0:
-            raise ValueError(f"`{name}[{k}]` must have at least one node (row), got shape "
-                             f"{F.shape}")
-        if F.shape[1] != f:
-            raise ValueError(f"`{name}[{k}]` must have {f} columns like `{name}[0]`, got shape "
-                             f"{F.shape}")
     return out
 
 
@@ -272,7 +255,7 @@ def hks_oa_kernel(features, *, sigma2: float | None = None, node_labels=None,
     array([[2., 2.],
            [2., 3.]])
     """
-    feats = _check_features(features)
+    feats = check_feature_list(features)
     sizes = np.array([F.shape[0] for F in feats])
     labels = _check_node_labels(node_labels, sizes)
     sigma2 = default_sigma2(feats) if sigma2 is None else check_positive(sigma2, "sigma2")
@@ -333,7 +316,7 @@ def hks_mean_kernel(features, *, kernel: str = "linear", gamma: float | None = N
     array([[0.5, 2. ],
            [2. , 8. ]])
     """
-    feats = _check_features(features)
+    feats = check_feature_list(features)
     kernel = check_choice(kernel, "kernel", ("linear", "rbf"))
     block_nodes = check_int(block_nodes, "block_nodes", minimum=1)
     sizes = np.array([F.shape[0] for F in feats])

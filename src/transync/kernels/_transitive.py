@@ -26,6 +26,7 @@ import numpy as np
 from .._validation import check_array, check_choice, check_int, check_positive
 from ..permutations import solve_lap
 from ..synchronization import synchronize_permutations
+from ._checks import check_feature_list
 from ._evaluate import cosine_normalize
 
 __all__ = [
@@ -501,25 +502,6 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
     return out, Q
 
 
-def _check_features(features, name: str = "features") -> list[np.ndarray]:
-    # a padded (N, n, f) array is refused: its rows would all count as real nodes
-    if isinstance(features, (str, bytes, np.ndarray)) or not isinstance(features, Sequence):
-        raise TypeError(f"`{name}` must be a sequence of (n_i, f) arrays, got "
-                        f"{type(features).__name__}")
-    if len(features) == 0:
-        raise ValueError(f"`{name}` must hold at least one graph's features, got none")
-    out = [check_array(F, f"{name}[{g}]", ndim=2) for g, F in enumerate(features)]
-    f = out[0].shape[1]
-    for g, F in enumerate(out):
-        if F.shape[1] != f:
-            raise ValueError(f"`{name}[{g}]` must have {f} columns like `{name}[0]`, got shape "
-                             f"{F.shape}")
-        if F.shape[0] == 0:
-            raise ValueError(f"`{name}[{g}]` must describe at least one node, got shape "
-                             f"{F.shape}")
-    return out
-
-
 def _padded_features(feats: list[np.ndarray], n: int) -> np.ndarray:
     """(N, n, f + 1): features of the real nodes first, dummies zero; last column = 1 on real."""
     N, f = len(feats), feats[0].shape[1]
@@ -559,7 +541,7 @@ def aligned_features(features, labels, n: int | None = None) -> np.ndarray:
     array([[2., 1.],
            [3., 0.]])
     """
-    feats = _check_features(features)
+    feats = check_feature_list(features)
     lab = _check_int_array(labels, "labels", 2)
     if n is None:
         n = lab.shape[1]
@@ -599,7 +581,7 @@ def relaxed_features(features, embedding) -> np.ndarray:
     array([[2., 1.],
            [1., 1.]])
     """
-    feats = _check_features(features)
+    feats = check_feature_list(features)
     E = check_array(embedding, "embedding", ndim=3)
     if E.shape[0] != len(feats):
         raise ValueError(f"`embedding` must have one (n, d) block per graph ({len(feats)}), got "

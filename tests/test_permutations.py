@@ -87,3 +87,50 @@ def test_cycle_inconsistency_detects_a_broken_triangle(rng):
     rep = cycle_inconsistency(pairs)
     assert rep["inconsistent_triangles"] == 0.5   # the two triangles through (0, 1)
     assert rep["cycle_error"] > 0
+
+
+# ---------------------------------------------------------------- partial maps and cycles
+
+def _partial_collection(seed, sizes=(5, 6, 8, 3, 7), d=8):
+    from transync.permutations import MultiMatching
+
+    rng = np.random.default_rng(seed)
+    labels = [rng.permutation(d)[:k] for k in sizes]
+    m = MultiMatching(labels, d)
+    pairs = np.array([[i, j] for i in range(len(sizes)) for j in range(i + 1, len(sizes))])
+    return m, pairs, np.array(sizes)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_partial_maps_from_universe_labels_are_cycle_consistent(seed):
+    from transync.permutations import cycle_inconsistency_arrays
+
+    m, pairs, sizes = _partial_collection(seed)
+    rep = cycle_inconsistency_arrays(pairs, m.pairwise_array(pairs), sizes)
+    assert rep["n_triangles"] == 10 and rep["cycle_error"] == 0.0
+
+
+def test_partial_maps_inconsistency_is_found_in_every_orientation():
+    """A violation visible only through the middle object i (j -> i -> k) is still found."""
+    from transync.permutations import cycle_inconsistency_arrays
+
+    pairs = np.array([[0, 1], [0, 2], [1, 2]])
+    sizes = np.array([2, 2, 2])
+    # node 0 of graph 0 <-> node 0 of graph 1 and node 0 of graph 2, but 1 -> 2 leaves node 0
+    # of graph 1 unmatched: only the orientations through graph 0 see it
+    maps = np.array([[0, -1], [0, -1], [-1, -1]])
+    rep = cycle_inconsistency_arrays(pairs, maps, sizes)
+    assert rep["inconsistent_triangles"] == 1.0 and rep["cycle_error"] == 0.5
+    # a node unmatched by the first hop constrains nothing: consistent
+    ok = np.array([[0, -1], [-1, -1], [-1, -1]])
+    assert cycle_inconsistency_arrays(pairs, ok, sizes)["cycle_error"] == 0.0
+
+
+def test_full_permutations_count_as_before():
+    """For full permutations the orientations agree: one swap in one map of a triangle."""
+    from transync.permutations import cycle_inconsistency_arrays
+
+    pairs = np.array([[0, 1], [0, 2], [1, 2]])
+    maps = np.array([[0, 1, 2], [0, 1, 2], [1, 0, 2]])
+    rep = cycle_inconsistency_arrays(pairs, maps, [3, 3, 3])
+    assert rep["cycle_error"] == pytest.approx(2 / 3)

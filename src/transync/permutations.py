@@ -409,6 +409,14 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
     ``i -> j -> k`` is compared with ``i -> k``. Returns the number of triangles checked, the
     fraction of inconsistent ones and the mean fraction of disagreeing nodes (``cycle_error``).
 
+    Partial maps (``-1`` = unmatched, objects of different sizes): a node unmatched by the first
+    hop constrains nothing, so each triangle is checked in its three orientations (middle object
+    ``j``, ``k`` and ``i``: ``X_ij X_jk <= X_ik`` and the like), a node of the source disagreeing
+    when its first hop is matched and the composition differs from the direct map (``-1``
+    included); the triangle's error is the largest fraction over the orientations. Maps read
+    off universe labels are consistent (error 0); for full permutations the three orientations
+    count the same nodes, so this is the plain comparison.
+
     When there are more than ``max_triangles`` candidate triples, ``max_triangles`` triples
     ``i < j < k`` are drawn uniformly at random (with ``rng``) and the observed ones among them
     are checked; ``"sampled"`` says so. The work is vectorized over triangles (index gathers).
@@ -536,7 +544,15 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
         raise ValueError("`maps` entries must be node indices or -1")
     check_int(max_triangles, "max_triangles", minimum=1)
     n_obj = int(sizes.shape[0])
-    n_max = maps.shape[1]
+    n_max = max(maps.shape[1], int(sizes.max(initial=0)))
+    if maps.shape[1] < n_max:
+        maps = np.concatenate([maps, np.full((maps.shape[0], n_max - maps.shape[1]),
+                                             UNMATCHED, maps.dtype)], 1)
+    partial = bool(np.any(maps[np.arange(n_max)[None, :] < sizes[pairs[:, 0]][:, None]] < 0))
+    if partial:                   # inverses, for the two other orientations of a triangle
+        inv = np.full_like(maps, UNMATCHED)
+        q, u = np.nonzero(maps >= 0)
+        inv[q, maps[q, u]] = u
     pid = np.full((n_obj, n_obj), -1, dtype=np.int64)
     q_rev = np.arange(pairs.shape[0])[::-1]
     pid[pairs[q_rev, 0], pairs[q_rev, 1]] = q_rev          # first occurrence wins
@@ -576,12 +592,26 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
         if not ok.any():
             continue
         qij, qjk, qik, tri = qij[ok], qjk[ok], qik[ok], tri[ok]
-        aij = maps[qij]                                       # (t, n_max)
-        via = np.take_along_axis(maps_pad[qjk], np.where(aij >= 0, aij, n_max), axis=1)
-        diff = (via != maps[qik]).sum(1)                      # padding is -1 on both sides
+        if not partial:
+            aij = maps[qij]                                   # (t, n_max)
+            via = np.take_along_axis(maps_pad[qjk], np.where(aij >= 0, aij, n_max), axis=1)
+            frac = (via != maps[qik]).sum(1) / np.maximum(sizes[tri[:, 0]], 1)
+        else:
+            pad = np.full((inv.shape[0], 1), UNMATCHED, maps.dtype)
+            inv_pad = np.concatenate([inv, pad], 1)
+            frac = np.zeros(tri.shape[0])
+            # (first hop, second hop (padded), direct map, source object)
+            for first, second, direct, src in (
+                    (maps[qij], maps_pad[qjk], maps[qik], tri[:, 0]),     # i -> j -> k
+                    (maps[qik], inv_pad[qjk], maps[qij], tri[:, 0]),      # i -> k -> j
+                    (inv[qij], maps_pad[qik], maps[qjk], tri[:, 1])):     # j -> i -> k
+                hit = first >= 0
+                via = np.take_along_axis(second, np.where(hit, first, n_max), axis=1)
+                wrong = (hit & (via != direct)).sum(1) / np.maximum(sizes[src], 1)
+                frac = np.maximum(frac, wrong)
         n_tri += int(tri.shape[0])
-        bad += int(np.count_nonzero(diff))
-        err += float((diff / np.maximum(sizes[tri[:, 0]], 1)).sum())
+        bad += int(np.count_nonzero(frac))
+        err += float(frac.sum())
     return {
         "n_triangles": n_tri,
         "inconsistent_triangles": float(bad / n_tri) if n_tri else 0.0,

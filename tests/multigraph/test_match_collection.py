@@ -180,7 +180,14 @@ def _graphs(sizes, rng=0):
 
 
 @pytest.mark.parametrize("graphs, kwargs, exc, match", [
-    (_graphs([5, 5, 6]), {}, ValueError, "same number of nodes"),
+    (_graphs([5, 5, 6]), {"solver": "cao"}, ValueError, "partial='dummies'"),
+    (_graphs([5, 5, 6]), {"n_universe": 5}, ValueError, "`n_universe` must be >= .* 6"),
+    (_graphs([5, 5, 6]), {"n_universe": 17}, ValueError, "`n_universe` must be <= .* 16"),
+    (_graphs([5, 5, 6]), {"n_universe": 7.5}, TypeError, "n_universe"),
+    (_graphs([5, 5, 6]), {"n_universe": "7"}, TypeError, "n_universe"),
+    (_graphs([5, 5, 6]), {"partial": "pad"}, ValueError, "`partial`"),
+    (_graphs([4, 4, 4]), {"n_universe": 5, "affinity": np.zeros((3, 3, 16, 16))}, ValueError,
+     "callable"),
     (_graphs([5]), {}, ValueError, "at least 2 graphs"),
     ([], {}, ValueError, "at least 2 graphs"),
     (_graphs([5])[0], {}, TypeError, "sequence"),

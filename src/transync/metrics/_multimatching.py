@@ -27,6 +27,9 @@ def _prediction(prediction, truth: MultiMatching):
     """A :class:`MultiMatching` or a mapping of pairwise assignments, sizes checked."""
     if isinstance(prediction, Mapping):
         return prediction
+    if (not isinstance(prediction, MultiMatching) and getattr(prediction, "matching", 0) is None
+            and callable(getattr(prediction, "pairwise_dict", None))):
+        return prediction.pairwise_dict()     # an unsynchronized result: its observed pairs
     if (not isinstance(prediction, MultiMatching)
             and isinstance(getattr(prediction, "matching", None), MultiMatching)):
         prediction = prediction.matching
@@ -63,7 +66,9 @@ def multimatching_precision_recall(prediction, truth, *, pairs=None) -> dict[str
     prediction : MultiMatching, labels, result with ``.matching``, or dict
         A multi-matching (consistent by construction), or a dict ``{(i, j): assignment}`` of
         pairwise outputs that need not be consistent (a missing pair predicts nothing;
-        ``(j, i)`` is used, inverted, when only it is given).
+        ``(j, i)`` is used, inverted, when only it is given). A
+        :class:`~transync.multigraph.MultiMatchingResult` without universe labels
+        (``sync=None``, CAO) is scored on its matched pairs (``pairwise_dict()``).
     truth : MultiMatching or labels
         The ground truth (``-1`` = outlier), e.g. a generator's ``.ground_truth``.
     pairs : (P, 2) array_like of int, optional

@@ -508,7 +508,8 @@ class PairAffinities:
 
     # ---------------------------------------------------------------- constructors
     @classmethod
-    def from_graphs(cls, graphs, pairs=None, affinity=None) -> PairAffinities:
+    def from_graphs(cls, graphs, pairs=None, affinity=None, *,
+                    n_pad: int | None = None) -> PairAffinities:
         """Affinities of ``pairs`` of ``graphs`` (default all pairs).
 
         ``affinity``: callable ``(g_i, g_j) -> Affinity``; ``None`` is
@@ -517,14 +518,34 @@ class PairAffinities:
         per-graph separable path when the pairwise function would pick its separable backend
         (scalar edge attributes on dense graphs): no per-pair object is ever built. Otherwise the
         callable runs once per pair and its results are stacked (see the module docstring).
+
+        Graphs of different sizes need ``n_pad >= max n_i``: every pair's affinity (computed on
+        the real graphs) is embedded in an ``n_pad x n_pad`` problem whose extra *dummy* nodes
+        have zero affinity to everything (isolated nodes without attributes), so that the
+        lock-step solvers run on one shape; the real block of every ``K_p`` is the pair's own
+        affinity, exactly.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from transync.graphs import Graph
+        >>> rng = np.random.default_rng(0)
+        >>> g = [Graph.from_points(rng.random((k, 2)), edges="full") for k in (3, 4)]
+        >>> aff = PairAffinities.from_graphs(g, n_pad=4)
+        >>> (aff.n1, aff.n2), bool(np.all(aff.diag()[0, 3] == 0))      # node 3 of g[0]: dummy
+        ((4, 4), True)
         """
-        graphs = check_graphs(graphs)
+        graphs = check_graphs(graphs, equal_sizes=n_pad is None)
         pairs = check_pairs(pairs, len(graphs))
-        n = graphs[0].n_nodes
+        sizes = np.array([g.n_nodes for g in graphs])
+        if n_pad is not None:
+            n_pad = check_int(n_pad, "n_pad", minimum=int(sizes.max()))
+        n = int(sizes.max()) if n_pad is None else n_pad
+        padded = bool(np.any(sizes != n))
         opts = _fast_gaussian_options(affinity)
         if opts is not None:
             used = sorted({int(k) for k in pairs.ravel()})
-            sub = [graphs[k] for k in used]
+            sub = [_pad_isolated(graphs[k], n) for k in used]
             attribute = opts.get("attribute")
             kinds = {(g.edge_features is not None, g.points is not None) for g in sub}
             mixed = attribute is None and len(kinds) > 1   # the per-pair default would differ
@@ -555,6 +576,7 @@ class PairAffinities:
                             f"{type(affinity).__name__}")
         affs = []
         for i, j in pairs:
+            n_i, n_j = graphs[i].n_nodes, graphs[j].n_nodes
             try:
                 a = affinity(graphs[i], graphs[j])
             except (ValueError, TypeError) as exc:      # say which pair ("g1" = graphs[i])
@@ -565,10 +587,10 @@ class PairAffinities:
             if not isinstance(a, Affinity):
                 raise TypeError(f"`affinity` must return a transync.matching.Affinity, got "
                                 f"{type(a).__name__} for pair ({i}, {j})")
-            if a.shape != (n, n):
+            if a.shape != (n_i, n_j):
                 raise ValueError(f"`affinity` returned shape {a.shape} for pair ({i}, {j}), "
-                                 f"expected ({n}, {n})")
-            affs.append(a)
+                                 f"expected ({n_i}, {n_j})")
+            affs.append(_pad_affinity(a, n) if padded else a)
         return cls.from_affinities(affs, pairs)
 
     @classmethod
@@ -862,6 +884,84 @@ def _triplets(a):
     return np.r_[rows, nz], np.r_[cols, nz], np.r_[a.edge.ravel(), d[nz]]
 
 
+def _pad_isolated(g: Graph, n: int) -> Graph:
+    """``g`` with ``n - n_g`` isolated dummy nodes appended (no edges; zero points and edge
+    attributes; node features and labels dropped): for the edge-only Gaussian affinity only,
+    where a dummy's affinity to anything is exactly zero."""
+    k = n - g.n_nodes
+    if k == 0:
+        return g
+    A = np.zeros((n, n))
+    A[:g.n_nodes, :g.n_nodes] = g.adjacency
+    pts = None if g.points is None else np.vstack([g.points, np.zeros((k, g.points.shape[1]))])
+    E = None
+    if g.edge_features is not None:
+        E = np.zeros((n, n))
+        E[:g.n_nodes, :g.n_nodes] = g.edge_features
+    return Graph(adjacency=A, points=pts, edge_features=E, directed=g.directed)
+
+
+class _PaddedAffinity(Affinity):
+    """An ``(n1, n2)`` affinity embedded in ``(n, n)``; rows / columns beyond are dummies."""
+
+    def __init__(self, a: Affinity, n: int):
+        self.a, self.n1, self.n2 = a, n, n
+
+    def _apply(self, f, X):
+        Y = np.zeros((self.n1, self.n2))
+        Y[:self.a.n1, :self.a.n2] = f(np.asarray(X, dtype=float)[:self.a.n1, :self.a.n2])
+        return Y
+
+    def matvec(self, X):
+        return self._apply(self.a.matvec, X)
+
+    def rmatvec(self, X):
+        return self._apply(self.a.rmatvec, X)
+
+    def diag(self):
+        D = np.zeros((self.n1, self.n2))
+        D[:self.a.n1, :self.a.n2] = self.a.diag()
+        return D
+
+    def to_dense(self):
+        idx = _padded_index(self.a.n1, self.a.n2, self.n1)
+        K = np.zeros((self.n1 * self.n2,) * 2)
+        K[np.ix_(idx, idx)] = self.a.to_dense()
+        return K
+
+    def drop_conflicts(self):
+        return _PaddedAffinity(self.a.drop_conflicts(), self.n1)
+
+
+def _padded_index(n1: int, n2: int, n: int) -> np.ndarray:
+    """Index in the ``n x n`` pygmtools layout of candidate ``a * n1 + u`` of ``n1 x n2``."""
+    u, a = np.meshgrid(np.arange(n1), np.arange(n2), indexing="xy")
+    return (a * n + u).ravel()
+
+
+def _pad_affinity(a: Affinity, n: int) -> Affinity:
+    """``a`` embedded in an ``n x n`` problem with zero-affinity dummies, in the cheapest form
+    the stacking backends take: padded factors, re-indexed sparse entries, or a wrapper."""
+    if a.shape == (n, n):
+        return a
+    n1, n2 = a.shape
+    if isinstance(a, SeparableAffinity):
+        F = np.zeros((a.rank, n, n))
+        G = np.zeros((a.rank, n, n))
+        F[:, :n1, :n1], G[:, :n2, :n2] = a.F, a.G
+        node = None
+        if a.node is not None:
+            node = np.zeros((n, n))
+            node[:n1, :n2] = a.node
+        return SeparableAffinity(node, F, G, max_error=a.max_error)
+    if isinstance(a, (DenseAffinity, SparseAffinity, FactorizedAffinity)):
+        r, c, v = _triplets(a)
+        idx = _padded_index(n1, n2, n)
+        K = sp.csr_matrix((v, (idx[r], idx[c])), shape=(n * n, n * n))
+        return SparseAffinity(K, n, n)
+    return _PaddedAffinity(a, n)
+
+
 def _all_separable(graphs, pairs) -> bool:
     """Whether ``gaussian_edge_affinity(backend="auto")`` picks the separable form for every pair
     (its rule: ``n1^2 n2 + n1 n2^2 < m1 m2``, edge counts ``m``)."""
@@ -888,8 +988,9 @@ def _dict_keys(K: dict, name: str) -> list[tuple[int, int]]:
     return keys
 
 
-def check_graphs(graphs) -> list:
-    """``graphs`` as a list of at least two Graphs of one size ``n >= 1`` (full permutations)."""
+def check_graphs(graphs, *, equal_sizes: bool = True) -> list:
+    """``graphs`` as a list of at least two Graphs of ``n >= 1`` nodes, of one size when
+    ``equal_sizes`` (full permutations)."""
     if isinstance(graphs, (str, bytes, Graph)) or not isinstance(graphs, Sequence):
         raise TypeError("`graphs` must be a sequence (list or tuple) of transync.graphs.Graph, "
                         f"got {type(graphs).__name__}")
@@ -904,10 +1005,10 @@ def check_graphs(graphs) -> list:
     if sizes.min() < 1:
         raise ValueError(f"`graphs[{int(np.argmin(sizes))}]` has no nodes; every graph needs at "
                          "least one")
-    if np.any(sizes != sizes[0]):
+    if equal_sizes and np.any(sizes != sizes[0]):
         shown = sizes.tolist()[:12]
         raise ValueError(
-            "`graphs` must all have the same number of nodes: match_collection matches full "
-            f"permutations; got sizes {shown}{' ...' if len(sizes) > 12 else ''}. Graphs of "
-            "different sizes are not supported yet (select a common node subset first)")
+            "`graphs` must all have the same number of nodes here (full permutations); got "
+            f"sizes {shown}{' ...' if len(sizes) > 12 else ''}. Pass `n_pad` to embed them in "
+            "one padded size")
     return graphs

@@ -20,9 +20,10 @@ class MultiMatchingResult:
     ----------
     pairs : ndarray of shape (P, 2)
         The matched pairs ``(i, j)``, ``i < j``.
-    assignments : ndarray of shape (P, n)
+    assignments : ndarray of shape (P, n_max)
         ``assignments[p][u]`` is the node of graph ``pairs[p, 1]`` matched to node ``u`` of graph
-        ``pairs[p, 0]``.
+        ``pairs[p, 0]`` (``-1``: unmatched; graphs of different sizes: row ``p`` holds
+        ``sizes[pairs[p, 0]]`` entries, then ``-1`` padding).
     matching : MultiMatching or None
         Universe labels when the output is cycle-consistent by construction (every synchronized
         method), else ``None`` (plain pairwise matching, CAO): then only the observed pairs have
@@ -52,7 +53,14 @@ class MultiMatchingResult:
     n_graphs : int
         ``N``.
     info : dict
-        Details per stage (number of synchronization calls, CAO history ...).
+        Details per stage (number of synchronization calls, CAO history, ``"n_universe_rule"``
+        when synchronized, ``"soft"``: the pairwise stage's final soft blocks ``(P, n_max,
+        n_max)`` (the solvers' last iterates, online the synchronized ones, made exactly doubly
+        stochastic between the padded graphs, then cut to the real nodes: block ``p`` is
+        sub-doubly stochastic and zero beyond ``n_i x n_j``; 0/1 for ``sm`` / ``ipfp``; absent
+        for CAO) ...).
+    sizes : ndarray of shape (N,), int
+        Number of nodes of every graph (default: ``n`` for all, the width of ``assignments``).
 
     Examples
     --------
@@ -82,22 +90,33 @@ class MultiMatchingResult:
     converged: bool
     n_graphs: int
     info: dict[str, Any] = field(default_factory=dict)
+    sizes: np.ndarray | None = None
 
     def __post_init__(self):
-        for name in ("pairs", "assignments", "scores"):      # read-only, like MultiMatching's
+        if self.sizes is None:
+            object.__setattr__(self, "sizes", np.full(self.n_graphs,
+                                                      np.shape(self.assignments)[1]))
+        for name in ("pairs", "assignments", "scores", "sizes"):   # read-only, like MultiMatching
             arr = np.array(getattr(self, name))
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
 
     @property
     def n_nodes(self) -> int:
+        """The largest graph's number of nodes (the width of ``assignments``)."""
         return int(self.assignments.shape[1])
+
+    @property
+    def n_universe(self) -> int | None:
+        """Universe size of a consistent output (``None`` when nothing was synchronized)."""
+        return None if self.matching is None else int(self.matching.n_universe)
 
     def _index(self) -> dict[tuple[int, int], int]:
         return {(int(i), int(j)): p for p, (i, j) in enumerate(self.pairs.tolist())}
 
     def pairwise(self, i: int, j: int) -> np.ndarray:
-        """The map from graph ``i`` to graph ``j`` (``i != j``): ``(n,)`` node indices of ``j``.
+        """The map from graph ``i`` to graph ``j``: ``(n_i,)`` node indices of ``j`` (-1:
+        unmatched).
 
         From the universe labels when the output is consistent (every pair, observed or not),
         otherwise from the observed pair (inverted for ``i > j``).
@@ -107,7 +126,7 @@ class MultiMatchingResult:
             if isinstance(g, bool) or not isinstance(g, (int, np.integer)) or not 0 <= g < N:
                 raise ValueError(f"`{name}` must be a graph index in [0, {N}), got {g!r}")
         if i == j:
-            return np.arange(self.n_nodes)
+            return np.arange(int(self.sizes[i]))
         if self.matching is not None:
             return self.matching.pairwise(int(i), int(j))
         a, b = (int(i), int(j)) if i < j else (int(j), int(i))
@@ -115,32 +134,33 @@ class MultiMatchingResult:
         if p is None:
             raise ValueError(f"pair ({i}, {j}) was not matched: the output is not consistent "
                              "(no universe labels), so only the pairs in `pairs` have maps")
-        m = self.assignments[p]
+        m = self.assignments[p, :self.sizes[a]]
         if i < j:
             return m.copy()
-        inv = np.full(self.n_nodes, -1, dtype=np.int64)
+        inv = np.full(int(self.sizes[b]), -1, dtype=np.int64)
         ok = m >= 0
         inv[m[ok]] = np.flatnonzero(ok)
         return inv
 
     def pairwise_dict(self) -> dict[tuple[int, int], np.ndarray]:
         """``{(i, j): assignment}`` over the matched pairs (the input of the metrics)."""
-        return {(int(i), int(j)): self.assignments[p].copy()
+        return {(int(i), int(j)): self.assignments[p, :self.sizes[i]].copy()
                 for p, (i, j) in enumerate(self.pairs.tolist())}
 
     def to_matrix(self) -> np.ndarray:
-        """``(N n, N n)`` 0/1 block matrix of all pairwise maps (identity blocks on the diagonal;
-        blocks of unmatched pairs are zero when the output is not consistent)."""
-        N, n = self.n_graphs, self.n_nodes
+        """``(sum n_i, sum n_i)`` 0/1 block matrix of all pairwise maps (identity blocks on the
+        diagonal; blocks of unmatched pairs are zero when the output is not consistent)."""
         if self.matching is not None:
             return self.matching.to_matrix()
-        M = np.zeros((N * n, N * n))
-        for g in range(N):
-            M[g * n:(g + 1) * n, g * n:(g + 1) * n] = np.eye(n)
+        sizes = self.sizes.tolist()
+        off = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        M = np.zeros((off[-1], off[-1]))
+        for g, k in enumerate(sizes):
+            M[off[g]:off[g + 1], off[g]:off[g + 1]] = np.eye(k)
         for p, (i, j) in enumerate(self.pairs.tolist()):
-            B = assignment_to_matrix(self.assignments[p], n)
-            M[i * n:(i + 1) * n, j * n:(j + 1) * n] = B
-            M[j * n:(j + 1) * n, i * n:(i + 1) * n] = B.T
+            B = assignment_to_matrix(self.assignments[p, :sizes[i]], sizes[j])
+            M[off[i]:off[i + 1], off[j]:off[j + 1]] = B
+            M[off[j]:off[j + 1], off[i]:off[i + 1]] = B.T
         return M
 
     def accuracy(self, truth) -> float:

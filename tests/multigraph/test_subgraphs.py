@@ -96,6 +96,17 @@ def test_every_synchronization_honours_a_given_universe(sync, mode):
 
 
 @QUIET
+@pytest.mark.parametrize("kw", [{}, {"mode": "offline"}, {"mode": "offline", "sync": "spectral"},
+                                {"mode": "offline", "sync": "orthogonal"}, {"sync": "orthogonal"}])
+def test_a_universe_larger_than_needed_leaves_slots_empty(kw):
+    """Exact problems, d = 20 for a true universe of 12: nothing is split or lost."""
+    c = _problem()
+    res = match_collection(c.graphs, affinity=AFF, progress=False, rng=0, n_universe=20, **kw)
+    assert res.n_universe == 20
+    assert multimatching_precision_recall(res, c.ground_truth)["f1"] == 1.0
+
+
+@QUIET
 def test_synchronized_output_violates_no_constraint():
     c = _problem(seed=2, deformation=0.1, n_outliers=1)
     res = match_collection(c.graphs, affinity=AFF, progress=False, rng=0)

@@ -148,6 +148,16 @@ def bad_inputs(tmp_path):
      r"(edge affinity is zero for every candidate pair|`sigma2`=1e-06 is too small)"),
     (["match", "{d}/p2.txt", "{d}/p3.txt"],
      r"different dimensions: .*p2\.txt has 2 coordinates a point, .*p3\.txt has 3"),
+    (["collection", "{d}/p2.txt"], r"need at least 2 point sets to match, got 1"),
+    (["collection", "{d}/p2.txt", "{d}/p3.txt"], r"different dimensions: .*p3\.txt has 3"),
+    (["collection", "{d}/p2.txt", "{d}/header.csv"], r"header\.csv, line 1"),
+    (["collection", "{d}/p2.txt", "{d}/near.txt", "--n-universe", "3"],
+     r"`n_universe` must be >= the largest graph's size 5"),
+    (["collection", "{d}/p2.txt", "{d}/near.txt", "--solver", "cao", "--sync", "none"],
+     r"CAO composes full permutations; .* need partial='dummies'"),
+    (["collection", "{d}/p3.txt", "{d}/p3.txt", "--affinity", "length+angle", "--edges",
+      "full"],
+     r"length\+angle needs 2-d points"),
 ])
 def test_errors_are_one_line_and_exit_2(bad_inputs, capsys, argv, expected):
     import re
@@ -334,13 +344,18 @@ def test_cli_defaults_and_choices_are_the_librarys():
     assert _match.DEFAULT_SIGMA2 == DEFAULT_SIGMA2
     assert inspect.signature(match_graphs).parameters["sigma2"].default == DEFAULT_SIGMA2
     assert _match.SYNC_METHODS == _permutations._METHODS
+    from transync import multigraph
+
+    assert _match.COLLECTION_SOLVERS == multigraph.SOLVERS
+    assert _match.COLLECTION_SYNCS == (*multigraph.SYNCS, "none")
+    assert _match.PARTIAL == multigraph.PARTIAL
     parser = build_parser()
     args = parser.parse_args(["match", "a.txt", "b.txt"])
     assert args.sigma2 == DEFAULT_SIGMA2
 
 
-@pytest.mark.parametrize("command", ["demo", "experiment", "match", "sync", "homography",
-                                     "kernel", "datasets"])
+@pytest.mark.parametrize("command", ["demo", "experiment", "match", "collection", "sync",
+                                     "homography", "kernel", "datasets"])
 def test_every_option_has_help_and_shows_its_default(command):
     sub = next(a for a in build_parser()._actions
                if isinstance(a, argparse._SubParsersAction)).choices[command]
@@ -368,3 +383,33 @@ def test_homography_report_says_when_every_dense_update_was_rejected():
     assert "diverged 1" in line and "rejected sparse 1" in line
     assert "off" in _dense_line(res, types.SimpleNamespace(no_dense=True))
     assert "b.png" in _views_line(res, ["a.png", "b.png"])
+
+
+def _planted_point_sets(tmp_path, rng, d=15, n_sets=6):
+    """Point sets that each keep part of ``d`` universe points, shuffled; their universe ids."""
+    U = rng.random((d, 2))
+    files, ids = [], []
+    for g in range(n_sets):
+        keep = np.sort(rng.choice(d, rng.integers(d - 4, d + 1), replace=False))
+        perm = rng.permutation(len(keep))
+        path = tmp_path / f"view{g}.txt"
+        np.savetxt(path, U[keep][perm])
+        files.append(str(path))
+        ids.append(keep[perm])
+    return files, ids
+
+
+@pytest.mark.parametrize("extra", [[], ["--partial", "dummies"], ["--mode", "offline"]])
+def test_collection_command_matches_point_sets_of_different_sizes(tmp_path, extra):
+    files, ids = _planted_point_sets(tmp_path, np.random.default_rng(1))
+    out = tmp_path / "res.json"
+    assert main(["collection", *files, "--edges", "full", "--sigma2", "0.005", "--quiet",
+                 "--out", str(out), *extra]) == 0
+    res = json.loads(out.read_text())
+    assert res["sizes"] == [len(i) for i in ids]
+    assert len(res["labels"]) == len(files) and res["consistency"] == 1.0
+    for i, j, m in res["pairs"]:                 # every map is the planted one, -1 included
+        expect = [int(np.flatnonzero(ids[j] == u)[0]) if u in ids[j] else -1 for u in ids[i]]
+        assert m == expect
+    if not extra:
+        assert res["n_universe"] == 15 and "estimated" in res["n_universe_rule"]

@@ -1,4 +1,5 @@
-"""``transync match`` (two point sets) and ``transync sync`` (pairwise assignments as JSON)."""
+"""``transync match`` (two point sets), ``transync collection`` (many point sets, matched at once)
+and ``transync sync`` (pairwise assignments as JSON)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,10 @@ METHODS = ("hungarian", "sinkhorn", "sm", "rrwm", "ipfp", "ga", "pf")
 LINEAR = ("hungarian", "sinkhorn")
 #: ``synchronize_permutations``'s methods (kept in step by tests/cli)
 SYNC_METHODS = ("spectral", "orthogonal", "matcheig")
+#: ``match_collection``'s solvers, synchronizations and partial modes (kept in step by tests/cli)
+COLLECTION_SOLVERS = ("rrwm", "ga", "pf", "sm", "ipfp", "cao", "cao-c", "cao-uc", "cao-pc")
+COLLECTION_SYNCS = ("birkhoff", "spectral", "orthogonal", "none")
+PARTIAL = ("universe", "dummies")
 #: ``gaussian_edge_affinity``'s default width (kept in step by tests/cli; the CLI does not import
 #: the library to build its parser)
 DEFAULT_SIGMA2 = 0.15
@@ -131,6 +136,63 @@ def _cmd_match(args) -> int:
     return emit(payload, args.out)
 
 
+def _cmd_collection(args) -> int:
+    import functools
+
+    import numpy as np
+
+    from ..graphs import Graph
+    from ..matching import gaussian_edge_affinity
+    from ..multigraph import match_collection
+
+    if len(args.points) < 2:
+        raise CLIError(f"need at least 2 point sets to match, got {len(args.points)}")
+    sets = [read_points(p) for p in args.points]
+    dims = {P.shape[1] for P in sets}
+    if len(dims) > 1:
+        raise CLIError("the point sets have different dimensions: " + ", ".join(
+            f"{p} has {P.shape[1]}" for p, P in zip(args.points, sets)))
+    scale = float(max(np.ptp(P, axis=0).max() for P in sets))
+    if not scale > 0:
+        scale = 1.0                      # every point identical: nothing to rescale
+    graphs = []
+    for path, P in zip(args.points, sets):
+        try:
+            graphs.append(Graph.from_points(P / scale, edges=args.edges,
+                                            k=min(5, max(len(P) - 1, 1))))
+        except ValueError as exc:
+            raise CLIError(f"{path}: {exc}") from exc
+    if args.affinity == "length+angle":
+        if sets[0].shape[1] != 2:
+            raise CLIError(f"--affinity length+angle needs 2-d points, got {sets[0].shape[1]}-d")
+        aff = functools.partial(gaussian_edge_affinity, attribute="length+angle",
+                                sigma2=args.sigma2)
+    else:
+        aff = functools.partial(gaussian_edge_affinity, sigma2=args.sigma2)
+    sync = None if args.sync == "none" else args.sync
+    try:
+        res = match_collection(graphs, solver=args.solver, sync=sync, mode=args.mode,
+                               affinity=aff, n_universe=args.n_universe, partial=args.partial,
+                               rng=args.seed, progress=not args.quiet)
+    except (ValueError, TypeError) as exc:
+        raise CLIError(str(exc).splitlines()[0]) from exc
+    payload = {
+        "files": [str(p) for p in args.points], "sizes": res.sizes.tolist(),
+        "solver": res.solver, "sync": res.sync, "mode": res.mode, "partial": args.partial,
+        "n_universe": res.n_universe, "n_universe_rule": res.info.get("n_universe_rule"),
+        "labels": (None if res.matching is None
+                   else [np.asarray(lab).tolist() for lab in res.matching.labels]),
+        "pairs": [[int(i), int(j), res.pairwise(int(i), int(j)).tolist()]
+                  for i, j in res.pairs],
+        "total_score": res.total_score, "consistency": res.consistency,
+        "input_consistency": res.input_consistency, "converged": res.converged,
+        "timings": {k: round(float(v), 4) for k, v in res.timings.items()},
+        "edges": args.edges, "affinity": args.affinity, "sigma2": args.sigma2,
+        "coordinate_scale": scale,
+    }
+    return emit(payload, args.out)
+
+
 def _read_pairs(path: str) -> dict:
     import numpy as np
 
@@ -208,6 +270,40 @@ def add_parsers(sub) -> None:
                         "after scaling both point sets to unit size (the library's value)")
     p.add_argument("--out", help="JSON output file (default: print)")
     p.set_defaults(func=_cmd_match)
+
+    p = sub.add_parser(
+        "collection", help="match many point sets at once (of any sizes): cycle-consistent maps "
+                           "through a universe of nodes",
+        description="Build a graph on every point set (all scaled by one factor), match all "
+                    "pairs with transync.match_collection and print (or write) the universe "
+                    "labels of every point and the map of every pair as JSON (-1 = unmatched).")
+    p.add_argument("points", nargs="+", help="two or more point sets: .npy, or .txt/.csv with "
+                                             "one point a row (sets may differ in size)")
+    p.add_argument("--solver", default="rrwm", choices=list(COLLECTION_SOLVERS),
+                   help="pairwise solver (rrwm, ga, pf: online synchronized by default) or CAO")
+    p.add_argument("--sync", default="birkhoff", choices=list(COLLECTION_SYNCS),
+                   help="synchronization; none: plain pairwise matching (CAO: use none)")
+    p.add_argument("--mode", default="online", choices=["online", "offline"],
+                   help="online: synchronization steers the lock-step solvers; offline: solve "
+                        "every pair, then synchronize once")
+    p.add_argument("--n-universe", type=positive_int, default=None,
+                   help="universe size (default: estimated; the number of points when all sets "
+                        "have the same size)")
+    p.add_argument("--partial", default="universe", choices=list(PARTIAL),
+                   help="point sets of different sizes: map them into the universe, or pad "
+                        "them with dummy nodes (the baseline)")
+    p.add_argument("--edges", default="delaunay", choices=["full", "delaunay", "knn"],
+                   help="graph on each point set: complete, Delaunay triangulation, or k = 5 "
+                        "nearest neighbours")
+    p.add_argument("--affinity", default="length", choices=["length", "length+angle"],
+                   help="edge attribute of the Gaussian edge affinity (length+angle: 2-d points)")
+    p.add_argument("--sigma2", type=positive_float, default=0.05,
+                   help="width of the Gaussian edge affinity, after scaling all point sets by "
+                        "one factor to unit size")
+    p.add_argument("--seed", type=int, default=0, help="seed of the randomized steps")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--out", help="JSON output file (default: print)")
+    p.set_defaults(func=_cmd_collection)
 
     p = sub.add_parser("sync", help="synchronize pairwise assignments given as JSON "
                                     "{\"pairs\": [[i, j, assignment], ...]}")

@@ -1,4 +1,5 @@
-"""Multi-graph matching (thesis ch. 6): synchronized solvers, offline synchronization, CAO.
+"""Multi-graph matching (thesis ch. 6, 7): synchronized solvers, offline synchronization, CAO;
+graphs of different sizes through a universe.
 
 Front door :func:`match_collection`; result :class:`MultiMatchingResult`. The pieces are public
 for users who assemble their own pipeline: :class:`PairAffinities` (batched affinities of the
@@ -18,6 +19,7 @@ _LAZY = {
     "split_chunks": "transync.parallel",
     "CAO_VARIANTS": "._front",
     "ONLINE_SOLVERS": "._front",
+    "PARTIAL": "._front",
     "SOLVERS": "._front",
     "SYNCS": "._front",
     "match_collection": "._front",

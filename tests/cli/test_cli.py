@@ -133,7 +133,7 @@ def bad_inputs(tmp_path):
     (["sync", "{d}/broken.json"], r"broken\.json, line 3: not valid JSON"),
     (["sync", "{d}/badpair.json"], r"badpair\.json: pairs\[0\] must be \[i, j, map\]"),
     (["demo", "--experiments", "foo", "--out", "{d}/demo"],
-     r"unknown experiment 'foo'; choose from cmu, homography, kernels, multigraph, pairwise, sync"),
+     r"unknown experiment 'foo'; choose from cmu, homography, kernels, multigraph, pairwise, subgraph, sync"),
     (["experiment", "nope"], r"unknown experiment 'nope'; choose from"),
     (["match", "{d}/empty.txt", "{d}/p2.txt"], r"empty\.txt: no points found"),
     (["match", "{d}/header.csv", "{d}/p2.txt"],

@@ -30,7 +30,7 @@ def _build(name: str, *, quick: bool, data=None, sets=None, out=None):
             continue
         if option not in params:
             raise CLIError(f"experiment {name!r} takes no {flag}; {flag} is for the experiments "
-                           "on real data sets (cmu: --data; kernels: --data, --sets)")
+                           "on real data sets (cmu, subgraph: --data; kernels: --data, --sets)")
         kwargs[option] = value
     if out is not None and "out" in params:
         kwargs["out"] = out
@@ -146,8 +146,9 @@ def add_parsers(sub) -> None:
     p.add_argument("--out", help="output folder (default: results/NAME)")
     p.add_argument("--data", metavar="PATH",
                    help="data of the experiments on real data (cmu: a folder in the CMU layout, "
-                        "default TRANSYNC_DATA's cmu-house; kernels: a TU folder or a folder of "
-                        "TU folders, default TRANSYNC_DATA's tu)")
+                        "default TRANSYNC_DATA's cmu-house; subgraph: the same, for its CMU "
+                        "partial point; kernels: a TU folder or a folder of TU folders, default "
+                        "TRANSYNC_DATA's tu)")
     p.add_argument("--sets", metavar="NAME,NAME",
                    help="comma-separated data sets to run (kernels: TU names, e.g. MUTAG,PTC_MR; "
                         "default: all five of the thesis)")

@@ -22,6 +22,7 @@ REGISTRY = {
     "multigraph": "transync.experiments.multigraph",
     "cmu": "transync.experiments.cmu",
     "kernels": "transync.experiments.kernels",
+    "subgraph": "transync.experiments.subgraph",
 }
 
 __all__ = ["REGISTRY", "Experiment", "ExperimentReport", "ExperimentStore", "Sweep", "mean_se",

@@ -739,6 +739,20 @@ METRIC_LABELS = {
     "recall": "recall",
     "f1": "F1 score",
     "error": "error",
+    "universe_ok": "universe size = truth\n(fraction of trials)",
+    "universe_error": "estimated - true universe size",
+    "capacity_cvr": "capacity CVR\n(violated / constraints)",
+    "transitivity_cvr": "transitivity CVR\n(violated / constraints)",
+    "soft_capacity_cvr": "soft capacity CVR\n(violated / constraints)",
+    "soft_transitivity_cvr": "soft transitivity CVR\n(violated / constraints)",
+    "capacity_cvvr": "capacity CVVR\n(violation / mass)",
+    "transitivity_cvvr": "transitivity CVVR\n(violation / mass)",
+    "soft_capacity_cvvr": "soft capacity CVVR\n(violation / mass)",
+    "soft_transitivity_cvvr": "soft transitivity CVVR\n(violation / mass)",
+    "capacity_acvv": "capacity ACVV\n(mean violation)",
+    "transitivity_acvv": "transitivity ACVV\n(mean violation)",
+    "soft_capacity_acvv": "soft capacity ACVV\n(mean violation)",
+    "soft_transitivity_acvv": "soft transitivity ACVV\n(mean violation)",
 }
 
 def metric_label(metric: str, *, inline: bool = False) -> str:

@@ -62,6 +62,21 @@ def load_sequence(data=None):
             "set TRANSYNC_DATA to a folder holding `cmu-house`") from None
 
 
+def draw_frames(data, config: dict, n: int, gap: int, rng: np.random.Generator):
+    """The sequence in ``data`` (checked against ``config["fingerprint"]`` when recorded) and
+    ``n`` frame numbers ``gap`` apart from a random start: ``(sequence, frames)``."""
+    seq = _load(data)
+    if config.get("fingerprint") not in (None, sequence_fingerprint(seq)):
+        raise ValueError(f"the sequence in {data} is not the one this experiment was built on "
+                         "(its landmarks changed); rebuild the experiment")
+    span = gap * (n - 1)
+    if span > seq.n_frames - 1:
+        raise ValueError(f"{n} frames {gap} apart need {span + 1} frames, the sequence "
+                         f"{seq.name!r} has {seq.n_frames}")
+    offset = int(rng.integers(0, seq.n_frames - span))
+    return seq, seq.frames[offset + gap * np.arange(n)].tolist()
+
+
 def trial(config: dict, rng: np.random.Generator, *, data: str) -> dict:
     """One draw of ``n_frames`` frames at ``gap`` apart, one method of :data:`METHODS`.
 
@@ -71,17 +86,7 @@ def trial(config: dict, rng: np.random.Generator, *, data: str) -> dict:
     """
     from ..datasets import LANDMARK_AFFINITY
 
-    seq = _load(data)
-    if config.get("fingerprint") not in (None, sequence_fingerprint(seq)):
-        raise ValueError(f"the sequence in {data} is not the one this experiment was built on "
-                         "(its landmarks changed); rebuild the experiment")
-    n, gap = int(config["n_frames"]), int(config["gap"])
-    span = gap * (n - 1)
-    if span > seq.n_frames - 1:
-        raise ValueError(f"{n} frames {gap} apart need {span + 1} frames, the sequence "
-                         f"{seq.name!r} has {seq.n_frames}")
-    offset = int(rng.integers(0, seq.n_frames - span))
-    frames = seq.frames[offset + gap * np.arange(n)].tolist()
+    seq, frames = draw_frames(data, config, int(config["n_frames"]), int(config["gap"]), rng)
     problem = seq.graphs(frames, shuffle=True, rng=rng)
     affinity = functools.partial(gaussian_edge_affinity, **LANDMARK_AFFINITY)
     res, seconds = run_method(config["method"], problem.graphs, affinity, rng)

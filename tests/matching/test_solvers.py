@@ -22,7 +22,6 @@ from transync.matching import (
     RRWMStepper,
     SMStepper,
     Stepper,
-    as_affinity,
     ga,
     gaussian_edge_affinity,
     hungarian,

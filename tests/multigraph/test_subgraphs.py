@@ -251,3 +251,32 @@ def test_any_sizes_give_a_valid_result(sizes, seed, kw):
     _check_valid(res, sizes)
     assert np.all(np.isfinite(res.scores))
     assert res.to_matrix().shape == (sum(sizes), sum(sizes))
+
+
+@pytest.mark.parametrize("kw", [{}, {"mode": "offline"}, {"partial": "dummies"}])
+def test_precomputed_blocks_of_different_sizes_give_the_callables_result(kw):
+    """pygmtools-layout (n_i n_j, n_i n_j) blocks in a dict, some given as (j, i) only."""
+    c = _problem(seed=10, n_graphs=4, d=8)
+    exact = functools.partial(gaussian_edge_affinity, sigma2=0.005, backend="dense")
+    blocks = {}
+    for i in range(4):
+        for j in range(i + 1, 4):
+            if (i + j) % 2:
+                blocks[(i, j)] = exact(c.graphs[i], c.graphs[j]).to_dense()
+            else:
+                blocks[(j, i)] = exact(c.graphs[j], c.graphs[i]).to_dense()
+    a = match_collection(c.graphs, affinity=blocks, progress=False, rng=0, **kw)
+    b = match_collection(c.graphs, affinity=exact, progress=False, rng=0, **kw)
+    _check_valid(a, c.sizes)
+    assert np.array_equal(a.assignments, b.assignments)
+    np.testing.assert_allclose(a.scores, b.scores, rtol=1e-9, atol=1e-12)
+    assert multimatching_precision_recall(a, c.ground_truth)["f1"] == 1.0
+
+
+def test_blocks_for_different_sizes_are_checked_by_name():
+    c = _problem(seed=10, n_graphs=3, d=8)
+    with pytest.raises(ValueError, match=r"affinity\[0\]\[1\]"):
+        match_collection(c.graphs, affinity={(0, 1): np.ones((4, 4)), (0, 2): np.ones((4, 4)),
+                                             (1, 2): np.ones((4, 4))}, progress=False)
+    with pytest.raises(ValueError, match="dict"):
+        match_collection(c.graphs, affinity=np.ones((3, 3, 4, 4)), progress=False)

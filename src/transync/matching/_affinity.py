@@ -476,9 +476,13 @@ class SeparableAffinity(Affinity):
         return d if self.node is None else d + self.node
 
     def to_dense(self):
+        """The full matrix; entries an expansion (``max_error > 0``) puts below zero by less
+        than its error bound are 0, so that ``as_affinity(a.to_dense())`` accepts it."""
         K = np.einsum("rij,rab->aibj", self.F, self.G).reshape(self.n1 * self.n2, -1)
         if self.node is not None:
             K[np.diag_indices_from(K)] += _vec(self.node)
+        if self.max_error > 0:
+            K[(K < 0) & (K >= -self.max_error)] = 0.0
         return K
 
 

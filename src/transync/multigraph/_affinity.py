@@ -693,7 +693,7 @@ class PairAffinities:
 
     @classmethod
     def from_blocks(cls, K, pairs=None, n: int | None = None, *, n_graphs: int | None = None,
-                    name: str = "K") -> PairAffinities:
+                    sizes=None, name: str = "K") -> PairAffinities:
         """Precomputed pygmtools-layout blocks ``K_ij`` of shape ``(n*n, n*n)``.
 
         ``K``: an ndarray of shape ``(N, N, n*n, n*n)``, a dict ``{(i, j): K_ij}`` or an ``(N, N)``
@@ -701,7 +701,22 @@ class PairAffinities:
         list whose ``(j, i)`` block is present uses that block, re-indexed. ``pairs`` default:
         all pairs of the ``N`` graphs (``N`` from the array or list; required for a dict).
         ``n_graphs``: the number of graphs the blocks must describe (checked when given).
+
+        Graphs of different sizes: ``sizes`` (the ``N`` graphs' node counts; dict or nested list
+        only), block ``K_ij`` of shape ``(n_i n_j, n_i n_j)``, every pair embedded in an
+        ``n x n`` problem (``n >= max sizes``, default the largest) with zero-affinity dummies
+        (as :meth:`from_graphs` with ``n_pad``).
         """
+        if sizes is not None:
+            sizes = check_array(sizes, "sizes", dtype=None, ndim=1)
+            if sizes.dtype.kind not in "iu" or sizes.size == 0 or sizes.min() < 1:
+                raise ValueError(f"`sizes` must be positive integer node counts, got "
+                                 f"{sizes.tolist()[:10]}")
+            n = int(sizes.max()) if n is None else n
+            n = check_int(n, "n", minimum=int(sizes.max()))
+            if isinstance(K, np.ndarray) and K.dtype != object and np.any(sizes != n):
+                raise ValueError(f"`{name}` as one (N, N, n*n, n*n) array holds graphs of one "
+                                 "size; graphs of different sizes need a dict or nested list")
         if n is None:
             raise TypeError("`n` (the number of nodes per graph) is required")
         n = check_int(n, "n", minimum=1)
@@ -742,18 +757,23 @@ class PairAffinities:
             raise TypeError(f"`{name}` must be an ndarray (N, N, n*n, n*n), a dict "
                             "{(i, j): K_ij} or "
                             f"an (N, N) nested list, got {type(K).__name__}")
-        # re-indexing of a (j, i) block: candidate (a, u) of K_ji -> (u, a) of K_ij
-        t = np.arange(nn).reshape(n, n).T.ravel()
+        if sizes is not None and sizes.size < int(pairs.max()) + 1:
+            raise ValueError(f"`sizes` must give the size of every graph, got {sizes.size} for "
+                             f"graph indices up to {int(pairs.max())}")
         affs = []
         for i, j in pairs:
             i, j = int(i), int(j)
+            ni, nj = (n, n) if sizes is None else (int(sizes[i]), int(sizes[j]))
             b, where = get(i, j), f"{name}[{i}][{j}]"
             if b is None:
                 b, where = get(j, i), f"{name}[{j}][{i}]"
                 if b is None:
                     raise ValueError(f"`{name}` has no block for pair ({i}, {j}) (nor ({j}, {i}))")
+                # re-indexing of a (j, i) block: candidate (a, u) of K_ji -> (u, a) of K_ij
+                t = np.arange(ni * nj).reshape(ni, nj).T.ravel()
                 b = b.tocsr()[t][:, t] if sp.issparse(b) else np.asarray(b)[np.ix_(t, t)]
-            affs.append(as_affinity(b, n1=n, n2=n, name=where))
+            a = as_affinity(b, n1=ni, n2=nj, name=where)
+            affs.append(_pad_affinity(a, n) if (ni, nj) != (n, n) else a)
         return cls.from_affinities(affs, pairs)
 
     # ---------------------------------------------------------------- container

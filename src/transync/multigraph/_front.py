@@ -100,7 +100,8 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
         one when a process-based ``executor`` is used); default
         :func:`~transync.matching.gaussian_edge_affinity` with ``sigma2=0.15``. Or precomputed
         pygmtools-layout ``K`` blocks: an ``(N, N, n*n, n*n)`` array, a dict ``{(i, j): K_ij}`` or
-        an ``N x N`` nested list.
+        an ``N x N`` nested list (graphs of different sizes: a dict or list of ``(n_i n_j, n_i
+        n_j)`` blocks).
     pairs : array-like of shape (P, 2), optional
         The view graph: which pairs to match (default: all). Synchronization needs it connected;
         CAO needs all pairs.
@@ -149,7 +150,7 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
         Fewer than two graphs, a graph without nodes, unknown options, a bad view graph, a
         mis-shaped ``K`` collection, an executor with the online solvers, ``n_universe`` not an
         integer in ``[max n_i, sum n_i]``, CAO on graphs of different sizes with
-        ``partial="universe"``, precomputed ``K`` blocks with graphs of different sizes.
+        ``partial="universe"``, one ``(N, N, n*n, n*n)`` array with graphs of different sizes.
 
     Warns
     -----
@@ -394,9 +395,10 @@ def _check_layout(graphs, n_universe, partial, solver, affinity) -> _Layout:
     if lay.kind == "universe" and solver in CAO_VARIANTS:
         raise ValueError(f"CAO composes full permutations; {what} need partial='dummies' "
                          f"(the dummy-node padding) with solver={solver!r}")
-    if not (affinity is None or callable(affinity)):
-        raise ValueError(f"precomputed `affinity` blocks describe graphs of one size n; {what} "
-                         "need an affinity callable (g_i, g_j) -> Affinity")
+    if isinstance(affinity, np.ndarray) and affinity.dtype != object:
+        raise ValueError(f"`affinity` as one (N, N, n*n, n*n) array holds graphs of one size n; "
+                         f"{what} need a dict {{(i, j): K_ij}} of (n_i n_j, n_i n_j) blocks or "
+                         "a callable (g_i, g_j) -> Affinity")
     return lay
 
 
@@ -470,7 +472,9 @@ def _pair_affinities(graphs, pairs, affinity, n) -> PairAffinities:
     if affinity is None or callable(affinity):
         return PairAffinities.from_graphs(graphs, pairs, affinity, n_pad=n)
     if isinstance(affinity, (Mapping, list, tuple, np.ndarray)):
+        sizes = np.array([g.n_nodes for g in graphs])
         return PairAffinities.from_blocks(affinity, pairs, n, n_graphs=len(graphs),
+                                          sizes=None if np.all(sizes == n) else sizes,
                                           name="affinity")
     raise TypeError("`affinity` must be a callable (g_i, g_j) -> Affinity, pygmtools K blocks "
                     "((N, N, n*n, n*n) array, dict {(i, j): K} or nested list) or None, got "

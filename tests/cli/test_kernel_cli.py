@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from transync.cli import main
+from transync.kernels import min_eigenvalue_ratio
 
 
 def write_tu(folder, name="TOY", n_per_class=12, seed=0):
@@ -119,3 +120,19 @@ def test_ctrl_c_exits_130_and_writes_nothing(toy, tmp_path, capsys, monkeypatch)
     monkeypatch.setattr(TransitiveAssignmentKernel, "fit", interrupted)
     assert main(["kernel", str(toy), "--out", str(tmp_path / "o"), *FAST]) == 130
     assert "interrupted" in capsys.readouterr().err and not (tmp_path / "o").exists()
+
+
+def test_cli_kernel_with_a_view_graph(toy, tmp_path):
+    data = toy
+    out = tmp_path / "out"
+    args = ["kernel", str(data), "--out", str(out), "--matcher", "node", "--folds", "2",
+            "--repeats", "1", "--no-progress"]
+    assert main([*args, "--neighbors", "3"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["params"]["n_neighbors"] == 3
+    assert "view graph, 3 nearest graphs" in (out / "report.md").read_text()
+    with np.load(out / "gram.npz") as z:
+        assert min_eigenvalue_ratio(z["K"]) >= -1e-9
+    with pytest.raises(SystemExit) as err:                # argparse: bad option value
+        main([*args, "--neighbors", "0"])
+    assert err.value.code == 2

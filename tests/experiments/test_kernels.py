@@ -269,3 +269,68 @@ def test_tak_gram_equals_the_estimators(toy, tmp_path, method, kernel):
                                      random_state=0)
     np.testing.assert_allclose(ours, est.fit_transform(list(prepared.graphs)), atol=1e-10)
     assert len(list((tmp_path / "cache").rglob("alignment-*.npz"))) == 1
+
+
+# ---------------------------------------------------------------------------------------------
+# view-graph kernels on the larger sets, per-set kernel lists, Gram memory, repetitions per set
+# ---------------------------------------------------------------------------------------------
+
+def test_view_kernel_params_keep_the_all_pairs_keys():
+    assert "neighbors" not in kx.kernel_params("TAK-lin")      # cached entries stay valid
+    p = kx.kernel_params("TAK-node-k10")
+    assert p["neighbors"] == 10 and p["matcher"] == "node"
+    assert kx.kernel_params("TAK-lin-k10 n+5")["extra"] == 5
+
+
+def test_per_set_kernel_lists(tmp_path):
+    for name in ("MUTAG", "NCI1"):
+        write_tu(tmp_path / name, name=name, n_per_class=10)
+    exp = kx.build(data=tmp_path, out=tmp_path / "out", dimensionality=False)
+    table = exp.sweeps[0]
+    per_set = {}
+    for value, method, _config in table.configs():
+        per_set.setdefault(value.split("@")[0], []).append(method)
+    assert per_set["MUTAG"] == list(kx.FULL_KERNELS)
+    nci1 = per_set["NCI1"]
+    assert not set(nci1) & set(kx.SKIP["NCI1"])
+    assert "TAK-node-k10" in nci1 and "WL-OA" in nci1 and "HKS-OA" in nci1
+    assert not any(m in nci1 for m in ("TAK-lin", "TAK-node", "RW"))
+    # an explicit kernel list is run as given (minus the skips), without the extra kernels
+    only = kx.build(data=tmp_path, out=tmp_path / "o2", kernels=["WL", "RW"],
+                    dimensionality=False)
+    assert [(v.split("@")[0], m) for v, m, _ in only.sweeps[0].configs()] == [
+        ("MUTAG", "WL"), ("MUTAG", "RW"), ("NCI1", "WL")]
+
+
+def test_view_graph_gram_records_time_and_memory(tmp_path):
+    d = write_tu(tmp_path / "TOY", n_per_class=10)
+    prepared = kx.prepare(str(d))
+    entry = kx.compute_gram(prepared, "TAK-node-k10", tmp_path / "cache")
+    assert entry.seconds > 0 and entry.peak_mb > 10
+    assert kx.compute_gram(prepared, "TAK-node-k10", tmp_path / "cache").peak_mb == entry.peak_mb
+    assert entry.min_eig_ratio >= -1e-9
+    assert len(list((tmp_path / "cache").rglob("alignment-node-*.npz"))) == 1
+
+
+def test_table_states_repetitions_per_set(tmp_path):
+    def rec(ds, t, acc):
+        m = {"accuracy": acc, "gram_seconds": 1.0, "gram_peak_mb": 100.0, "folds_id": 1.0,
+             "fold_0": acc, "fold_1": acc}
+        return dict(sweep="table", config={"dataset": ds, "method": "WL"}, trial=t,
+                    metrics=m, error=None, seconds=0.1)
+
+    records = [rec("A@1", t, 0.8) for t in range(3)] + [rec("B@2", 0, 0.7)]
+    path = kx._table_4_2(kx._by(records, "table"), ["A@1", "B@2"], ["WL"], {}, tmp_path)
+    text = path.read_text()
+    assert "| *repetitions* | 3 | 1 |" in text
+    assert "| WL | **80.0 ± 0.0** | **70.0 ± 0.0** |" in text
+    assert "Peak memory" in text and "| WL | 100 | 100 |" in text
+    assert "| WL | 1 | 1 |" in text                      # no CPU time recorded: wall only
+
+
+@pytest.mark.parametrize("bad", [0, "x"])
+def test_bad_neighbors_in_estimator_message(bad):
+    from transync.kernels import TransitiveAssignmentKernel
+
+    with pytest.raises((ValueError, TypeError), match="n_neighbors"):
+        TransitiveAssignmentKernel(n_neighbors=bad)._check_params()

@@ -154,7 +154,8 @@ def add_parsers(sub) -> None:
                         "default: all five of the thesis)")
     p.add_argument("--trials", type=positive_int,
                    help="trials per configuration (default: the experiment's own, 20 for the "
-                        "full thesis experiments; fewer than stored: only those are reported)")
+                        "full thesis experiments; fewer than stored: nothing new runs and every "
+                        "stored trial is reported)")
     p.add_argument("--workers", type=positive_int, default=1,
                    help="worker processes for the trials (1 = in this process)")
     p.add_argument("--seed", type=int, default=0,

@@ -12,6 +12,8 @@ Front door: the scikit-learn transformer :class:`TransitiveAssignmentKernel` (``
 * node features -- :func:`heat_kernel_signature`, :func:`hks_features` (grid :data:`HKS_TIMES`);
 * pairwise matching of padded graphs -- :func:`match_pairs` (:data:`PAIRWISE_MATCHERS`,
   width :func:`default_sigma2`);
+* which pairs to match -- :func:`view_graph` (all pairs, or each graph's nearest graphs under
+  :func:`graph_descriptors` plus a spanning tree), :func:`nearest_graphs`;
 * synchronization onto the transitive space -- :func:`synchronize_alignments` -> :class:`Alignment`;
   inductive placement of new graphs -- :func:`place_graphs`;
 * aligned features and kernels -- :func:`aligned_features`, :func:`relaxed_features`,
@@ -46,11 +48,14 @@ _LAZY = {
     "SYNC_METHODS": "._transitive",
     "aligned_features": "._transitive",
     "assignment_kernel": "._transitive",
+    "graph_descriptors": "._transitive",
+    "nearest_graphs": "._transitive",
     "median_gamma": "._transitive",
     "place_graphs": "._transitive",
     "prune_by_size": "._transitive",
     "relaxed_features": "._transitive",
     "synchronize_alignments": "._transitive",
+    "view_graph": "._transitive",
     "TransitiveAssignmentKernel": "._estimator",
     # baselines and evaluation
     "GRAKEL_KERNELS": "._baselines",

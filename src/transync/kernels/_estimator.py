@@ -19,10 +19,13 @@ from ._transitive import (
     SYNC_METHODS,
     aligned_features,
     assignment_kernel,
+    graph_descriptors,
     median_gamma,
+    nearest_graphs,
     place_graphs,
     relaxed_features,
     synchronize_alignments,
+    view_graph,
 )
 
 __all__ = ["TransitiveAssignmentKernel"]
@@ -95,6 +98,18 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
     the placement rule (both ``sync`` methods refine them with it), so a copy of a fitted graph
     gets that graph's row back when the matches are consistent, but not in general.
 
+    **View graph for large sets** (``n_neighbors = k``). Matching all ``N (N - 1) / 2`` pairs
+    does not scale (NCI1: 7.6 million pairs). With ``k``, each graph is matched only to its
+    ``k`` nearest graphs under a cheap descriptor (:func:`transync.kernels.graph_descriptors`:
+    mean HKS, plus the node-label histogram when labels are used), and the pairs of a minimum
+    spanning tree of the same descriptor distances are added so that the view graph is
+    connected (:func:`transync.kernels.view_graph`; at most ``N k + N - 1`` pairs). The
+    synchronization makes these sparse matches transitive, and the kernel is still computed on
+    *all* pairs from the aligned features -- which is the point of transitivity: two graphs
+    that were never matched are compared through the universe. ``transform`` places a new
+    graph through matches to its ``k`` nearest fitted graphs only. ``k >= N - 1`` is the same
+    as ``None`` (all pairs).
+
     **Options fixed at fit.** :meth:`transform` uses the options in force at :meth:`fit`
     (``kernel_``, ``matcher_``, ``sync_``, ``times_``, ``sync_dummies_``, ``normalize_``,
     ``label_values_``, ``sigma2_``, ``gamma_``), not parameters changed afterwards by
@@ -133,6 +148,10 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
     n_universe : int, optional
         Padded size / universe; default the largest fitted graph. Larger graphs cannot be
         transformed.
+    n_neighbors : int, optional
+        View graph (see above): match each graph to its ``n_neighbors`` nearest graphs (plus a
+        spanning tree) instead of all pairs, and place new graphs through their
+        ``n_neighbors`` nearest fitted graphs. None (default): all pairs.
     sync_dummies : bool, default=False
         Feed the dummy nodes' matches to the synchronization too (full padded permutations, the
         outline's literal form). Default: only real-to-real correspondences are synchronized
@@ -190,6 +209,11 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
     assignments_ : ndarray of shape (P, n)
         The pairwise permutations of all fitted pairs (``pairs_``).
     pairs_ : ndarray of shape (P, 2)
+        The matched pairs: all pairs, or the view graph's (``n_neighbors``).
+    n_neighbors_ : int or None
+        The view graph's ``k`` of the fit (None: all pairs).
+    descriptors_ : ndarray of shape (N, d)
+        The fitted graphs' view-graph descriptors (:func:`transync.kernels.graph_descriptors`).
 
     Examples
     --------
@@ -211,7 +235,7 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
 
     def __init__(self, matcher: str = "rrwm", sync: str = "orthogonal", kernel: str = "linear",
                  times=None, sigma2=None, gamma=None, node_labels="auto", n_universe=None,
-                 sync_dummies: bool = False, drop_label_mismatches: bool = True,
+                 n_neighbors=None, sync_dummies: bool = False, drop_label_mismatches: bool = True,
                  normalize: bool = True, executor=None, progress: bool = False,
                  random_state=None):
         self.matcher = matcher
@@ -222,6 +246,7 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
         self.gamma = gamma
         self.node_labels = node_labels
         self.n_universe = n_universe
+        self.n_neighbors = n_neighbors
         self.sync_dummies = sync_dummies
         self.drop_label_mismatches = drop_label_mismatches
         self.normalize = normalize
@@ -268,6 +293,8 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
                              f"{self.node_labels!r}")
         if self.n_universe is not None:
             check_int(self.n_universe, "n_universe", minimum=1)
+        if self.n_neighbors is not None:
+            check_int(self.n_neighbors, "n_neighbors", minimum=1)
         for name in ("normalize", "progress", "sync_dummies", "drop_label_mismatches"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise TypeError(f"`{name}` must be a bool, got "
@@ -295,14 +322,20 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
         return aligned_features(feats, labels, n)
 
     # ----------------------------------------------------------------------------------------
-    def fit(self, X, y=None):
-        """Match all pairs of ``X``, synchronize them and compute the Gram matrix ``gram_``.
+    def fit(self, X, y=None, *, assignments=None):
+        """Match the pairs of ``X`` (all, or the view graph's), synchronize them and compute
+        the Gram matrix ``gram_`` of all pairs.
 
         Parameters
         ----------
         X : sequence of Graph
             Undirected graphs (a TU data set's ``.graphs``, or the data set itself).
         y : ignored
+        assignments : ndarray of shape (P, n), int, optional
+            Precomputed pairwise permutations of the pairs this fit matches (``pairs_`` of an
+            earlier fit with the same graphs, ``matcher``, ``times``, ``n_universe`` and
+            ``n_neighbors``), e.g. to synchronize one matching with both ``sync`` methods; the
+            matcher is not run.
 
         Returns
         -------
@@ -314,7 +347,8 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
             ``X`` not a sequence of graphs.
         ValueError
             An empty ``X``, a graph with no nodes, ``n_universe`` below the largest graph,
-            ``node_labels=True`` with a graph that has none, bad parameters.
+            ``node_labels=True`` with a graph that has none, ``assignments`` of the wrong
+            shape, bad parameters.
         """
         self._check_params()
         graphs = _check_graphs(X)
@@ -339,10 +373,18 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
         drop = bool(self.drop_label_mismatches) and not sync_dummies
         hks = hks_features(graphs, self.times)                  # validates `times`
         times = None if self.times is None else np.array(self.times, dtype=float)
-        iu, ju = np.triu_indices(N, 1)
-        pairs = np.column_stack([iu, ju]).astype(np.int64)
+        descriptors = graph_descriptors(hks, node_labels, label_values)
+        k = None if self.n_neighbors is None or self.n_neighbors >= N - 1 else int(
+            self.n_neighbors)
+        pairs = view_graph(descriptors, k)
         sigma2 = self._sigma2(hks)
-        if pairs.shape[0]:
+        if assignments is not None:
+            assignments = np.asarray(assignments)
+            if assignments.shape != (pairs.shape[0], n) or assignments.dtype.kind not in "iu":
+                raise ValueError(f"`assignments` must be an integer array of shape (P, n) = "
+                                 f"({pairs.shape[0]}, {n}), one row per matched pair, got "
+                                 f"shape {assignments.shape} and dtype {assignments.dtype}")
+        elif pairs.shape[0]:
             assignments = match_pairs(hks, [g.adjacency for g in graphs], pairs, n=n,
                                       matcher=self.matcher, sigma2=sigma2,
                                       node_labels=node_labels, executor=self.executor,
@@ -372,6 +414,8 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
         self.features_ = hks
         self.kernel_features_ = kernel_features
         self.pairs_ = pairs
+        self.n_neighbors_ = k
+        self.descriptors_ = descriptors
         self.assignments_ = assignments
         self.alignment_ = alignment
         self.labels_ = alignment.labels
@@ -429,7 +473,14 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
                          else [np.asarray(g.node_labels) for g in self.graphs_])
         hks = hks_features(graphs, self.times_)
         N, M = len(self.graphs_), len(graphs)
-        t_idx, j_idx = np.divmod(np.arange(M * N, dtype=np.int64), N)
+        nearest = None
+        if self.n_neighbors_ is not None:                 # the k nearest fitted graphs only
+            nearest = nearest_graphs(self.descriptors_, graph_descriptors(
+                hks, node_labels, self.label_values_), self.n_neighbors_)
+            t_idx = np.repeat(np.arange(M, dtype=np.int64), nearest.shape[1])
+            j_idx = nearest.ravel()
+        else:
+            t_idx, j_idx = np.divmod(np.arange(M * N, dtype=np.int64), N)
         pairs = np.column_stack([N + t_idx, j_idx])
         adjacency = [g.adjacency for g in self.graphs_] + [g.adjacency for g in graphs]
         assign = match_pairs(list(self.features_) + hks, adjacency, pairs, n=n,
@@ -437,7 +488,7 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
                              node_labels=None if node_labels is None else fitted_labels
                              + node_labels, executor=self.executor, progress=self.progress,
                              rng=self.random_state)
-        assign = assign.reshape(M, N, n)                   # int32: (M, N, n) can be large
+        assign = assign.reshape(M, -1, n)                  # int32: (M, N, n) can be large
         emb = self.alignment_.embedding if self.kernel_ == "relaxed" else None
         opts = {}
         if emb is not None and self.sync_ == "spectral":
@@ -448,7 +499,8 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
                      "fitted_sizes": np.array([g.n_nodes for g in self.graphs_]),
                      "node_labels": node_labels if self.drop_label_mismatches_ else None,
                      "fitted_node_labels": fitted_labels if self.drop_label_mismatches_ else None}
-        labels, Q = place_graphs(assign, self.labels_, embedding=emb, method=self.sync_, **opts)
+        labels, Q = place_graphs(assign, self.labels_, embedding=emb, method=self.sync_,
+                                 fitted=nearest, **opts)
         aligned = self._align(self.kernel_, self._kernel_features(hks, graphs,
                                                                   self.label_values_),
                               labels, Q, n)

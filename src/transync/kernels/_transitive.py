@@ -8,7 +8,8 @@ Because every graph now has one place per slot, a kernel that sums a PSD base ke
 is an inner product in a fixed feature space, hence positive semidefinite (methods page
 *Transitive assignment kernels*).
 
-Stages: :func:`synchronize_alignments` (pairwise permutations -> :class:`Alignment`),
+Stages: :func:`view_graph` (which pairs are matched: all, or each graph's nearest graphs plus a
+spanning tree), :func:`synchronize_alignments` (pairwise permutations -> :class:`Alignment`),
 :func:`aligned_features` (slot-ordered node features with a real-node indicator) or
 :func:`relaxed_features` (``Q_i^T F_i`` from the relaxed embedding), :func:`assignment_kernel`
 (linear, per-slot Gaussian, relaxed; cosine-normalized), and :func:`prune_by_size`.
@@ -35,11 +36,14 @@ __all__ = [
     "SYNC_METHODS",
     "aligned_features",
     "assignment_kernel",
+    "graph_descriptors",
     "median_gamma",
+    "nearest_graphs",
     "place_graphs",
     "prune_by_size",
     "relaxed_features",
     "synchronize_alignments",
+    "view_graph",
 ]
 
 SYNC_METHODS = ("orthogonal", "spectral")
@@ -100,6 +104,189 @@ class Alignment:
         """The transitive permutation ``i -> j`` of the padded graphs (``a[u] = v``)."""
         inv = np.argsort(self.labels[j])
         return inv[self.labels[i]]
+
+
+# --------------------------------------------------------------------------------------------
+# view graph
+# --------------------------------------------------------------------------------------------
+
+def _check_descriptors(descriptors) -> np.ndarray:
+    D = check_array(descriptors, "descriptors", ndim=2)
+    if D.shape[0] == 0:
+        raise ValueError("`descriptors` must hold at least one graph (one row per graph), got "
+                         "shape (0, ...)")
+    return D
+
+
+def _sq_distances(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """(len(X), len(Y)) squared Euclidean distances, clipped at 0."""
+    d = (X * X).sum(1)[:, None] + (Y * Y).sum(1)[None, :] - 2.0 * (X @ Y.T)
+    return np.maximum(d, 0.0, out=d)
+
+
+def nearest_graphs(descriptors, queries, n_neighbors: int) -> np.ndarray:
+    """The ``k`` graphs of ``descriptors`` nearest each row of ``queries`` (inductive view
+    graph: which fitted graphs a new graph is matched to).
+
+    Parameters
+    ----------
+    descriptors : array_like of shape (N, d)
+        Descriptors of the fitted graphs (:func:`graph_descriptors`).
+    queries : array_like of shape (M, d)
+        Descriptors of the new graphs.
+    n_neighbors : int >= 1
+        ``k``; at most ``N`` are returned.
+
+    Returns
+    -------
+    ndarray of shape (M, min(k, N)), int64
+        Row indices of ``descriptors``, nearest first (Euclidean; ties by index).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> nearest_graphs(np.array([[0.0], [1.0], [3.0]]), np.array([[2.9], [0.4]]), 2).tolist()
+    [[2, 1], [0, 1]]
+    """
+    D = _check_descriptors(descriptors)
+    Q = check_array(queries, "queries", ndim=2)
+    if Q.shape[1] != D.shape[1]:
+        raise ValueError(f"`queries` must have {D.shape[1]} columns like `descriptors`, got "
+                         f"shape {Q.shape}")
+    k = min(check_int(n_neighbors, "n_neighbors", minimum=1), D.shape[0])
+    out = np.empty((Q.shape[0], k), dtype=np.int64)
+    step = max(1, _SLOT_BLOCK_ELEMENTS // max(D.shape[0], 1))
+    for s in range(0, Q.shape[0], step):                  # blocks of queries bound memory
+        d = _sq_distances(Q[s:s + step], D)
+        out[s:s + step] = np.argsort(d, axis=1, kind="stable")[:, :k]
+    return out
+
+
+def _spanning_tree(D: np.ndarray) -> np.ndarray:
+    """Edges (N - 1, 2) of a minimum spanning tree of the complete graph on the rows of ``D``
+    under Euclidean distance (Prim, dense, O(N^2) time and O(N) memory; ties by index)."""
+    N = D.shape[0]
+    in_tree = np.zeros(N, dtype=bool)
+    in_tree[0] = True
+    best = _sq_distances(D[:1], D)[0]                     # squared distance to the tree
+    parent = np.zeros(N, dtype=np.int64)
+    edges = np.empty((max(N - 1, 0), 2), dtype=np.int64)
+    for e in range(N - 1):
+        cand = np.where(in_tree, np.inf, best)
+        v = int(np.argmin(cand))
+        edges[e] = (parent[v], v)
+        in_tree[v] = True
+        d = _sq_distances(D[v:v + 1], D)[0]
+        closer = d < best
+        best = np.where(closer, d, best)
+        parent[closer] = v
+    return edges
+
+
+def view_graph(descriptors, n_neighbors: int | None = None) -> np.ndarray:
+    """The pairs of graphs to match: all pairs, or a sparse connected *view graph*.
+
+    With ``n_neighbors = k``, every graph is paired with its ``k`` nearest graphs under the
+    Euclidean distance of ``descriptors`` (ties by index; the relation is symmetrized), and the
+    edges of a minimum spanning tree of the same distances are added, so the view graph is
+    always connected (a requirement of the synchronization) with at most ``N k + N - 1`` pairs
+    instead of ``N (N - 1) / 2``. The synchronization then makes the sparse matches transitive,
+    and the kernel still compares *all* pairs through the aligned features.
+
+    Parameters
+    ----------
+    descriptors : array_like of shape (N, d)
+        One cheap descriptor per graph (the kernel uses :func:`graph_descriptors`).
+    n_neighbors : int >= 1, optional
+        ``k``; None, or ``k >= N - 1``: all pairs.
+
+    Returns
+    -------
+    ndarray of shape (P, 2), int64
+        Pairs ``(i, j)``, ``i < j``, in lexicographic order (for ``None``: the order of
+        ``numpy.triu_indices``).
+
+    Raises
+    ------
+    ValueError
+        ``descriptors`` not a finite 2-d array with a row per graph, ``n_neighbors`` < 1.
+    TypeError
+        ``n_neighbors`` not an integer.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x = np.array([[0.0], [0.1], [5.0], [5.2], [9.0]])
+    >>> view_graph(x, 1).tolist()       # 1-NN pairs {01, 23, 34} + spanning tree {12}
+    [[0, 1], [1, 2], [2, 3], [3, 4]]
+    >>> len(view_graph(x)) == len(view_graph(x, 4)) == 10
+    True
+    """
+    D = _check_descriptors(descriptors)
+    N = D.shape[0]
+    if n_neighbors is not None:
+        n_neighbors = check_int(n_neighbors, "n_neighbors", minimum=1)
+    if n_neighbors is None or n_neighbors >= N - 1:
+        iu, ju = np.triu_indices(N, 1)
+        return np.column_stack([iu, ju]).astype(np.int64)
+    near = np.empty((N, n_neighbors), dtype=np.int64)
+    step = max(1, _SLOT_BLOCK_ELEMENTS // N)
+    for s in range(0, N, step):                           # k nearest *other* graphs
+        d = _sq_distances(D[s:s + step], D)
+        d[np.arange(d.shape[0]), np.arange(s, s + d.shape[0])] = np.inf
+        near[s:s + step] = np.argsort(d, axis=1, kind="stable")[:, :n_neighbors]
+    edges = np.concatenate([np.column_stack([np.repeat(np.arange(N), n_neighbors),
+                                             near.ravel()]), _spanning_tree(D)])
+    edges = np.sort(edges, axis=1)
+    return np.unique(edges[edges[:, 0] != edges[:, 1]], axis=0)
+
+
+def graph_descriptors(features, node_labels=None, label_values=None) -> np.ndarray:
+    """The view graph's cheap per-graph descriptor: mean HKS, plus the node-label histogram.
+
+    ``[mean_u f_i(u), share of the nodes of each label]``: the heat kernel signature's mean
+    embedding (the HKS mean-embedding kernel's feature vector) and, when labels are used, the
+    fraction of graph ``i``'s nodes that carry each value of ``label_values`` (labels not listed
+    count nowhere). Both parts lie in [0, 1], so they are concatenated without weights.
+
+    Parameters
+    ----------
+    features : sequence of N arrays of shape (n_i, T)
+        Node features (HKS) of each graph.
+    node_labels : sequence of N int arrays of shape (n_i,), optional
+    label_values : array of int, optional
+        The label values with a histogram bin (sorted); needed with ``node_labels``.
+
+    Returns
+    -------
+    ndarray of shape (N, T + len(label_values))
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> graph_descriptors([np.array([[1.0], [0.0]])], [np.array([3, 5])], np.array([3, 5, 7]))
+    array([[0.5, 0.5, 0.5, 0. ]])
+    """
+    feats = check_feature_list(features)
+    out = np.stack([F.mean(0) for F in feats])
+    if node_labels is None:
+        return out
+    if label_values is None:
+        raise ValueError("`label_values` must be given with `node_labels`")
+    vals = np.asarray(label_values)
+    if len(node_labels) != len(feats):
+        raise ValueError(f"`node_labels` must have one entry per graph ({len(feats)}), got "
+                         f"{len(node_labels)}")
+    hist = np.zeros((len(feats), vals.size))
+    for g, lab in enumerate(node_labels):                 # one bincount per graph
+        lab = np.asarray(lab)
+        if lab.shape != (feats[g].shape[0],):
+            raise ValueError(f"`node_labels[{g}]` must have length {feats[g].shape[0]} (the "
+                             f"graph's node count), got shape {lab.shape}")
+        idx = np.minimum(np.searchsorted(vals, lab), vals.size - 1)
+        ok = vals[idx] == lab
+        hist[g] = np.bincount(idx[ok], minlength=vals.size) / max(lab.size, 1)
+    return np.hstack([out, hist])
 
 
 # --------------------------------------------------------------------------------------------
@@ -338,7 +525,8 @@ def _fill_dummies(real_labels, n: int) -> np.ndarray:
 
 def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_labels=None,
                  fitted_node_labels=None, embedding=None, degrees=None, eigenvalues=None,
-                 method: str = "orthogonal") -> tuple[np.ndarray, np.ndarray | None]:
+                 method: str = "orthogonal",
+                 fitted=None) -> tuple[np.ndarray, np.ndarray | None]:
     """Place new graphs in a fitted universe (inductive use; methods page *Transitive assignment
     kernels*, step 7).
 
@@ -358,9 +546,9 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
 
     Parameters
     ----------
-    assignments : ndarray of shape (M, N, n), int
-        Permutation from each new graph ``t`` to each fitted graph ``j`` (padded); int32 is
-        used as it is (no int64 copy).
+    assignments : ndarray of shape (M, N, n) or (M, k, n), int
+        Permutation from each new graph ``t`` to each fitted graph ``j`` (padded), or to the
+        fitted graphs ``fitted[t]`` only; int32 is used as it is (no int64 copy).
     labels : ndarray of shape (N, n), int
         The fitted alignment's labels.
     sizes, fitted_sizes : arrays of shape (M,) and (N,), int, optional
@@ -379,6 +567,11 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
         ``"spectral"`` embedding (a column with a non-positive eigenvalue is left at zero).
     method : {"orthogonal", "spectral"}
         The synchronization method of the fitted alignment (how ``Q_t`` is placed).
+    fitted : ndarray of shape (M, k), int, optional
+        The fitted graphs that ``assignments[t]`` maps new graph ``t`` to (e.g. its ``k``
+        nearest fitted graphs, the view graph of
+        :class:`~transync.kernels.TransitiveAssignmentKernel` with ``n_neighbors``); only
+        they vote. Default: all ``N`` fitted graphs, in order.
 
     Returns
     -------
@@ -405,10 +598,21 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
     check_choice(method, "method", SYNC_METHODS)
     A = _check_int_array(assignments, "assignments", 3, keep_dtype=True)
     lab = _check_int_array(labels, "labels", 2)
-    M, N, n = A.shape
-    if lab.shape != (N, n):
-        raise ValueError(f"`labels` must have shape (N, n) = ({N}, {n}) to match `assignments`, "
+    M, K, n = A.shape
+    N = lab.shape[0]
+    if lab.shape[1:] != (n,) or (fitted is None and N != K):
+        raise ValueError(f"`labels` must have shape (N, n) = ({K}, {n}) to match `assignments`, "
                          f"got shape {lab.shape}")
+    if fitted is None:
+        nbr = None
+    else:
+        nbr = _check_int_array(fitted, "fitted", 2)
+        if nbr.shape != (M, K):
+            raise ValueError(f"`fitted` must have shape (M, k) = ({M}, {K}) like the first two "
+                             f"axes of `assignments`, got shape {nbr.shape}")
+        if nbr.size and (nbr.min() < 0 or nbr.max() >= N):
+            raise ValueError(f"`fitted` must hold fitted-graph indices in [0, {N}), got values "
+                             f"in [{int(nbr.min())}, {int(nbr.max())}]")
     _check_permutation_rows(A, "assignments")
     if (sizes is None) != (fitted_sizes is None):
         raise ValueError("`sizes` and `fitted_sizes` must be given together")
@@ -452,17 +656,18 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
             dinv = np.where(deg > 0, 1.0 / np.sqrt(np.where(deg > 0, deg, 1.0)), 0.0)
             E = E * dinv[:, :, None]                      # D^{-1/2} U, once
     out = np.empty((M, n), dtype=np.int64)
-    step = max(1, _SLOT_BLOCK_ELEMENTS // max(N * n, 1))
-    jj = np.arange(N)[None, :, None]
+    step = max(1, _SLOT_BLOCK_ELEMENTS // max(K * n, 1))
     for s in range(0, M, step):                           # blocks of new graphs bound memory
         blk = A[s:s + step]
         b = blk.shape[0]
-        slots = lab[jj, blk]                                              # (b, N, n)
+        jj = (np.arange(K)[None, :, None] if nbr is None
+              else nbr[s:s + b, :, None])                 # fitted graph of each vote
+        slots = lab[jj, blk]                                              # (b, K, n)
         code = (np.arange(b)[:, None, None] * n + np.arange(n)[None, None, :]) * n + slots
         valid = None
         if real is not None:                              # real u -> real partner only
             valid = ((np.arange(n)[None, None, :] < real[s:s + b, None, None])
-                     & (blk < fit_real[None, :, None]))
+                     & (blk < fit_real[jj]))
             if L_new is not None:                         # ... of the same label
                 valid &= L_new[s:s + b, None, :] == L_fit[jj, blk]
         votes = None if valid is None else valid.ravel().astype(float)
@@ -475,11 +680,11 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
                 out[s + t, k:] = np.setdiff1d(np.arange(n), c)
         if E is None:
             continue
-        for t in range(b):                                # (N, n, d) gathered per new graph
-            rows = E[np.arange(N)[:, None], blk[t]]
+        for t in range(b):                                # (K, n, d) gathered per new graph
+            rows = E[jj[min(t, jj.shape[0] - 1)], blk[t]]
             if valid is None:
                 Q[s + t] = rows.sum(0)
-                cnt = np.full(n, float(N))
+                cnt = np.full(n, float(K))
             else:
                 Q[s + t] = np.einsum("ju,jud->ud", valid[t], rows)
                 cnt = valid[t].sum(0).astype(float)

@@ -497,6 +497,19 @@ def test_view_graph_errors():
         graph_descriptors([np.zeros((2, 1))], [np.array([0, 1])])
     with pytest.raises(ValueError, match=r"node_labels\[0\]"):
         graph_descriptors([np.zeros((2, 1))], [np.array([0])], np.array([0, 1]))
+    for bad in (np.array([]), np.array([[0, 1]]), np.array([5, 3]), np.array([3, 3])):
+        with pytest.raises(ValueError, match="`label_values` must be a non-empty 1-d array"):
+            graph_descriptors([np.zeros((2, 1))], [np.array([3, 5])], bad)
+
+
+def test_view_graph_far_from_zero_and_huge_descriptors():
+    """Neighbours by exact Euclidean distance whatever the offset and scale of the descriptors
+    (the |x|^2 + |y|^2 - 2 x.y expansion on raw values cancels at 1e8 and overflows at 1e200)."""
+    x = np.array([[0.0], [1.0], [0.4], [3.0]])
+    for shift, scale in ((0.0, 1.0), (1e8, 1.0), (0.0, 1e200)):
+        X = shift + scale * x
+        assert view_graph(X, 1).tolist() == [[0, 2], [1, 2], [1, 3]]
+        assert nearest_graphs(X, shift + scale * np.array([[0.45]]), 2).tolist() == [[2, 0]]
 
 
 def test_graph_descriptors_are_permutation_invariant():
@@ -507,7 +520,9 @@ def test_graph_descriptors_are_permutation_invariant():
     D = graph_descriptors(hks_features([g, h]), [g.node_labels, h.node_labels], vals)
     np.testing.assert_allclose(D[0], D[1], atol=1e-12)
     np.testing.assert_allclose(D[0, -3:].sum(), 1.0)
-    np.testing.assert_array_equal(nearest_graphs(D, D[1:], 5), [[0, 1]])
+    # both copies at distance ~0 (the means may differ in the last bit: which comes first is
+    # not asserted)
+    assert sorted(nearest_graphs(D, D[1:], 5)[0].tolist()) == [0, 1]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -571,9 +586,17 @@ def test_precomputed_assignments_reproduce_the_fit():
     b = TransitiveAssignmentKernel(matcher="node", n_neighbors=3, random_state=0).fit(
         graphs, assignments=a.assignments_)
     np.testing.assert_array_equal(b.gram_, a.gram_)
-    with pytest.raises(ValueError, match=r"`assignments` must be an integer array of shape"):
+    c = TransitiveAssignmentKernel(matcher="node", n_neighbors=3, random_state=0)
+    np.testing.assert_array_equal(c.fit_transform(graphs, assignments=a.assignments_), a.gram_)
+    with pytest.raises(ValueError, match=r"`assignments` must have shape \(P, n\)"):
         TransitiveAssignmentKernel(matcher="node", n_neighbors=3).fit(
             graphs, assignments=a.assignments_[1:])
+    with pytest.raises(TypeError, match="`assignments` must be an integer array"):
+        TransitiveAssignmentKernel(matcher="node", n_neighbors=3).fit_transform(
+            graphs, assignments=a.assignments_.astype(float))
+    with pytest.raises(ValueError, match="assignments"):           # not a permutation
+        TransitiveAssignmentKernel(matcher="node", n_neighbors=3).fit_transform(
+            graphs, assignments=np.zeros_like(a.assignments_))
 
 
 def test_bad_n_neighbors():
@@ -601,5 +624,9 @@ def test_place_graphs_with_fitted_subset_equals_full_votes():
     np.testing.assert_array_equal(place_graphs(full, labels)[0], truth)
     with pytest.raises(ValueError, match="`fitted` must have shape"):
         place_graphs(full[:, :2], labels, fitted=sub[:2])
+    with pytest.raises(ValueError, match="`fitted` must list distinct fitted graphs"):
+        place_graphs(full[:, :2], labels, fitted=np.array([[4, 4], [0, 5], [2, 3]]))
+    with pytest.raises(ValueError, match=r"`labels` must have shape \(N, 5\)"):
+        place_graphs(full[:, :2], labels[:, :4], fitted=sub)
     with pytest.raises(ValueError, match="`fitted` must hold fitted-graph indices"):
         place_graphs(full[:, :2], labels, fitted=sub + 6)

@@ -333,9 +333,10 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
         y : ignored
         assignments : ndarray of shape (P, n), int, optional
             Precomputed pairwise permutations of the pairs this fit matches (``pairs_`` of an
-            earlier fit with the same graphs, ``matcher``, ``times``, ``n_universe`` and
-            ``n_neighbors``), e.g. to synchronize one matching with both ``sync`` methods; the
-            matcher is not run.
+            earlier fit with the same graphs, ``matcher``, ``times``, ``node_labels``,
+            ``n_universe`` and ``n_neighbors``: they decide the pairs and the matches), e.g. to
+            synchronize one matching with both ``sync`` methods; the matcher is not run. Only
+            the shape and that every row is a permutation are checked.
 
         Returns
         -------
@@ -344,11 +345,11 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
         Raises
         ------
         TypeError
-            ``X`` not a sequence of graphs.
+            ``X`` not a sequence of graphs, ``assignments`` not of an integer dtype.
         ValueError
             An empty ``X``, a graph with no nodes, ``n_universe`` below the largest graph,
             ``node_labels=True`` with a graph that has none, ``assignments`` of the wrong
-            shape, bad parameters.
+            shape or with a row that is not a permutation, bad parameters.
         """
         self._check_params()
         graphs = _check_graphs(X)
@@ -380,10 +381,13 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
         sigma2 = self._sigma2(hks)
         if assignments is not None:
             assignments = np.asarray(assignments)
-            if assignments.shape != (pairs.shape[0], n) or assignments.dtype.kind not in "iu":
-                raise ValueError(f"`assignments` must be an integer array of shape (P, n) = "
-                                 f"({pairs.shape[0]}, {n}), one row per matched pair, got "
-                                 f"shape {assignments.shape} and dtype {assignments.dtype}")
+            if assignments.dtype.kind not in "iu":
+                raise TypeError(f"`assignments` must be an integer array, got dtype "
+                                f"{assignments.dtype}")
+            if assignments.shape != (pairs.shape[0], n):
+                raise ValueError(f"`assignments` must have shape (P, n) = ({pairs.shape[0]}, "
+                                 f"{n}), one row per matched pair, got shape "
+                                 f"{assignments.shape}")
         elif pairs.shape[0]:
             assignments = match_pairs(hks, [g.adjacency for g in graphs], pairs, n=n,
                                       matcher=self.matcher, sigma2=sigma2,
@@ -432,7 +436,7 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
 
     def fit_transform(self, X, y=None, **fit_params):
         """Fit and return the (transductive) Gram matrix ``gram_`` of ``X``, shape (N, N)."""
-        return self.fit(X, y).gram_.copy()
+        return self.fit(X, y, **fit_params).gram_.copy()
 
     def transform(self, X):
         """Gram matrix of ``X`` against the fitted graphs, shape ``(len(X), N)``.

@@ -119,9 +119,21 @@ def _check_descriptors(descriptors) -> np.ndarray:
 
 
 def _sq_distances(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
-    """(len(X), len(Y)) squared Euclidean distances, clipped at 0."""
+    """(len(X), len(Y)) squared Euclidean distances, clipped at 0. Callers pass descriptors
+    centred and scaled by :func:`_standardized` so that the expansion
+    ``|x|^2 + |y|^2 - 2 x.y`` neither cancels (descriptors far from 0) nor overflows."""
     d = (X * X).sum(1)[:, None] + (Y * Y).sum(1)[None, :] - 2.0 * (X @ Y.T)
     return np.maximum(d, 0.0, out=d)
+
+
+def _standardized(D: np.ndarray, *others: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``D`` and ``others`` shifted by ``D``'s column means and divided by one common scale
+    (the largest absolute centred entry): Euclidean neighbours and their order unchanged."""
+    mu = D.mean(0)
+    Dc = D - mu
+    scale = float(np.max(np.abs(Dc))) if Dc.size else 0.0
+    scale = scale if scale > 0 and np.isfinite(scale) else 1.0
+    return (Dc / scale,) + tuple((X - mu) / scale for X in others)
 
 
 def nearest_graphs(descriptors, queries, n_neighbors: int) -> np.ndarray:
@@ -154,6 +166,7 @@ def nearest_graphs(descriptors, queries, n_neighbors: int) -> np.ndarray:
         raise ValueError(f"`queries` must have {D.shape[1]} columns like `descriptors`, got "
                          f"shape {Q.shape}")
     k = min(check_int(n_neighbors, "n_neighbors", minimum=1), D.shape[0])
+    D, Q = _standardized(D, Q)
     out = np.empty((Q.shape[0], k), dtype=np.int64)
     step = max(1, _SLOT_BLOCK_ELEMENTS // max(D.shape[0], 1))
     for s in range(0, Q.shape[0], step):                  # blocks of queries bound memory
@@ -224,6 +237,7 @@ def view_graph(descriptors, n_neighbors: int | None = None) -> np.ndarray:
     """
     D = _check_descriptors(descriptors)
     N = D.shape[0]
+    D, = _standardized(D)
     if n_neighbors is not None:
         n_neighbors = check_int(n_neighbors, "n_neighbors", minimum=1)
     if n_neighbors is None or n_neighbors >= N - 1:
@@ -274,6 +288,10 @@ def graph_descriptors(features, node_labels=None, label_values=None) -> np.ndarr
     if label_values is None:
         raise ValueError("`label_values` must be given with `node_labels`")
     vals = np.asarray(label_values)
+    if vals.ndim != 1 or vals.size == 0 or (vals.size > 1 and np.any(vals[1:] <= vals[:-1])):
+        raise ValueError(f"`label_values` must be a non-empty 1-d array of strictly increasing "
+                         f"label values (one histogram bin each), got "
+                         f"{np.asarray(label_values).tolist()!r:.80}")
     if len(node_labels) != len(feats):
         raise ValueError(f"`node_labels` must have one entry per graph ({len(feats)}), got "
                          f"{len(node_labels)}")
@@ -601,8 +619,9 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
     M, K, n = A.shape
     N = lab.shape[0]
     if lab.shape[1:] != (n,) or (fitted is None and N != K):
-        raise ValueError(f"`labels` must have shape (N, n) = ({K}, {n}) to match `assignments`, "
-                         f"got shape {lab.shape}")
+        want = f"(N, n) = ({K}, {n})" if fitted is None else f"(N, {n})"
+        raise ValueError(f"`labels` must have shape {want} to match `assignments`, got shape "
+                         f"{lab.shape}")
     if fitted is None:
         nbr = None
     else:
@@ -613,6 +632,12 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
         if nbr.size and (nbr.min() < 0 or nbr.max() >= N):
             raise ValueError(f"`fitted` must hold fitted-graph indices in [0, {N}), got values "
                              f"in [{int(nbr.min())}, {int(nbr.max())}]")
+        srt = np.sort(nbr, axis=1)
+        dup = np.flatnonzero(np.any(srt[:, 1:] == srt[:, :-1], axis=1))
+        if dup.size:
+            raise ValueError(f"`fitted` must list distinct fitted graphs per new graph (each "
+                             f"votes once), row {int(dup[0])} repeats one: "
+                             f"{nbr[dup[0]].tolist()!r:.80}")
     _check_permutation_rows(A, "assignments")
     if (sizes is None) != (fitted_sizes is None):
         raise ValueError("`sizes` and `fitted_sizes` must be given together")

@@ -8,6 +8,9 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from sklearn.base import clone
@@ -500,6 +503,37 @@ def test_view_graph_errors():
     for bad in (np.array([]), np.array([[0, 1]]), np.array([5, 3]), np.array([3, 3])):
         with pytest.raises(ValueError, match="`label_values` must be a non-empty 1-d array"):
             graph_descriptors([np.zeros((2, 1))], [np.array([3, 5])], bad)
+
+
+@settings(max_examples=60, deadline=None)
+@given(data=st.data(), N=st.integers(1, 12), d=st.integers(1, 3))
+def test_view_graph_contract_on_any_finite_descriptors(data, N, d):
+    """Any finite descriptors (ties, duplicates, huge or tiny values): a connected view graph of
+    distinct pairs i < j in lexicographic order, at most N k + N - 1 of them, holding every
+    graph's nearest other graph; all pairs for k >= N - 1."""
+    elems = st.one_of(st.integers(-3, 3).map(float),                 # ties and duplicates
+                      st.floats(-1e12, 1e12, allow_nan=False, allow_infinity=False))
+    X = data.draw(hnp.arrays(np.float64, (N, d), elements=elems))
+    k = data.draw(st.integers(1, N + 1))
+    pairs = view_graph(X, k)
+    full = N * (N - 1) // 2
+    assert pairs.dtype == np.int64 and pairs.shape[1] == 2
+    if k >= N - 1:
+        assert len(pairs) == full
+    assert len(pairs) <= min(full, N * k + N - 1)
+    assert np.all(pairs[:, 0] < pairs[:, 1])
+    assert len({tuple(p) for p in pairs.tolist()}) == len(pairs)
+    assert pairs.tolist() == sorted(pairs.tolist())
+    if N > 1:
+        assert _connected(pairs, N)
+        dist = np.abs(X[:, None, :] - X[None, :, :]).max(-1)       # any norm: a 0 stays a 0
+        np.fill_diagonal(dist, np.inf)
+        if np.any((dist > 0) & (dist < 1e-100)):     # squares underflow to a tie: resolution
+            return
+        for i in np.flatnonzero(dist.min(1) == 0):              # an exact duplicate is paired
+            j = set(np.flatnonzero(dist[i] == 0).tolist())
+            partners = {b if a == i else a for a, b in pairs.tolist() if i in (a, b)}
+            assert partners & j or len(j) > k
 
 
 def test_view_graph_far_from_zero_and_huge_descriptors():

@@ -119,21 +119,22 @@ def _check_descriptors(descriptors) -> np.ndarray:
 
 
 def _sq_distances(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
-    """(len(X), len(Y)) squared Euclidean distances, clipped at 0. Callers pass descriptors
-    centred and scaled by :func:`_standardized` so that the expansion
-    ``|x|^2 + |y|^2 - 2 x.y`` neither cancels (descriptors far from 0) nor overflows."""
-    d = (X * X).sum(1)[:, None] + (Y * Y).sum(1)[None, :] - 2.0 * (X @ Y.T)
-    return np.maximum(d, 0.0, out=d)
+    """(len(X), len(Y)) squared Euclidean distances from coordinate differences (no
+    ``|x|^2 + |y|^2 - 2 x.y`` cancellation: equal rows are at distance 0 exactly). Callers pass
+    descriptors through :func:`_scaled` so that squares cannot overflow."""
+    from scipy.spatial.distance import cdist
+
+    return cdist(X, Y, "sqeuclidean")
 
 
-def _standardized(D: np.ndarray, *others: np.ndarray) -> tuple[np.ndarray, ...]:
-    """``D`` and ``others`` shifted by ``D``'s column means and divided by one common scale
-    (the largest absolute centred entry): Euclidean neighbours and their order unchanged."""
-    mu = D.mean(0)
-    Dc = D - mu
-    scale = float(np.max(np.abs(Dc))) if Dc.size else 0.0
-    scale = scale if scale > 0 and np.isfinite(scale) else 1.0
-    return (Dc / scale,) + tuple((X - mu) / scale for X in others)
+def _scaled(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The arrays divided by one power of two (exact: neighbours and ties unchanged) that
+    brings their largest absolute entry to [0.5, 1), so that squared distances stay finite."""
+    top = max((float(np.max(np.abs(a))) if a.size else 0.0) for a in arrays)
+    if top == 0.0:
+        return arrays
+    scale = 2.0 ** np.frexp(top)[1]
+    return tuple(a / scale for a in arrays)
 
 
 def nearest_graphs(descriptors, queries, n_neighbors: int) -> np.ndarray:
@@ -166,7 +167,7 @@ def nearest_graphs(descriptors, queries, n_neighbors: int) -> np.ndarray:
         raise ValueError(f"`queries` must have {D.shape[1]} columns like `descriptors`, got "
                          f"shape {Q.shape}")
     k = min(check_int(n_neighbors, "n_neighbors", minimum=1), D.shape[0])
-    D, Q = _standardized(D, Q)
+    D, Q = _scaled(D, Q)
     out = np.empty((Q.shape[0], k), dtype=np.int64)
     step = max(1, _SLOT_BLOCK_ELEMENTS // max(D.shape[0], 1))
     for s in range(0, Q.shape[0], step):                  # blocks of queries bound memory
@@ -237,7 +238,7 @@ def view_graph(descriptors, n_neighbors: int | None = None) -> np.ndarray:
     """
     D = _check_descriptors(descriptors)
     N = D.shape[0]
-    D, = _standardized(D)
+    D, = _scaled(D)
     if n_neighbors is not None:
         n_neighbors = check_int(n_neighbors, "n_neighbors", minimum=1)
     if n_neighbors is None or n_neighbors >= N - 1:

@@ -540,7 +540,7 @@ def test_view_graph_far_from_zero_and_huge_descriptors():
     """Neighbours by exact Euclidean distance whatever the offset and scale of the descriptors
     (the |x|^2 + |y|^2 - 2 x.y expansion on raw values cancels at 1e8 and overflows at 1e200)."""
     x = np.array([[0.0], [1.0], [0.4], [3.0]])
-    for shift, scale in ((0.0, 1.0), (1e8, 1.0), (0.0, 1e200)):
+    for shift, scale in ((0.0, 1.0), (1e8, 1.0), (0.0, 1e200), (0.0, 5e307), (0.0, 1e-300)):
         X = shift + scale * x
         assert view_graph(X, 1).tolist() == [[0, 2], [1, 2], [1, 3]]
         assert nearest_graphs(X, shift + scale * np.array([[0.45]]), 2).tolist() == [[2, 0]]

@@ -133,8 +133,8 @@ def _scaled(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
     top = max((float(np.max(np.abs(a))) if a.size else 0.0) for a in arrays)
     if top == 0.0:
         return arrays
-    scale = 2.0 ** np.frexp(top)[1]
-    return tuple(a / scale for a in arrays)
+    exponent = int(np.frexp(top)[1])
+    return tuple(np.ldexp(a, -exponent) for a in arrays)     # no 2**1024 overflow
 
 
 def nearest_graphs(descriptors, queries, n_neighbors: int) -> np.ndarray:

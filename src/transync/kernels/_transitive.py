@@ -167,11 +167,19 @@ def nearest_graphs(descriptors, queries, n_neighbors: int) -> np.ndarray:
         raise ValueError(f"`queries` must have {D.shape[1]} columns like `descriptors`, got "
                          f"shape {Q.shape}")
     k = min(check_int(n_neighbors, "n_neighbors", minimum=1), D.shape[0])
-    D, Q = _scaled(D, Q)
+    return _k_nearest(*_scaled(D, Q), k)
+
+
+def _k_nearest(D: np.ndarray, Q: np.ndarray, k: int, *, exclude_self: bool = False):
+    """(len(Q), k) indices of the rows of ``D`` nearest each row of ``Q`` (stable: ties by
+    index), in blocks of queries that bound memory; ``exclude_self``: ``Q`` is ``D`` and a row
+    is not its own neighbour."""
     out = np.empty((Q.shape[0], k), dtype=np.int64)
     step = max(1, _SLOT_BLOCK_ELEMENTS // max(D.shape[0], 1))
-    for s in range(0, Q.shape[0], step):                  # blocks of queries bound memory
+    for s in range(0, Q.shape[0], step):
         d = _sq_distances(Q[s:s + step], D)
+        if exclude_self:
+            d[np.arange(d.shape[0]), np.arange(s, s + d.shape[0])] = np.inf
         out[s:s + step] = np.argsort(d, axis=1, kind="stable")[:, :k]
     return out
 
@@ -244,16 +252,10 @@ def view_graph(descriptors, n_neighbors: int | None = None) -> np.ndarray:
     if n_neighbors is None or n_neighbors >= N - 1:
         iu, ju = np.triu_indices(N, 1)
         return np.column_stack([iu, ju]).astype(np.int64)
-    near = np.empty((N, n_neighbors), dtype=np.int64)
-    step = max(1, _SLOT_BLOCK_ELEMENTS // N)
-    for s in range(0, N, step):                           # k nearest *other* graphs
-        d = _sq_distances(D[s:s + step], D)
-        d[np.arange(d.shape[0]), np.arange(s, s + d.shape[0])] = np.inf
-        near[s:s + step] = np.argsort(d, axis=1, kind="stable")[:, :n_neighbors]
+    near = _k_nearest(D, D, n_neighbors, exclude_self=True)   # k < N - 1: never itself
     edges = np.concatenate([np.column_stack([np.repeat(np.arange(N), n_neighbors),
                                              near.ravel()]), _spanning_tree(D)])
-    edges = np.sort(edges, axis=1)
-    return np.unique(edges[edges[:, 0] != edges[:, 1]], axis=0)
+    return np.unique(np.sort(edges, axis=1), axis=0)
 
 
 def graph_descriptors(features, node_labels=None, label_values=None) -> np.ndarray:

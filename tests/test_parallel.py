@@ -360,3 +360,25 @@ def test_broken_process_pool_is_an_executor_error():
 def test_default_timeout_is_documented():
     assert DEFAULT_TIMEOUT == 600.0
     assert "600 s" in map_chunks.__doc__
+
+
+def _allocator_tuned(_chunk):
+    from transync import _malloc
+    return _malloc.tune_worker_allocator(), _malloc._DONE["tuned"]
+
+
+def test_worker_processes_tune_the_allocator_and_the_caller_does_not():
+    import sys
+
+    from transync import _malloc
+    assert _malloc.tune_worker_allocator() is False      # the caller's process is left alone
+    assert map_chunks(_allocator_tuned, [0]) == [(False, False)]
+    with ThreadPoolExecutor(2) as pool:                   # threads: still the caller's process
+        assert map_chunks(_allocator_tuned, [0, 1], executor=pool) == [(False, False)] * 2
+    with ProcessPoolExecutor(1) as pool:
+        done = map_chunks(_allocator_tuned, [0, 1], executor=pool)
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import ctypes.util
+        expected = hasattr(ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6"), "mallopt")
+        assert done == [(expected, expected)] * 2        # set once before the first chunk

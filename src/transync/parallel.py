@@ -36,6 +36,13 @@ Guarantees
   which also take lambdas and local functions); a failure is a ``TypeError`` naming ``fn`` or
   ``chunks``.
 
+Worker processes (joblib's, a ``ProcessPoolExecutor``'s, Dask's) fix glibc's malloc trim and
+mmap thresholds before their first chunk (``transync._malloc``): left at their defaults, a fresh
+worker gave freed heap back to the system after every solver step and faulted it in again
+(two loky workers on ENZYMES pairs spent 28 s in the kernel beside 34 s of computation and
+were slower than one process; with the thresholds fixed, 1.7x faster than one process). A
+worker then keeps up to 256 MB of freed memory for reuse. The calling process is never changed.
+
 Examples
 --------
 >>> from concurrent.futures import ThreadPoolExecutor
@@ -65,6 +72,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ._malloc import tune_worker_allocator
 from ._progress import progress_bar
 from ._validation import check_int, check_positive
 from .exceptions import ExecutorError
@@ -340,8 +348,10 @@ def _run_chunk(fn, index: int, chunk, pickler: str | None):
     """Worker side: ``(index, fn(chunk))``, or ``(index, _TaskFailure)`` if ``fn`` raised.
 
     Returning the failure (rather than raising it) keeps the task's own exceptions apart from
-    the executor's (lost worker, timeout...), which become ``ExecutorError``.
+    the executor's (lost worker, timeout...), which become ``ExecutorError``. In a worker
+    process, the allocator is tuned first (:mod:`transync._malloc`).
     """
+    tune_worker_allocator()
     try:
         return index, fn(chunk)
     except Exception as exc:

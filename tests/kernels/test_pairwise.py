@@ -6,6 +6,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
+from transync.kernels import _pairwise
 from transync.kernels._hks import hks_features
 from transync.kernels._pairwise import (
     DUMMY_AFFINITY,
@@ -122,6 +123,37 @@ def test_independent_of_executor_and_chunk_size(rng, matcher):
             ref)
     # a pair's result does not depend on the other pairs of the call
     np.testing.assert_array_equal(match_pairs(feats, adjs, pairs[[5, 2]], **kw), ref[[5, 2]])
+
+
+@pytest.mark.parametrize("matcher", ["rrwm", "node"])
+def test_chunk_plan_covers_every_pair_largest_first_within_memory(matcher):
+    rng = np.random.default_rng(3)
+    sizes = np.r_[rng.integers(2, 30, size=60), 120, 95]
+    pairs = np.stack(np.triu_indices(len(sizes), 1), axis=1)
+    order, bounds = _pairwise._chunk_plan(pairs, sizes, matcher, None)
+    np.testing.assert_array_equal(np.sort(order), np.arange(len(pairs)))
+    assert bounds[0] == 0 and bounds[-1] == len(pairs) and np.all(np.diff(bounds) > 0)
+    m = np.maximum(sizes[pairs[order, 0]], sizes[pairs[order, 1]])
+    assert np.all(np.diff(m) <= 0)                               # largest solve size first
+    per_pair = 8 * _pairwise._STATE_ARRAYS[matcher] * m.astype(float) ** 2
+    for s, e in zip(bounds[:-1], bounds[1:]):
+        # the memory target holds at the chunk's largest size, unless the 8-pair minimum
+        assert e - s <= 8 or (e - s) * per_pair[s] <= _pairwise._CHUNK_BYTES
+    assert np.diff(bounds)[0] == 8 and len(bounds) - 1 >= 16    # costly pairs in small chunks
+    order7, bounds7 = _pairwise._chunk_plan(pairs, sizes, matcher, 7)
+    assert set(np.diff(bounds7)[:-1]) == {7}
+
+
+def test_default_chunks_do_not_depend_on_the_executor(rng):
+    # mixed sizes (one large graph): the default cut, not the executor, decides the chunks
+    adjs = [_random_graph(rng, n, asymmetric=False) for n in [*rng.integers(3, 12, size=14), 26]]
+    feats = hks_features(adjs)
+    pairs = np.stack(np.triu_indices(len(adjs), 1), axis=1)
+    kw = dict(n=26, matcher="rrwm")
+    ref = match_pairs(feats, adjs, pairs, **kw)
+    with ThreadPoolExecutor(3) as pool:
+        np.testing.assert_array_equal(match_pairs(feats, adjs, pairs, executor=pool, **kw), ref)
+    np.testing.assert_array_equal(match_pairs(feats, adjs, pairs, executor=2, **kw), ref)
 
 
 def test_labels_restrict_the_node_matching(rng):

@@ -298,7 +298,8 @@ def prepare(path, key: str | None = None) -> PreparedSet:
 #: Version of the kernels' computations in the cache keys: bump it whenever a change of
 #: ``transync.kernels`` changes a Gram matrix, so that stale cached entries are not reused.
 #: 2: refined synchronization, cross-label matches dropped, exact spectral placement.
-CACHE_VERSION = 2
+#: 3: pairs cut into chunks by work, largest first (near-ties of RRWM / SM may fall otherwise).
+CACHE_VERSION = 3
 
 
 def _hash(obj) -> str:

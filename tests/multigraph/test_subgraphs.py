@@ -80,6 +80,10 @@ def test_default_estimates_the_universe_and_reports_the_rule():
     res = match_collection(c.graphs, affinity=AFF, progress=False, rng=0)
     assert res.n_universe == 12
     assert "eigengap" in res.info["n_universe_rule"]
+    assert "soft solutions" in res.info["n_universe_rule"]        # the solver's soft matrices
+    offline = match_collection(c.graphs, affinity=AFF, progress=False, rng=0, mode="offline",
+                               sync="spectral")
+    assert offline.n_universe == 12 and "soft" in offline.info["n_universe_rule"]
     given_ = match_collection(c.graphs, affinity=AFF, progress=False, rng=0, n_universe=12)
     assert given_.info["n_universe_rule"].startswith("given")
 

@@ -219,3 +219,50 @@ def test_block_is_the_weighted_sum_of_the_atoms_maps():
         want = sum(w * assignment_to_matrix(res.atom(k).pairwise(i, j), 5)
                    for k, w in enumerate(res.weights))
         np.testing.assert_allclose(res.block(i, j), want, atol=1e-12)
+
+
+# ---------------------------------------------------------------- estimate_universe
+
+def _partial_collection(rng, d, sizes):
+    """Objects keeping ``sizes[g]`` of ``d`` universe nodes (shuffled): exact partial maps."""
+    labels = [rng.permutation(d)[:k] for k in sizes]
+    blocks = {}
+    for i in range(len(sizes)):
+        for j in range(i + 1, len(sizes)):
+            X = (labels[i][:, None] == labels[j][None, :]).astype(float)
+            blocks[(i, j)] = X
+    return labels, blocks
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_estimate_universe_exact_at_zero_noise_and_invariant_to_relabelling(seed):
+    from transync.synchronization import estimate_universe
+    rng = np.random.default_rng(seed)
+    d = 15
+    sizes = rng.integers(8, 14, size=7)
+    labels, blocks = _partial_collection(rng, d, sizes)
+    used = len(set(np.concatenate(labels).tolist()))        # nodes kept by at least one object
+    est = estimate_universe(blocks)
+    assert est.n_universe == used and est.sizes.tolist() == sizes.tolist()
+    assert "eigengap" in est.rule and est.eigenvalues[0] == pytest.approx(1.0)
+    perm = rng.permutation(sizes[2])                         # relabel object 2's nodes
+    relabelled = {k: (X[perm] if k[0] == 2 else X[:, perm] if k[1] == 2 else X)
+                  for k, X in blocks.items()}
+    assert estimate_universe(relabelled).n_universe == used
+    # the same rule as synchronize_doubly_stochastic's, on the same soft input
+    soft = {k: 0.9 * X + 0.1 / X.size for k, X in blocks.items()}     # rows, columns <= 1
+    ref = synchronize_doubly_stochastic(soft, max_iter=0).info["n_universe"]
+    assert estimate_universe(soft).n_universe == ref
+
+
+def test_estimate_universe_bad_input():
+    from transync.synchronization import estimate_universe
+    X = np.array([[0.5, 0.5], [0.0, 0.0]])
+    with pytest.raises(ValueError, match="non-negative"):
+        estimate_universe({(0, 1): -X})
+    with pytest.raises(ValueError, match="at most 1"):
+        estimate_universe({(0, 1): 2.0 * X})
+    with pytest.raises(ValueError, match="at least one observed pair"):
+        estimate_universe({})
+    est = estimate_universe({(0, 1): X}, sizes=[2, 2, 3])     # object 2 in no pair
+    assert est.n_universe >= 3

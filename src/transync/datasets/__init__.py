@@ -3,6 +3,7 @@
 The rendered scenes and the image loaders need OpenCV (and scikit-image); they are imported on
 first use, so that ``import transync.datasets`` stays light.
 """
+from .._lazy import lazy_attributes
 from ._graphs import (  # noqa: F401
     GraphCollectionProblem,
     PairwiseProblem,
@@ -56,15 +57,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        import importlib
-
-        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())

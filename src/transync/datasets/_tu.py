@@ -419,6 +419,197 @@ def _resolve(path_or_name, data_home) -> Path:
     return root / spec
 
 
+# --------------------------------------------------------------------------- loading stages
+
+
+def _locate(path_or_name, data_home) -> tuple[Path, str, dict]:
+    """Find the set's folder, its prefix ``DS`` and the path of every file of the format.
+
+    Returns ``(folder, DS, {kind: folder / "DS_<kind>.txt"})`` for every kind of
+    ``_REQUIRED + _OPTIONAL + _IGNORED``; the required files exist, the others may not.
+    """
+    folder = _resolve(path_or_name, data_home)
+    a_files = _a_files(folder)
+    if not a_files:
+        raise FileNotFoundError(f"{folder}: no `<DS>_A.txt` file ({_layout('DS')})")
+    if len(a_files) > 1:
+        names = ", ".join(p.name for p in a_files)
+        raise ValueError(f"{folder}: several `*_A.txt` files ({names}); expected one TU data set "
+                         "per folder")
+    ds = a_files[0].name[: -len("_A.txt")]
+    files = {k: folder / f"{ds}_{k}.txt" for k in _REQUIRED + _OPTIONAL + _IGNORED}
+    for k in _REQUIRED:
+        if not files[k].is_file():
+            raise FileNotFoundError(f"{folder}: missing {files[k].name} ({_layout(ds)})")
+    return folder, ds, files
+
+
+def _read_column(path: Path, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """Parse a file of one integer per line into ``(values (rows,), line numbers (rows,))``."""
+    values, lines = _read_table(path, columns=1, kind="int", what=what)
+    return values[:, 0], lines
+
+
+def _check_indicator(indicator: np.ndarray, ind_lines: np.ndarray, n_graphs: int,
+                     files: dict) -> np.ndarray:
+    """Check the graph indicator against the graph labels; return the node count of each graph.
+
+    The indicator must be nonempty and nondecreasing, and name every graph id ``1..n_graphs``
+    (``n_graphs`` graph labels, at least one) for at least one node.
+    """
+    f_ind, f_lab = files["graph_indicator"], files["graph_labels"]
+    if indicator.size == 0:
+        raise ValueError(f"{f_ind}: no nodes (expected one graph id per node)")
+    if n_graphs == 0:
+        raise ValueError(f"{f_lab}: no graphs (expected one class label per graph)")
+    down = np.flatnonzero(np.diff(indicator) < 0)
+    if down.size:
+        raise _bad_line(f_ind, f_ind.read_bytes(), int(ind_lines[down[0] + 1]),
+                        f"expected nondecreasing graph ids (previous line: "
+                        f"{int(indicator[down[0]])})")
+    out = np.flatnonzero((indicator < 1) | (indicator > n_graphs))
+    if out.size:
+        raise ValueError(f"{f_ind}, line {int(ind_lines[out[0]])}: graph id "
+                         f"{int(indicator[out[0]])} out of range 1..{n_graphs} ({f_lab} has "
+                         f"{n_graphs} graph labels)")
+    counts = np.bincount(indicator - 1, minlength=n_graphs)
+    empty = np.flatnonzero(counts == 0)
+    if empty.size:
+        raise ValueError(f"{f_ind}: graph {int(empty[0]) + 1} has no nodes ({f_lab} has "
+                         f"{n_graphs} graph labels; graph ids must be 1..{n_graphs}, each "
+                         "listed for at least one node)")
+    return counts
+
+
+def _check_edges(edges: np.ndarray, a_lines: np.ndarray, indicator: np.ndarray,
+                 files: dict) -> np.ndarray:
+    """Check that every edge of ``DS_A.txt`` joins two nodes of one graph; return them 0-based."""
+    f_a, f_ind = files["A"], files["graph_indicator"]
+    n = indicator.size
+    bad = np.flatnonzero(((edges < 1) | (edges > n)).any(axis=1))
+    if bad.size:
+        i, j = edges[bad[0]].tolist()
+        raise ValueError(f"{f_a}, line {int(a_lines[bad[0]])}: edge {i}, {j} names a node out "
+                         f"of range 1..{n} ({f_ind} lists {n} nodes)")
+    edges = edges - 1
+    gi, gj = indicator[edges[:, 0]], indicator[edges[:, 1]]
+    bad = np.flatnonzero(gi != gj)
+    if bad.size:
+        i, j = (edges[bad[0]] + 1).tolist()
+        raise ValueError(f"{f_a}, line {int(a_lines[bad[0]])}: edge {i}, {j} joins graph "
+                         f"{int(gi[bad[0]])} and graph {int(gj[bad[0]])} (per {f_ind}); an edge "
+                         "must stay within one graph")
+    return edges
+
+
+def _read_optional(path: Path, columns, kind: str, what: str, rows: int, against: Path):
+    """Parse an optional file (``(None, None)`` when absent) holding one line per ``against`` row.
+
+    Returns ``(values (rows, k), line numbers (rows,))`` as :func:`_read_table`.
+    """
+    if not path.is_file():
+        return None, None
+    values, lines = _read_table(path, columns=columns, kind=kind, what=what)
+    if values.shape[0] != rows:
+        raise ValueError(f"{path} has {values.shape[0]} data lines but {against} has {rows}; "
+                         f"expected one line per line of {against.name}")
+    return values, lines
+
+
+def _read_extras(files: dict, n: int, m: int) -> tuple:
+    """Read the optional node labels, node attributes and edge labels (``n`` nodes, ``m`` edges).
+
+    Returns ``(node_labels (n,), attributes (n, f), edge_labels (m,), edge label line numbers
+    (m,))``, each None when its file is absent.
+    """
+    f_ind, f_a = files["graph_indicator"], files["A"]
+    node_labels, _ = _read_optional(files["node_labels"], 1, "int", "one integer node label", n,
+                                    f_ind)
+    attributes, _ = _read_optional(files["node_attributes"], None, "float",
+                                   "comma-separated node attributes", n, f_ind)
+    edge_labels, el_lines = _read_optional(files["edge_labels"], 1, "int",
+                                           "one integer edge label", m, f_a)
+    return (None if node_labels is None else node_labels[:, 0], attributes,
+            None if edge_labels is None else edge_labels[:, 0], el_lines)
+
+
+def _undirected_edges(edges: np.ndarray, indicator: np.ndarray, n_graphs: int, edge_labels,
+                      el_lines, f_el: Path) -> tuple:
+    """Fold the edge list into undirected edges: self-loops dropped, each edge kept once.
+
+    ``edges`` are 0-based ``(m, 2)`` node ids; an edge listed several times (e.g. in both
+    directions) is kept once, and its labels (``edge_labels`` ``(m,)`` read from ``f_el`` at
+    lines ``el_lines``, or None) must agree.
+
+    Returns
+    -------
+    lo, hi : ndarray of shape (k,), int64
+        The endpoints of each undirected edge, ``lo < hi``, sorted by ``(lo, hi)``.
+    labels : ndarray of shape (k,), int64, or None
+        The label of each edge, None without edge labels.
+    self_loops : ndarray of shape (n_graphs,), int64
+        Self-loops dropped, per graph.
+    """
+    n = indicator.size
+    loop = edges[:, 0] == edges[:, 1]
+    self_loops = np.bincount(indicator[edges[loop, 0]] - 1, minlength=n_graphs)
+    keep = ~loop
+    lo = np.minimum(edges[keep, 0], edges[keep, 1])
+    hi = np.maximum(edges[keep, 0], edges[keep, 1])
+    key = lo * n + hi
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    first = np.ones(key.size, bool)
+    first[1:] = key[1:] != key[:-1]
+    lab = None
+    if edge_labels is not None:
+        lab = edge_labels[keep][order]
+        clash = np.flatnonzero(~first & (lab != np.roll(lab, 1)))
+        if clash.size:
+            c = int(clash[0])
+            rows = el_lines[keep][order]
+            raise ValueError(f"{f_el}, lines {int(rows[c - 1])} and "
+                             f"{int(rows[c])}: edge {int(lo[order][c]) + 1}, "
+                             f"{int(hi[order][c]) + 1} has labels {int(lab[c - 1])} and "
+                             f"{int(lab[c])}; an undirected edge listed twice (e.g. in both "
+                             "directions) must carry one label")
+        lab = lab[first]
+    return lo[order][first], hi[order][first], lab, self_loops
+
+
+def _build_graphs(indicator: np.ndarray, counts: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                  labels, node_labels, attributes) -> tuple:
+    """Build one :class:`Graph` per graph from the undirected edges of :func:`_undirected_edges`.
+
+    Both directions of every edge are set by one scatter into a flat buffer shared by all the
+    adjacencies (and one shared by the edge-label matrices); nodes in no edge are kept.
+    ``node_labels`` ``(n,)`` and ``attributes`` ``(n, f)`` (or None) are split by graph.
+    """
+    # one flat buffer holds every adjacency; graph g's nodes are start[g] .. start[g] + n_g - 1
+    n_graphs = counts.size
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    offset = np.concatenate([[0], np.cumsum(counts * counts)])
+    g = indicator[lo] - 1
+    li, lj, ng = lo - start[g], hi - start[g], counts[g]
+    flat = np.concatenate([offset[g] + li * ng + lj, offset[g] + lj * ng + li])
+    buf = np.zeros(int(offset[-1]))
+    buf[flat] = 1.0
+    ebuf = None
+    if labels is not None:
+        ebuf = np.zeros(int(offset[-1]))
+        ebuf[flat] = np.concatenate([labels, labels])
+    bounds = np.cumsum(counts)[:-1]
+    labels_g = np.split(node_labels, bounds) if node_labels is not None else [None] * n_graphs
+    attrs_g = np.split(attributes, bounds) if attributes is not None else [None] * n_graphs
+    graphs = []
+    for k, size in enumerate(counts.tolist()):
+        sl = slice(int(offset[k]), int(offset[k + 1]))
+        graphs.append(Graph(buf[sl].reshape(size, size), node_labels=labels_g[k],
+                            node_features=attrs_g[k],
+                            edge_features=None if ebuf is None else ebuf[sl].reshape(size, size)))
+    return tuple(graphs)
+
+
 # --------------------------------------------------------------------------- loading
 
 
@@ -480,126 +671,17 @@ def load_tu(path_or_name, *, data_home=None) -> TUDataset:
     (True, 1)
     >>> tmp.cleanup()
     """
-    folder = _resolve(path_or_name, data_home)
-    a_files = _a_files(folder)
-    if not a_files:
-        raise FileNotFoundError(f"{folder}: no `<DS>_A.txt` file ({_layout('DS')})")
-    if len(a_files) > 1:
-        names = ", ".join(p.name for p in a_files)
-        raise ValueError(f"{folder}: several `*_A.txt` files ({names}); expected one TU data set "
-                         "per folder")
-    ds = a_files[0].name[: -len("_A.txt")]
-    files = {k: folder / f"{ds}_{k}.txt" for k in _REQUIRED + _OPTIONAL + _IGNORED}
-    for k in _REQUIRED:
-        if not files[k].is_file():
-            raise FileNotFoundError(f"{folder}: missing {files[k].name} ({_layout(ds)})")
-
-    f_ind, f_lab, f_a = files["graph_indicator"], files["graph_labels"], files["A"]
-    indicator, ind_lines = _read_table(f_ind, columns=1, kind="int", what="one graph id")
-    indicator = indicator[:, 0]
-    y, _ = _read_table(f_lab, columns=1, kind="int", what="one integer class label")
-    y = y[:, 0]
-    n, n_graphs = indicator.size, y.size
-    if n == 0:
-        raise ValueError(f"{f_ind}: no nodes (expected one graph id per node)")
-    if n_graphs == 0:
-        raise ValueError(f"{f_lab}: no graphs (expected one class label per graph)")
-    down = np.flatnonzero(np.diff(indicator) < 0)
-    if down.size:
-        raise _bad_line(f_ind, f_ind.read_bytes(), int(ind_lines[down[0] + 1]),
-                        f"expected nondecreasing graph ids (previous line: "
-                        f"{int(indicator[down[0]])})")
-    out = np.flatnonzero((indicator < 1) | (indicator > n_graphs))
-    if out.size:
-        raise ValueError(f"{f_ind}, line {int(ind_lines[out[0]])}: graph id "
-                         f"{int(indicator[out[0]])} out of range 1..{n_graphs} ({f_lab} has "
-                         f"{n_graphs} graph labels)")
-    counts = np.bincount(indicator - 1, minlength=n_graphs)
-    empty = np.flatnonzero(counts == 0)
-    if empty.size:
-        raise ValueError(f"{f_ind}: graph {int(empty[0]) + 1} has no nodes ({f_lab} has "
-                         f"{n_graphs} graph labels; graph ids must be 1..{n_graphs}, each "
-                         "listed for at least one node)")
-
-    edges, a_lines = _read_table(f_a, columns=2, kind="int", what="one edge `i, j`")
-    m = edges.shape[0]
-    bad = np.flatnonzero(((edges < 1) | (edges > n)).any(axis=1))
-    if bad.size:
-        i, j = edges[bad[0]].tolist()
-        raise ValueError(f"{f_a}, line {int(a_lines[bad[0]])}: edge {i}, {j} names a node out "
-                         f"of range 1..{n} ({f_ind} lists {n} nodes)")
-    edges = edges - 1
-    gi, gj = indicator[edges[:, 0]], indicator[edges[:, 1]]
-    bad = np.flatnonzero(gi != gj)
-    if bad.size:
-        i, j = (edges[bad[0]] + 1).tolist()
-        raise ValueError(f"{f_a}, line {int(a_lines[bad[0]])}: edge {i}, {j} joins graph "
-                         f"{int(gi[bad[0]])} and graph {int(gj[bad[0]])} (per {f_ind}); an edge "
-                         "must stay within one graph")
-
-    def optional(key, columns, kind, what, rows, against):
-        path = files[key]
-        if not path.is_file():
-            return None, None
-        values, lines = _read_table(path, columns=columns, kind=kind, what=what)
-        if values.shape[0] != rows:
-            raise ValueError(f"{path} has {values.shape[0]} data lines but {against} has {rows}; "
-                             f"expected one line per line of {against.name}")
-        return values, lines
-
-    node_labels, _ = optional("node_labels", 1, "int", "one integer node label", n, f_ind)
-    attributes, _ = optional("node_attributes", None, "float", "comma-separated node attributes",
-                             n, f_ind)
-    edge_labels, el_lines = optional("edge_labels", 1, "int", "one integer edge label", m, f_a)
-
-    # self-loops are dropped; one direction is enough; both directions must agree on the label
-    loop = edges[:, 0] == edges[:, 1]
-    self_loops = np.bincount(gi[loop] - 1, minlength=n_graphs)
-    keep = ~loop
-    lo = np.minimum(edges[keep, 0], edges[keep, 1])
-    hi = np.maximum(edges[keep, 0], edges[keep, 1])
-    key = lo * n + hi
-    order = np.argsort(key, kind="stable")
-    key = key[order]
-    first = np.ones(key.size, bool)
-    first[1:] = key[1:] != key[:-1]
-    lab = None
-    if edge_labels is not None:
-        lab = edge_labels[keep, 0][order]
-        clash = np.flatnonzero(~first & (lab != np.roll(lab, 1)))
-        if clash.size:
-            c = int(clash[0])
-            rows = el_lines[keep][order]
-            raise ValueError(f"{files['edge_labels']}, lines {int(rows[c - 1])} and "
-                             f"{int(rows[c])}: edge {int(lo[order][c]) + 1}, "
-                             f"{int(hi[order][c]) + 1} has labels {int(lab[c - 1])} and "
-                             f"{int(lab[c])}; an undirected edge listed twice (e.g. in both "
-                             "directions) must carry one label")
-        lab = lab[first]
-    lo, hi = lo[order][first], hi[order][first]
-
-    # one flat buffer holds every adjacency; graph g's nodes are start[g] .. start[g] + n_g - 1
-    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    offset = np.concatenate([[0], np.cumsum(counts * counts)])
-    g = indicator[lo] - 1
-    li, lj, ng = lo - start[g], hi - start[g], counts[g]
-    flat = np.concatenate([offset[g] + li * ng + lj, offset[g] + lj * ng + li])
-    buf = np.zeros(int(offset[-1]))
-    buf[flat] = 1.0
-    ebuf = None
-    if lab is not None:
-        ebuf = np.zeros(int(offset[-1]))
-        ebuf[flat] = np.concatenate([lab, lab])
-    bounds = np.cumsum(counts)[:-1]
-    labels_g = (np.split(node_labels[:, 0], bounds) if node_labels is not None
-                else [None] * n_graphs)
-    attrs_g = np.split(attributes, bounds) if attributes is not None else [None] * n_graphs
-    graphs = []
-    for k, size in enumerate(counts.tolist()):
-        sl = slice(int(offset[k]), int(offset[k + 1]))
-        graphs.append(Graph(buf[sl].reshape(size, size), node_labels=labels_g[k],
-                            node_features=attrs_g[k],
-                            edge_features=None if ebuf is None else ebuf[sl].reshape(size, size)))
+    folder, ds, files = _locate(path_or_name, data_home)
+    indicator, ind_lines = _read_column(files["graph_indicator"], "one graph id")
+    y, _ = _read_column(files["graph_labels"], "one integer class label")
+    counts = _check_indicator(indicator, ind_lines, y.size, files)
+    edges, a_lines = _read_table(files["A"], columns=2, kind="int", what="one edge `i, j`")
+    edges = _check_edges(edges, a_lines, indicator, files)
+    node_labels, attributes, edge_labels, el_lines = _read_extras(files, indicator.size,
+                                                                  edges.shape[0])
+    lo, hi, labels, self_loops = _undirected_edges(edges, indicator, counts.size, edge_labels,
+                                                   el_lines, files["edge_labels"])
+    graphs = _build_graphs(indicator, counts, lo, hi, labels, node_labels, attributes)
     ignored = tuple(files[k].name for k in _IGNORED if files[k].is_file())
-    return TUDataset(ds, tuple(graphs), y, folder, node_labels is not None,
-                     edge_labels is not None, attributes is not None, self_loops, ignored)
+    return TUDataset(ds, graphs, y, folder, node_labels is not None, edge_labels is not None,
+                     attributes is not None, self_loops, ignored)

@@ -22,17 +22,16 @@ gets a zero row).
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
 from functools import partial
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .._validation import check_array, check_choice, check_int, check_positive
+from .._validation import check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning
 from ..graphs import Graph
 from ..parallel import map_chunks, split_chunks
-from ._checks import check_feature_list
+from ._checks import check_feature_list, check_graph_list, check_node_labels
 from ._evaluate import cosine_normalize
 from ._pairwise import default_sigma2
 
@@ -52,43 +51,13 @@ GRAKEL_KERNELS = ("wl", "wl-oa", "sp", "rw")
 
 # --------------------------------------------------------------------------- input helpers
 
-def _check_graphs(graphs, name: str = "graphs") -> list[np.ndarray]:
-    """Binary 0/1 adjacency of each graph (Graph or square array), validated."""
-    if isinstance(graphs, (str, bytes, Graph, np.ndarray)) or not isinstance(graphs, Sequence):
-        raise TypeError(f"`{name}` must be a sequence (list or tuple) of Graphs or adjacency "
-                        f"arrays, got {type(graphs).__name__}")
-    if len(graphs) == 0:
-        raise ValueError(f"`{name}` must hold at least one graph, got an empty sequence")
+def _check_graphs(graphs) -> list[np.ndarray]:
+    """Binary 0/1 adjacency (zero diagonal) of each graph (Graph or square array), validated."""
     out = []
-    for k, g in enumerate(graphs):
-        A = g.adjacency if isinstance(g, Graph) else check_array(g, f"{name}[{k}]", ndim=2)
-        if A.shape[0] != A.shape[1] or A.shape[0] == 0:
-            raise ValueError(f"`{name}[{k}]` must be a non-empty square adjacency, got shape "
-                             f"{A.shape}")
-        B = (A != 0)
-        if not np.array_equal(B, B.T):
-            raise ValueError(f"`{name}[{k}]` must be undirected (symmetric adjacency)")
+    for A in check_graph_list(graphs, edges_only=True):
+        B = A != 0
         np.fill_diagonal(B, False)
         out.append(B.astype(np.float64))
-    return out
-
-
-def _check_node_labels(node_labels, sizes: Sequence[int]) -> list[np.ndarray] | None:
-    if node_labels is None:
-        return None
-    if isinstance(node_labels, (str, bytes)) or not isinstance(node_labels, Sequence):
-        raise TypeError("`node_labels` must be None or a list of int arrays, one per graph, got "
-                        f"{type(node_labels).__name__}")
-    if len(node_labels) != len(sizes):
-        raise ValueError(f"`node_labels` must hold {len(sizes)} arrays (one per graph), got "
-                         f"{len(node_labels)}")
-    out = []
-    for k, (lab, n) in enumerate(zip(node_labels, sizes)):
-        lab = np.asarray(lab)
-        if lab.shape != (n,) or lab.dtype.kind not in "iu":
-            raise ValueError(f"`node_labels[{k}]` must be an int array of shape ({n},), got "
-                             f"{lab.dtype} array of shape {lab.shape}")
-        out.append(lab.astype(np.int64))
     return out
 
 
@@ -257,7 +226,7 @@ def hks_oa_kernel(features, *, sigma2: float | None = None, node_labels=None,
     """
     feats = check_feature_list(features)
     sizes = np.array([F.shape[0] for F in feats])
-    labels = _check_node_labels(node_labels, sizes)
+    labels = None if node_labels is None else check_node_labels(node_labels, sizes)
     sigma2 = default_sigma2(feats) if sigma2 is None else check_positive(sigma2, "sigma2")
     N = len(feats)
     offsets = np.concatenate([[0], np.cumsum(sizes)])
@@ -320,7 +289,7 @@ def hks_mean_kernel(features, *, kernel: str = "linear", gamma: float | None = N
     kernel = check_choice(kernel, "kernel", ("linear", "rbf"))
     block_nodes = check_int(block_nodes, "block_nodes", minimum=1)
     sizes = np.array([F.shape[0] for F in feats])
-    labels = _check_node_labels(node_labels, sizes)
+    labels = None if node_labels is None else check_node_labels(node_labels, sizes)
     N = len(feats)
     owner = np.repeat(np.arange(N), sizes)
     X = np.concatenate(feats, axis=0)
@@ -444,6 +413,8 @@ def random_walk_kernel(graphs, *, lamda: float = 1e-2, node_labels=None, normali
 
     Raises
     ------
+    TypeError
+        ``graphs`` or ``node_labels`` not a sequence, non-integer labels.
     ValueError
         ``lamda`` outside ``(0, 1 / rho_max^2)``, invalid graphs or labels.
 
@@ -501,17 +472,11 @@ def _grakel_input(graphs, node_labels) -> list:
     adj = _check_graphs(graphs)
     if node_labels is None:
         node_labels = [g.node_labels if isinstance(g, Graph) else None for g in graphs]
-    elif isinstance(node_labels, (str, bytes)) or not isinstance(node_labels, Sequence) \
-            or len(node_labels) != len(adj):
-        raise ValueError(f"`node_labels` must be None or a list of {len(adj)} int arrays")
+    labels = check_node_labels(node_labels, [A.shape[0] for A in adj], missing_ok=True)
     out = []
-    for k, (A, lab) in enumerate(zip(adj, node_labels)):
+    for A, lab in zip(adj, labels):
         if lab is None:
             lab = A.sum(1).astype(np.int64)            # degree: the field's convention
-        lab = np.asarray(lab)
-        if lab.shape != (A.shape[0],) or lab.dtype.kind not in "iu":
-            raise ValueError(f"`node_labels[{k}]` must be an int array of shape "
-                             f"({A.shape[0]},), got {lab.dtype} array of shape {lab.shape}")
         out.append([A.astype(np.int64), {i: int(v) for i, v in enumerate(lab)}])
     return out
 

@@ -1,4 +1,12 @@
-"""Input checks shared by the kernels' modules."""
+"""Input checks shared by the kernels' modules.
+
+One home for the checks that several modules need: a sequence with one entry per graph
+(:func:`check_sequence`), node features (:func:`check_feature_list`), adjacencies
+(:func:`check_adjacency`, :func:`check_graph_list`), integer node labels
+(:func:`check_label_array`, :func:`check_node_labels`) and integer arrays
+(:func:`check_int_array`). A wrong type raises ``TypeError``, a wrong value ``ValueError``; the
+message names the argument, what was expected and what arrived.
+"""
 
 from __future__ import annotations
 
@@ -7,21 +15,64 @@ from collections.abc import Sequence
 import numpy as np
 
 from .._validation import check_array
+from ..graphs import Graph
 
-__all__ = ["check_feature_list"]
+__all__ = [
+    "check_adjacency",
+    "check_feature_list",
+    "check_graph_list",
+    "check_int_array",
+    "check_label_array",
+    "check_node_labels",
+    "check_sequence",
+]
 
 
-def check_feature_list(features, name: str = "features") -> list[np.ndarray]:
+def check_sequence(x, name: str, expected: str, *, allow_empty: bool = False,
+                   arrays: bool = False) -> list:
+    """One entry per graph: a list or tuple (never a str, bytes or a single Graph), as a list.
+
+    Parameters
+    ----------
+    x : object
+        The argument to check.
+    name : str
+        Its name, for the messages.
+    expected : str
+        What it must be, as the ``TypeError`` says it (``"a list or tuple of ..."``).
+    allow_empty : bool, default=False
+        Accept an empty sequence; otherwise it raises ``ValueError``.
+    arrays : bool, default=False
+        Accept a numpy array too (its rows are the entries). Off by default: the rows of a
+        padded ``(N, n, ...)`` array would all count as real nodes.
+
+    Returns
+    -------
+    list
+    """
+    if isinstance(x, Graph):
+        raise TypeError(f"`{name}` must be {expected}, got a single Graph (wrap it in a list)")
+    if isinstance(x, (str, bytes)) or not (isinstance(x, Sequence)
+                                           or (arrays and isinstance(x, np.ndarray))):
+        raise TypeError(f"`{name}` must be {expected}, got {type(x).__name__}")
+    if len(x) == 0 and not allow_empty:
+        raise ValueError(f"`{name}` must hold at least one graph, got an empty sequence")
+    return list(x)
+
+
+def check_feature_list(features, name: str = "features", *,
+                       ndim: int | tuple[int, ...] = 2) -> list[np.ndarray]:
     """One ``(n_i, f)`` float array per graph (``n_i >= 1``, one ``f`` for all), validated.
 
-    A padded ``(N, n, f)`` array is refused: its rows would all count as real nodes.
+    A padded ``(N, n, f)`` array is refused: its rows would all count as real nodes. With
+    ``ndim=(1, 2)`` a 1-d array of ``n_i`` values is one feature column.
     """
-    if isinstance(features, (str, bytes, np.ndarray)) or not isinstance(features, Sequence):
-        raise TypeError(f"`{name}` must be a sequence of (n_i, f) arrays, got "
-                        f"{type(features).__name__}")
-    if len(features) == 0:
-        raise ValueError(f"`{name}` must hold at least one graph's features, got none")
-    out = [check_array(F, f"{name}[{g}]", ndim=2) for g, F in enumerate(features)]
+    seq = check_sequence(features, name, "a list or tuple (a sequence) of (n_i, f) arrays, one "
+                                         "per graph")
+    out = []
+    for g, F in enumerate(seq):
+        F = check_array(F, f"{name}[{g}]", ndim=ndim)
+        out.append(F[:, None] if F.ndim == 1 else F)
     f = out[0].shape[1]
     for g, F in enumerate(out):
         if F.shape[1] != f:
@@ -31,3 +82,119 @@ def check_feature_list(features, name: str = "features") -> list[np.ndarray]:
             raise ValueError(f"`{name}[{g}]` must describe at least one node, got shape "
                              f"{F.shape}")
     return out
+
+
+def check_adjacency(graph, name: str, *, n: int | None = None,
+                    edges_only: bool = False) -> np.ndarray:
+    """The adjacency of an undirected Graph or a square, non-negative, symmetric, finite array.
+
+    Parameters
+    ----------
+    graph : Graph or array_like of shape (n, n)
+        A directed Graph is refused.
+    name : str
+        The argument's name, for the messages.
+    n : int, optional
+        The required node count (``n >= 1``); default any ``n >= 1``.
+    edges_only : bool, default=False
+        Only the edge pattern (``!= 0``) must be symmetric (the caller uses nothing else);
+        otherwise the weights must be, up to rounding (``numpy.allclose``), and an array that
+        is symmetric only up to rounding comes back symmetrized.
+
+    Returns
+    -------
+    ndarray of shape (n, n)
+    """
+    if isinstance(graph, Graph):
+        if graph.directed:
+            raise ValueError(f"`{name}` must be an undirected graph (symmetric adjacency), got a "
+                             "directed Graph")
+        A = graph.adjacency
+    else:
+        A = check_array(graph, name, ndim=2)
+    if n is not None and A.shape != (n, n):
+        raise ValueError(f"`{name}` must have shape ({n}, {n}) (one row and column per node of "
+                         f"the graph), got shape {A.shape}")
+    if A.shape[0] != A.shape[1] or A.shape[0] == 0:
+        raise ValueError(f"`{name}` must be a square (n, n) adjacency with n >= 1, got shape "
+                         f"{A.shape}")
+    if A.min() < 0:
+        raise ValueError(f"`{name}` must be non-negative, got minimum {A.min():.6g}")
+    E = A != 0
+    if not (np.array_equal(E, E.T) if edges_only else np.array_equal(A, A.T)):
+        if edges_only or not np.allclose(A, A.T):
+            raise ValueError(f"`{name}` must be symmetric (an undirected graph), got an "
+                             f"asymmetric matrix of shape {A.shape}")
+        A = 0.5 * (A + A.T)
+    return A
+
+
+def check_graph_list(graphs, name: str = "graphs", *, allow_empty: bool = False,
+                     edges_only: bool = False) -> list[np.ndarray]:
+    """The adjacency of each graph of a sequence of Graphs or adjacency arrays, validated.
+
+    Each entry goes through :func:`check_adjacency` (named ``graphs[k]``); ``allow_empty`` and
+    ``edges_only`` as in :func:`check_sequence` and :func:`check_adjacency`.
+    """
+    seq = check_sequence(graphs, name, "a sequence (list or tuple) of Graphs or adjacency arrays",
+                         allow_empty=allow_empty)
+    return [check_adjacency(g, f"{name}[{k}]", edges_only=edges_only) for k, g in enumerate(seq)]
+
+
+def check_label_array(labels, name: str, n: int | None = None) -> np.ndarray:
+    """The integer (or bool) node labels of one graph, as int64; ``n`` labels when given.
+
+    A non-integer dtype (float, NaN included, string, object) raises ``TypeError``.
+    """
+    lab = check_array(labels, name, ndim=1, dtype=None, finite=False)
+    if lab.dtype.kind not in "iub":
+        raise TypeError(f"`{name}` must hold integer labels, got dtype {lab.dtype}")
+    if n is not None and lab.shape[0] != n:
+        raise ValueError(f"`{name}` must have length {n} (the graph's node count), got "
+                         f"{lab.shape[0]}")
+    return lab.astype(np.int64, copy=False)
+
+
+def check_node_labels(node_labels, sizes, name: str = "node_labels", *,
+                      missing_ok: bool = False) -> list:
+    """One int64 label array of length ``sizes[g]`` per graph (:func:`check_label_array`).
+
+    Parameters
+    ----------
+    node_labels : sequence of array_like of shape (n_g,)
+        A list, tuple or array with one entry per graph.
+    sizes : sequence of int
+        The node count of each graph.
+    name : str, default="node_labels"
+        The argument's name, for the messages.
+    missing_ok : bool, default=False
+        A ``None`` entry (a graph without labels) stays ``None``.
+
+    Returns
+    -------
+    list of ndarray (or None where ``missing_ok``)
+    """
+    labs = check_sequence(node_labels, name, "a sequence (list, tuple or array) of integer "
+                                             "arrays, one per graph", allow_empty=True, arrays=True)
+    if len(labs) != len(sizes):
+        raise ValueError(f"`{name}` must have one entry per graph ({len(sizes)}), got "
+                         f"{len(labs)}")
+    return [None if lab is None and missing_ok else
+            check_label_array(lab, f"{name}[{g}]", int(sizes[g])) for g, lab in enumerate(labs)]
+
+
+def check_int_array(x, name: str, ndim: int | None = None,
+                    keep_dtype: bool = False) -> np.ndarray:
+    """Integer array (of ``ndim`` dims when given), as int64; an empty one of any dtype too.
+
+    With ``keep_dtype`` a signed integer array keeps its own dtype (no int64 copy of a large
+    int32 assignment array).
+    """
+    arr = check_array(x, name, ndim=ndim, dtype=None)
+    if arr.size == 0:
+        return arr.astype(np.int64)
+    if arr.dtype.kind not in "iu":
+        raise TypeError(f"`{name}` must hold integers, got dtype {arr.dtype}")
+    if keep_dtype and arr.dtype.kind == "i":
+        return arr
+    return arr.astype(np.int64, copy=False)

@@ -12,6 +12,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from .._validation import check_choice, check_int, check_positive
 from ..graphs import Graph
+from ._checks import check_label_array, check_sequence
 from ._hks import hks_features
 from ._pairwise import PAIRWISE_MATCHERS, default_sigma2, match_pairs
 from ._transitive import (
@@ -33,21 +34,13 @@ __all__ = ["TransitiveAssignmentKernel"]
 
 def _check_graphs(X, name: str = "X") -> list[Graph]:
     """A non-empty sequence of :class:`~transync.graphs.Graph` (a TU data set's ``.graphs``)."""
-    if isinstance(X, Graph):
-        raise TypeError(f"`{name}` must be a sequence of Graph objects, got a single Graph "
-                        "(wrap it in a list)")
     if not isinstance(X, (Sequence, np.ndarray)) and isinstance(getattr(X, "graphs", None),
                                                                 Sequence):
         X = X.graphs                                        # e.g. a TUDataset
-    if isinstance(X, (str, bytes)) or not isinstance(X, (Sequence, np.ndarray)):
-        raise TypeError(f"`{name}` must be a sequence of Graph objects, got "
-                        f"{type(X).__name__}")
     if isinstance(X, np.ndarray) and (X.dtype != object or X.ndim != 1):
         raise TypeError(f"`{name}` must be a sequence of Graph objects, got an array of shape "
                         f"{X.shape} and dtype {X.dtype}")
-    graphs = list(X)
-    if not graphs:
-        raise ValueError(f"`{name}` must hold at least one graph, got an empty sequence")
+    graphs = check_sequence(X, name, "a sequence of Graph objects", arrays=True)
     for k, g in enumerate(graphs):
         if not isinstance(g, Graph):
             raise TypeError(f"`{name}[{k}]` must be a transync.graphs.Graph, got "
@@ -55,10 +48,7 @@ def _check_graphs(X, name: str = "X") -> list[Graph]:
         if g.adjacency.shape[0] == 0:
             raise ValueError(f"`{name}[{k}]` has no nodes; every graph needs at least one")
         if g.node_labels is not None:
-            lab = np.asarray(g.node_labels)
-            if lab.dtype.kind not in "iub":
-                raise TypeError(f"`{name}[{k}].node_labels` must hold integer labels, got "
-                                f"dtype {lab.dtype}")
+            check_label_array(g.node_labels, f"{name}[{k}].node_labels")
     return graphs
 
 

@@ -27,13 +27,11 @@ True
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 
 from .._blas import blas_limit
 from .._validation import check_array
-from ..graphs import Graph
+from ._checks import check_adjacency, check_graph_list
 
 __all__ = ["HKS_TIMES", "heat_kernel_signature", "hks_features"]
 
@@ -60,27 +58,6 @@ def _check_times(times) -> np.ndarray:
     if t.min() <= 0:
         raise ValueError(f"`times` must be positive, got minimum {t.min():.6g}")
     return t
-
-
-def _check_adjacency(graph, name: str) -> np.ndarray:
-    """The adjacency of a Graph or a square, symmetric, non-negative, finite array."""
-    if isinstance(graph, Graph):
-        if graph.directed:
-            raise ValueError(f"`{name}` must be an undirected graph (the heat kernel needs a "
-                             "symmetric Laplacian), got a directed Graph")
-        return graph.adjacency
-    A = check_array(graph, name, ndim=2)
-    if A.shape[0] != A.shape[1] or A.shape[0] == 0:
-        raise ValueError(f"`{name}` must be a square (n, n) adjacency with n >= 1, got shape "
-                         f"{A.shape}")
-    if A.min() < 0:
-        raise ValueError(f"`{name}` must be non-negative, got minimum {A.min():.6g}")
-    if not np.array_equal(A, A.T):
-        if not np.allclose(A, A.T):
-            raise ValueError(f"`{name}` must be symmetric (an undirected graph), got an "
-                             f"asymmetric matrix of shape {A.shape}")
-        A = 0.5 * (A + A.T)
-    return A
 
 
 def _hks_stack(A: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -138,7 +115,7 @@ def heat_kernel_signature(graph_or_adjacency, times=None) -> np.ndarray:
     >>> bool(np.allclose(h[0], (1 + np.exp(-2 * np.array([1.0, 10.0]))) / 2))
     True
     """
-    A = _check_adjacency(graph_or_adjacency, "graph_or_adjacency")
+    A = check_adjacency(graph_or_adjacency, "graph_or_adjacency")
     return _hks_stack(A[None], _check_times(times))[0]
 
 
@@ -178,11 +155,8 @@ def hks_features(graphs, times=None) -> list[np.ndarray]:
     >>> bool(np.allclose(feats[0], heat_kernel_signature(path, times=[0.5, 2.0])))
     True
     """
-    if isinstance(graphs, (str, bytes, Graph, np.ndarray)) or not isinstance(graphs, Sequence):
-        raise TypeError("`graphs` must be a sequence (list or tuple) of Graphs or adjacency "
-                        f"arrays, got {type(graphs).__name__}")
+    adj = check_graph_list(graphs, allow_empty=True)
     t = _check_times(times)
-    adj = [_check_adjacency(g, f"graphs[{k}]") for k, g in enumerate(graphs)]
     out: list = [None] * len(adj)
     sizes = np.array([a.shape[0] for a in adj], dtype=np.int64)
     for n in np.unique(sizes):

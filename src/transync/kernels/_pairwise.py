@@ -50,10 +50,10 @@ parallel runs solve the same chunks and return the same result.
 Pairs solved in one batch share its floating-point rounding (batched products, by ~1e-16),
 and RRWM's fifty amplifying steps can carry such differences up to the assignment where two
 candidates nearly tie: on 11,175 ENZYMES pairs, two different chunk cuts gave different
-assignments on 2.7 % of the pairs (848 pairs; equally good matches, different choices). The
-scores are rounded to 10 decimals relative to their maximum before the assignment, so exact
-ties (automorphic nodes, dummies) are broken by node index whatever the chunks; a given
-``chunk_size`` is a different cut and may break near-ties differently.
+assignments on 2.7 % of the pairs (848 pairs). The scores are rounded to 10 decimals
+relative to their maximum before the assignment, so exact ties (automorphic nodes, dummies)
+are broken by node index whatever the chunks; a given ``chunk_size`` is a different cut and
+may break near-ties differently.
 
 Examples
 --------
@@ -75,17 +75,18 @@ from __future__ import annotations
 
 import functools
 import inspect
-from collections.abc import Sequence
 
 import numpy as np
 
 from .._blas import blas_limit
 from .._progress import progress_bar
-from .._validation import as_generator, check_array, check_choice, check_int, check_positive
+from .._validation import as_generator, check_choice, check_int, check_positive
 from ..matching import sm as _sm_reference
 from ..multigraph import PairAffinities, run_lockstep
 from ..parallel import map_chunks, split_chunks
 from ..permutations import solve_lap
+from ._checks import (check_adjacency, check_feature_list, check_int_array, check_node_labels,
+                      check_sequence)
 
 __all__ = ["DUMMY_AFFINITY", "LABEL_MISMATCH", "PAIRWISE_MATCHERS",
            "default_sigma2", "match_pairs"]
@@ -118,72 +119,26 @@ _STATE_ARRAYS = {"rrwm": 14, "sm": 6, "node": 4}
 # --------------------------------------------------------------------------- validation
 
 
-def _check_sequence(x, name):
-    if isinstance(x, (str, bytes, np.ndarray)) or not isinstance(x, Sequence):
-        raise TypeError(f"`{name}` must be a list or tuple (one entry per graph), got "
-                        f"{type(x).__name__}")
-    return list(x)
-
-
 def _check_inputs(features, adjacencies, node_labels):
-    feats = _check_sequence(features, "features")
-    adjs = _check_sequence(adjacencies, "adjacencies")
-    if not feats:
-        raise ValueError("`features` must hold at least one graph, got an empty sequence")
+    feats = check_feature_list(features, ndim=(1, 2))
+    adjs = check_sequence(adjacencies, "adjacencies", "a list or tuple of (n_g, n_g) arrays, one "
+                                                      "per graph", allow_empty=True)
     if len(adjs) != len(feats):
         raise ValueError(f"`features` and `adjacencies` must have the same length (one entry per "
                          f"graph), got {len(feats)} and {len(adjs)}")
-    out_f, out_a = [], []
-    dim = None
-    for k, (h, a) in enumerate(zip(feats, adjs)):
-        h = check_array(h, f"features[{k}]", ndim=(1, 2))
-        if h.ndim == 1:
-            h = h[:, None]
-        if dim is None:
-            dim = h.shape[1]
-        if h.shape[1] != dim:
-            raise ValueError(f"`features[{k}]` must have {dim} columns (as features[0]), got "
-                             f"shape {h.shape}")
-        a = check_array(a, f"adjacencies[{k}]", ndim=2)
-        if a.shape != (len(h), len(h)) or len(h) == 0:
-            raise ValueError(f"`adjacencies[{k}]` must have shape (n_g, n_g) = ({len(h)}, "
-                             f"{len(h)}) as features[{k}] has {len(h)} rows (n_g >= 1), got "
-                             f"{a.shape}")
-        if a.min() < 0:
-            raise ValueError(f"`adjacencies[{k}]` must be non-negative, got minimum "
-                             f"{a.min():.6g}")
-        if not np.array_equal(a != 0, (a != 0).T):
-            raise ValueError(f"`adjacencies[{k}]` must be symmetric (undirected graphs)")
-        out_f.append(h)
-        out_a.append(a)
-    labels = None
-    if node_labels is not None:
-        labs = _check_sequence(node_labels, "node_labels")
-        if len(labs) != len(feats):
-            raise ValueError(f"`node_labels` must have one entry per graph ({len(feats)}), got "
-                             f"{len(labs)}")
-        labels = []
-        for k, lab in enumerate(labs):
-            lab = check_array(lab, f"node_labels[{k}]", dtype=None, ndim=1)
-            if lab.dtype.kind not in "iub":
-                raise TypeError(f"`node_labels[{k}]` must hold integer labels, got dtype "
-                                f"{lab.dtype}")
-            if len(lab) != len(out_f[k]):
-                raise ValueError(f"`node_labels[{k}]` must have length {len(out_f[k])} (the "
-                                 f"graph's node count), got {len(lab)}")
-            labels.append(lab.astype(np.int64))
-    return out_f, out_a, labels
+    adjs = [check_adjacency(a, f"adjacencies[{k}]", n=len(h), edges_only=True)
+            for k, (h, a) in enumerate(zip(feats, adjs))]
+    labels = None if node_labels is None else check_node_labels(node_labels,
+                                                                [len(h) for h in feats])
+    return feats, adjs, labels
 
 
 def _check_pair_indices(pairs, n_graphs):
-    arr = check_array(pairs, "pairs", dtype=None)
+    arr = check_int_array(pairs, "pairs")
     if arr.size == 0:
         return np.zeros((0, 2), np.int64)
     if arr.ndim != 2 or arr.shape[1] != 2:
         raise ValueError(f"`pairs` must have shape (P, 2), got shape {arr.shape}")
-    if arr.dtype.kind not in "iu":
-        raise TypeError(f"`pairs` must hold integer graph indices, got dtype {arr.dtype}")
-    arr = arr.astype(np.int64)
     if arr.min() < 0 or arr.max() >= n_graphs:
         raise ValueError(f"`pairs` must hold graph indices in [0, {n_graphs}), got range "
                          f"[{arr.min()}, {arr.max()}]")
@@ -220,9 +175,7 @@ def default_sigma2(features, *, rng=None) -> float:
     >>> default_sigma2([np.array([[0.0], [1.0]]), np.array([[3.0]])])
     4.0
     """
-    feats = _check_sequence(features, "features")
-    H = np.concatenate([check_array(h, f"features[{k}]", ndim=(1, 2)).reshape(len(h), -1)
-                        for k, h in enumerate(feats)])
+    H = np.concatenate(check_feature_list(features, ndim=(1, 2)))
     if len(H) > _SIGMA_NODES:
         if rng is None:
             sel = np.linspace(0, len(H) - 1, _SIGMA_NODES).round().astype(np.int64)

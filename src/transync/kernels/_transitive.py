@@ -18,7 +18,7 @@ spanning tree), :func:`synchronize_alignments` (pairwise permutations -> :class:
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,7 +27,7 @@ import numpy as np
 from .._validation import check_array, check_choice, check_int, check_positive
 from ..permutations import solve_lap
 from ..synchronization import synchronize_permutations
-from ._checks import check_feature_list
+from ._checks import check_feature_list, check_int_array, check_node_labels
 from ._evaluate import cosine_normalize
 
 __all__ = [
@@ -295,15 +295,9 @@ def graph_descriptors(features, node_labels=None, label_values=None) -> np.ndarr
         raise ValueError(f"`label_values` must be a non-empty 1-d array of strictly increasing "
                          f"label values (one histogram bin each), got "
                          f"{np.asarray(label_values).tolist()!r:.80}")
-    if len(node_labels) != len(feats):
-        raise ValueError(f"`node_labels` must have one entry per graph ({len(feats)}), got "
-                         f"{len(node_labels)}")
+    labels = check_node_labels(node_labels, [F.shape[0] for F in feats])
     hist = np.zeros((len(feats), vals.size))
-    for g, lab in enumerate(node_labels):                 # one bincount per graph
-        lab = np.asarray(lab)
-        if lab.shape != (feats[g].shape[0],):
-            raise ValueError(f"`node_labels[{g}]` must have length {feats[g].shape[0]} (the "
-                             f"graph's node count), got shape {lab.shape}")
+    for g, lab in enumerate(labels):                      # one bincount per graph
         idx = np.minimum(np.searchsorted(vals, lab), vals.size - 1)
         ok = vals[idx] == lab
         hist[g] = np.bincount(idx[ok], minlength=vals.size) / max(lab.size, 1)
@@ -327,36 +321,10 @@ def _check_permutation_rows(a: np.ndarray, name: str) -> None:
                          f"{int(bad[0])} is not one: {flat[bad[0]].tolist()!r:.80}")
 
 
-def _check_int_array(x, name: str, ndim: int, keep_dtype: bool = False) -> np.ndarray:
-    """Integer array of ``ndim`` dims, as int64 (or its own integer dtype with ``keep_dtype``:
-    no int64 copy of a large int32 assignment array)."""
-    arr = check_array(x, name, ndim=ndim, dtype=None)
-    if arr.size == 0:
-        return arr.astype(np.int64)
-    if arr.dtype.kind not in "iu":
-        raise TypeError(f"`{name}` must hold integers, got dtype {arr.dtype}")
-    if keep_dtype and arr.dtype.kind == "i":
-        return arr
-    return arr.astype(np.int64, copy=False)
-
-
 def _padded_node_labels(node_labels, sizes: np.ndarray, n: int, name: str) -> np.ndarray:
     """(N, n) int64 labels of the real nodes, ``-1`` on the dummies (validated per graph)."""
-    if isinstance(node_labels, (str, bytes)) or not isinstance(node_labels,
-                                                               (Sequence, np.ndarray)):
-        raise TypeError(f"`{name}` must be a sequence of integer arrays (one per graph), got "
-                        f"{type(node_labels).__name__}")
-    if len(node_labels) != sizes.size:
-        raise ValueError(f"`{name}` must have one entry per graph ({sizes.size}), got "
-                         f"{len(node_labels)}")
     out = np.full((sizes.size, n), -1, dtype=np.int64)
-    for g, lab in enumerate(node_labels):                  # one copy per graph
-        lab = check_array(lab, f"{name}[{g}]", ndim=1, dtype=None)
-        if lab.dtype.kind not in "iub":
-            raise TypeError(f"`{name}[{g}]` must hold integer labels, got dtype {lab.dtype}")
-        if lab.shape[0] != sizes[g]:
-            raise ValueError(f"`{name}[{g}]` must have length {int(sizes[g])} (the graph's "
-                             f"real node count), got {lab.shape[0]}")
+    for g, lab in enumerate(check_node_labels(node_labels, sizes, name)):
         out[g, : lab.shape[0]] = lab
     return out
 
@@ -444,8 +412,8 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
     check_choice(method, "method", SYNC_METHODS)
     if not isinstance(keep_embedding, (bool, np.bool_)):
         raise TypeError(f"`keep_embedding` must be a bool, got {type(keep_embedding).__name__}")
-    A = _check_int_array(assignments, "assignments", 2)
-    pr = _check_int_array(pairs, "pairs", 2)
+    A = check_int_array(assignments, "assignments", 2)
+    pr = check_int_array(pairs, "pairs", 2)
     if A.size == 0:
         A = A.reshape(0, n)
     if pr.size == 0:
@@ -465,7 +433,7 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
     _check_permutation_rows(A, "assignments")
     real = None
     if sizes is not None:
-        real = _check_int_array(sizes, "sizes", 1)
+        real = check_int_array(sizes, "sizes", 1)
         if real.shape != (N,) or real.min() < 1 or real.max() > n:
             raise ValueError(f"`sizes` must hold {N} node counts in [1, {n}], got "
                              f"{real.tolist()!r:.80}")
@@ -617,8 +585,8 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
     array([[0, 1, 2]])
     """
     check_choice(method, "method", SYNC_METHODS)
-    A = _check_int_array(assignments, "assignments", 3, keep_dtype=True)
-    lab = _check_int_array(labels, "labels", 2)
+    A = check_int_array(assignments, "assignments", 3, keep_dtype=True)
+    lab = check_int_array(labels, "labels", 2)
     M, K, n = A.shape
     N = lab.shape[0]
     if lab.shape[1:] != (n,) or (fitted is None and N != K):
@@ -628,7 +596,7 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
     if fitted is None:
         nbr = None
     else:
-        nbr = _check_int_array(fitted, "fitted", 2)
+        nbr = check_int_array(fitted, "fitted", 2)
         if nbr.shape != (M, K):
             raise ValueError(f"`fitted` must have shape (M, k) = ({M}, {K}) like the first two "
                              f"axes of `assignments`, got shape {nbr.shape}")
@@ -648,8 +616,8 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
         raise ValueError("`node_labels` and `fitted_node_labels` must be given together")
     real = fit_real = L_new = L_fit = None
     if sizes is not None:
-        real = _check_int_array(sizes, "sizes", 1)
-        fit_real = _check_int_array(fitted_sizes, "fitted_sizes", 1)
+        real = check_int_array(sizes, "sizes", 1)
+        fit_real = check_int_array(fitted_sizes, "fitted_sizes", 1)
         for arr, name, k in ((real, "sizes", M), (fit_real, "fitted_sizes", N)):
             if arr.shape != (k,) or arr.min() < 1 or arr.max() > n:
                 raise ValueError(f"`{name}` must hold {k} node counts in [1, {n}], got "
@@ -775,7 +743,7 @@ def aligned_features(features, labels, n: int | None = None) -> np.ndarray:
            [3., 0.]])
     """
     feats = check_feature_list(features)
-    lab = _check_int_array(labels, "labels", 2)
+    lab = check_int_array(labels, "labels", 2)
     if n is None:
         n = lab.shape[1]
     n = check_int(n, "n", minimum=1)
@@ -1029,7 +997,7 @@ def prune_by_size(sizes, y, *, quantile: float | None = 0.95, max_nodes: int | N
     >>> rule
     'kept 3/4 graphs, 2/2 classes: n_i <= 17 (0.75 size quantile 17.75); ... max 7'
     """
-    s = _check_int_array(sizes, "sizes", 1)
+    s = check_int_array(sizes, "sizes", 1)
     if s.size == 0:
         raise ValueError("`sizes` must hold at least one graph size, got none")
     if s.min() < 1:

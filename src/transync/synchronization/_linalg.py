@@ -50,7 +50,9 @@ class RowBlockProduct:
         indptr = self.A.indptr
         cuts = np.searchsorted(indptr, np.linspace(0, self.nnz, t + 1)[1:-1])
         bounds = np.unique(np.r_[0, cuts, self.shape[0]])
-        self.blocks = [(int(s), int(e), self.A[s:e]) for s, e in zip(bounds[:-1], bounds[1:])]
+        # row slices are copies: one block per thread (about one more copy of A in all)
+        self.blocks = ([(0, self.shape[0], self.A)] if len(bounds) <= 2 else
+                       [(int(s), int(e), self.A[s:e]) for s, e in zip(bounds[:-1], bounds[1:])])
 
     def __matmul__(self, X):
         if len(self.blocks) < 2 or self.nnz * (X.shape[1] if X.ndim == 2 else 1) \

@@ -167,7 +167,7 @@ def _spectral_embedding(stk, d, solver, tol, rng, info):
     info["seconds_build"] = time.perf_counter() - t0
     info["operator_nnz"] = int(A.nnz)
 
-    Aop = RowBlockProduct(A)              # row blocks on threads (bit-identical products)
+    Aop = None if use == "dense" else RowBlockProduct(A)   # row blocks on threads, bit-identical
 
     def matmat(X):
         return (Aop @ X.astype(A.dtype)).astype(np.float64)

@@ -585,7 +585,7 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
     _check_soft_blocks(stk.soft, full)
     pairs, w, X = _merge_observations(stk)
     info: dict = {"fully_corrective": fully_corrective, "pairs": pairs}
-    d = _choose_universe(n_universe, full, X, w, pairs, sizes, solver, gen, info)
+    d = _choose_universe(n_universe, full, X, w, pairs, sizes, info)
     fw = _FrankWolfe(X, w, pairs, sizes, d, inner_sweeps=inner_sweeps, rng=gen, solver=solver)
     info["solver"] = fw.oracle.use
     start = start_w = None
@@ -682,7 +682,7 @@ def estimate_universe(pairwise, *, mask=None, weights=None, sizes=None) -> Unive
     stk = parse_pairwise(pairwise, mask=mask, weights=weights, sizes=sizes, soft=True)
     _check_soft_blocks(stk.soft, False)
     pairs, w, X = _merge_observations(stk)
-    d, rule, vals = _estimate_universe_soft(X, w, pairs, stk.sizes, "dense", None)
+    d, rule, vals = _estimate_universe_soft(X, w, pairs, stk.sizes)
     return UniverseEstimate(n_universe=int(d), rule=rule, eigenvalues=np.asarray(vals),
                             sizes=np.asarray(stk.sizes).copy())
 
@@ -743,7 +743,7 @@ def _merge_observations(stk):
     return pairs, w, X
 
 
-def _choose_universe(n_universe, full, X, w, pairs, sizes, solver, gen, info) -> int:
+def _choose_universe(n_universe, full, X, w, pairs, sizes, info) -> int:
     if n_universe is not None:
         d = n_universe
         info["n_universe_rule"] = "given"
@@ -751,14 +751,14 @@ def _choose_universe(n_universe, full, X, w, pairs, sizes, solver, gen, info) ->
         d = int(sizes.max())
         info["n_universe_rule"] = "equal sizes: d = number of nodes"
     else:
-        d, rule, vals = _estimate_universe_soft(X, w, pairs, sizes, solver, gen)
+        d, rule, vals = _estimate_universe_soft(X, w, pairs, sizes)
         info["n_universe_rule"] = rule
         info["eigenvalues"] = vals
     info["n_universe"] = d
     return d
 
 
-def _estimate_universe_soft(X, w, pairs, sizes, solver, rng):
+def _estimate_universe_soft(X, w, pairs, sizes):
     """Eigengap of the degree-normalized soft block matrix (identity diagonal blocks)."""
     n_max = int(sizes.max())
     off = np.concatenate([[0], np.cumsum(sizes)])

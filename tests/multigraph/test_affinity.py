@@ -11,7 +11,14 @@ import scipy.sparse as sp
 from transync.datasets import make_graph_collection
 from transync.exceptions import DegenerateInputError
 from transync.graphs import Graph
-from transync.matching import Affinity, DenseAffinity, SparseAffinity, gaussian_edge_affinity
+from transync.matching import (
+    Affinity,
+    DenseAffinity,
+    FactorizedAffinity,
+    SeparableAffinity,
+    SparseAffinity,
+    gaussian_edge_affinity,
+)
 from transync.matching import gaussian_edge_factors
 from transync.multigraph import PairAffinities
 from transync.multigraph._affinity import all_pairs
@@ -305,3 +312,27 @@ def test_from_factors_validation(rng):
         PairAffinities.from_factors(F, F, [[0, 1]], node=np.ones((1, 3, 2)))
     with pytest.raises(ValueError, match="must have 4 dimensions"):
         PairAffinities.from_factors(F[0], F, [[0, 1]])
+
+
+@pytest.mark.parametrize("with_node", [False, True])
+def test_loop_backend_scores_factorized_and_separable_pairs_without_products(with_node, rng):
+    """Mixed per-pair types (sparse graphs next to dense ones) take the per-pair backend; its
+    candidate scores gather edge pairs (factorized) or factor entries (separable) and must equal
+    ``x^T K x``, with unmatched nodes (-1) and unary terms, and an edge list that repeats an edge
+    (no lookup table: the product route)."""
+    n = 6
+    affs = []
+    for k in range(6):
+        node = rng.random((n, n)) if with_node else None
+        if k % 3 == 0:
+            affs.append(SeparableAffinity(node, rng.random((2, n, n)), rng.random((2, n, n))))
+            continue
+        e1 = np.array([(u, v) for u in range(n) for v in range(n) if u != v and rng.random() < .5])
+        e2 = np.array([(u, v) for u in range(n) for v in range(n) if u != v and rng.random() < .5])
+        if k == 5:
+            e2 = np.vstack([e2, e2[:1]])                 # a repeated edge
+        affs.append(FactorizedAffinity(node, rng.random((len(e1), len(e2))), e1, e2, n, n))
+    A = PairAffinities.from_affinities(affs, all_pairs(4))
+    assert A.backend == "loop"
+    for _ in range(3):
+        _check_score_assignments(A, rng, c=40)

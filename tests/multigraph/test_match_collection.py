@@ -107,6 +107,8 @@ def test_synchronized_at_least_as_accurate_as_pairwise(solver):
         assert synced.consistency == 1.0 and base.consistency < 1.0
         hist = synced.info["refine"]["score_history"]
         assert np.all(np.diff(hist) >= 0) and synced.total_score == pytest.approx(hist[-1])
+        moves = synced.info["refine"]["moves"]
+        assert set(moves) == {"anchor", "swap"} and min(moves.values()) >= 0
     assert np.mean(acc0) < 0.8                     # hard enough to need synchronization
     assert np.mean(acc1) >= np.mean(acc0) + 0.05
 

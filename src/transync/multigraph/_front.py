@@ -128,11 +128,12 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
         Online solvers: weight of the synchronized iterate at each synchronization point.
         Refused elsewhere.
     refine : bool, default=True
-        After synchronization, re-anchor graphs on the pairwise stage's maps while the total
-        affinity score increases (consistent coordinate ascent, see ``info["refine"]``); the output
-        stays consistent and its total score never decreases. ``False``: the synchronization's
-        configuration as is. Applies to full permutations (equal sizes, or
-        ``partial="dummies"``).
+        After synchronization, re-anchor graphs on the pairwise stage's maps and swap the
+        universe slots of two nodes of a graph while the total affinity score increases
+        (consistent coordinate ascent, described in the multi-graph guide; moves and scores in
+        ``info["refine"]``); the output stays consistent and its total score never decreases.
+        ``False``: the synchronization's configuration as is. Applies to full permutations
+        (equal sizes, or ``partial="dummies"``).
     n_universe : int, optional
         Universe size ``d``, ``max n_i <= d <= sum n_i``; ``None``: ``n`` for graphs of equal
         size ``n``, else estimated by the synchronization (eigengap rule).
@@ -676,9 +677,15 @@ def _refine(matching, pairs, proposals, aff, info) -> MultiMatching:
     L = np.stack(matching.labels)
     if np.any(L < 0) or np.any(np.sort(L, axis=1) != np.arange(L.shape[1])):
         return matching                       # not a full configuration: nothing to re-anchor
-    L, history = refine_consistent(L, pairs, np.asarray(proposals, dtype=np.int64),
-                                   aff.score_assignments)
-    info["refine"] = {"score_history": history, "sweeps": len(history) - 1}
+    symmetric = not aff.asymmetric().any()
+
+    def gradient(p_idx, X):                   # (K + K^T) vec(X) of pairs p_idx
+        KX = aff._product(X, p_idx)
+        return 2.0 * KX if symmetric else KX + aff._product(X, p_idx, True)
+
+    L, history, moves = refine_consistent(L, pairs, np.asarray(proposals, dtype=np.int64),
+                                          aff.score_assignments, gradient=gradient)
+    info["refine"] = {"score_history": history, "sweeps": len(history) - 1, "moves": moves}
     return MultiMatching(list(L), matching.n_universe)
 
 

@@ -16,6 +16,7 @@ __all__ = [
     "check_array",
     "check_finite",
     "check_int",
+    "check_int_array",
     "check_nonnegative",
     "check_positive",
     "check_probability",
@@ -129,6 +130,123 @@ def check_int(value, name: str, *, minimum: int | None = None, maximum: int | No
     if maximum is not None and value > maximum:
         raise ValueError(f"`{name}` must be <= {maximum}, got {value}")
     return value
+
+
+def check_int_array(x, name: str, *, ndim: int | Sequence[int] | None = None,
+                    integral_floats: bool = False, allow_bool: bool = False,
+                    finite: bool = False, what: str = "integers", keep_dtype: bool = False,
+                    copy: bool = False) -> np.ndarray:
+    """Check that ``x`` is an array of integers and return it as ``int64``.
+
+    The one "integer array" check of the package; each caller states its policy through the
+    keywords (range checks on the values stay with the caller). An empty array of any dtype
+    passes (as an empty ``int64`` array of its shape).
+
+    Parameters
+    ----------
+    x : array_like
+        The argument to check.
+    name : str
+        Its name, for the messages.
+    ndim : int or sequence of int, optional
+        Allowed numbers of dimensions; any other raises ``ValueError``.
+    integral_floats : bool, default=False
+        Accept a float array whose entries are all finite integers (``2.0``). Otherwise any
+        float dtype is refused.
+    allow_bool : bool, default=False
+        Accept a boolean array (as 0 and 1).
+    finite : bool, default=False
+        A float array with NaN or infinite entries raises ``ValueError`` (as
+        :func:`check_array`) before the integer check; by default such an array raises
+        ``TypeError`` like any other non-integer.
+    what : str, default="integers"
+        What the entries must be, as the messages say it (``"integer node indices"``).
+    keep_dtype : bool, default=False
+        A signed integer array keeps its own dtype (no int64 copy of a large int32 array).
+    copy : bool, default=False
+        Always return a new array; otherwise an ``int64`` array comes back as it is.
+
+    Returns
+    -------
+    ndarray of int64 (or the input's signed integer dtype with ``keep_dtype``)
+
+    Raises
+    ------
+    TypeError
+        ``None``, a string, ragged nesting, or entries that are not integers: the message
+        names the dtype that arrived, or the first non-integral or NaN float and its position.
+    ValueError
+        The wrong number of dimensions, NaN or infinite entries with ``finite``, or integers
+        outside the ``int64`` range.
+
+    Examples
+    --------
+    >>> check_int_array([2, 0, -1], "assignment")
+    array([ 2,  0, -1])
+    >>> check_int_array(np.array([2.0, 0.0]), "assignment")
+    Traceback (most recent call last):
+        ...
+    TypeError: `assignment` must hold integers, got dtype float64
+    >>> check_int_array(np.array([2.0, 0.0]), "assignment", integral_floats=True)
+    array([2, 0])
+    >>> check_int_array([[0, 1], [1, 0.5]], "pairs", integral_floats=True,
+    ...                 what="integer graph indices")
+    Traceback (most recent call last):
+        ...
+    TypeError: `pairs` must hold integer graph indices, got 0.5 at position (1, 1)
+    >>> check_int_array(np.array([], dtype=str), "pairs")
+    array([], dtype=int64)
+    """
+    if x is None:
+        raise TypeError(f"`{name}` must be an array, got None")
+    if isinstance(x, (str, bytes)):
+        raise TypeError(f"`{name}` must be an array of {what}, got {type(x).__name__} {x!r:.40}")
+    try:
+        arr = np.asarray(x)
+    except (TypeError, ValueError) as exc:     # ragged nesting
+        raise TypeError(f"`{name}` must be an array of {what}, got {_describe(x)}: {exc}"
+                        ) from None
+    kind = arr.dtype.kind
+    if kind == "c" and arr.size:               # before the dimensions, as check_array
+        raise TypeError(f"`{name}` must hold {what}, got dtype {arr.dtype}")
+    if ndim is not None:
+        allowed = (ndim,) if isinstance(ndim, int) else tuple(ndim)
+        if arr.ndim not in allowed:
+            want = " or ".join(str(a) for a in allowed)
+            raise ValueError(f"`{name}` must have {want} dimensions, got shape {arr.shape}")
+    if finite and kind == "f" and not np.all(np.isfinite(arr)):
+        bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
+        raise ValueError(f"`{name}` must be finite, got {bad} NaN or infinite entries")
+    if arr.size == 0:
+        return np.empty(arr.shape, dtype=np.int64)
+    if kind == "f" and integral_floats:
+        bad = ~np.isfinite(arr) | (arr != np.round(arr))
+        if bad.any():
+            raise TypeError(f"`{name}` must hold {what}, got {_first(arr, bad)}")
+        top = np.float64(2.0**63)                # a float64 bound: no float16 overflow
+        big = (arr >= top) | (arr < -top)
+        if big.any():
+            raise ValueError(f"`{name}` must hold {what} in the int64 range, got "
+                             f"{_first(arr, big)}")
+        return arr.astype(np.int64)
+    if kind == "b" and allow_bool:
+        return arr.astype(np.int64)
+    if kind not in "iu":
+        raise TypeError(f"`{name}` must hold {what}, got dtype {arr.dtype}")
+    if kind == "u" and arr.dtype.itemsize >= 8 and arr.max() > np.iinfo(np.int64).max:
+        raise ValueError(f"`{name}` must hold {what} in the int64 range, got {int(arr.max())}")
+    if keep_dtype and kind == "i":
+        return arr.copy() if copy else arr
+    return arr.astype(np.int64, copy=copy)
+
+
+def _first(arr: np.ndarray, bad: np.ndarray) -> str:
+    """The first flagged entry of ``arr`` and its position, for a message."""
+    pos = tuple(int(i) for i in np.argwhere(bad)[0])
+    value = f"{float(arr[pos])!r}"
+    if not pos:
+        return value
+    return f"{value} at position {pos[0] if len(pos) == 1 else pos}"
 
 
 def check_positive(value, name: str, *, allow_zero: bool = False) -> float:

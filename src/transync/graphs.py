@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
-from ._validation import check_array, check_choice, check_int, check_shape
+from ._validation import check_array, check_choice, check_int, check_int_array, check_shape
 
 __all__ = ["Graph"]
 
@@ -162,11 +162,9 @@ class Graph:
 
     def permute(self, perm) -> Graph:
         """Relabel nodes: node ``u`` of the result is node ``perm[u]`` of this graph."""
-        perm = check_array(perm, "perm", dtype=None)
-        if perm.dtype.kind == "f" and np.all(np.isfinite(perm)) and np.all(perm == np.round(perm)):
-            perm = perm.astype(np.int64)                  # integer-valued floats are indices
-        if perm.dtype.kind not in "iu":
-            raise TypeError(f"`perm` must hold integer node indices, got {_describe_array(perm)}")
+        perm = check_array(perm, "perm", dtype=None)       # not complex, NaN, infinite
+        perm = check_int_array(perm, "perm", integral_floats=True,     # 3.0 is an index
+                               what="integer node indices")
         if perm.shape != (self.n_nodes,) or not np.array_equal(
                 np.sort(perm), np.arange(self.n_nodes)):
             raise ValueError(f"`perm` must be a permutation of range({self.n_nodes}) (integers), "

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from ._validation import as_generator, check_array, check_int
+from ._validation import as_generator, check_array, check_int, check_int_array
 
 __all__ = [
     "MAX_NODES",
@@ -63,19 +63,19 @@ def _as_label_array(lab, name: str) -> np.ndarray:
     arr = np.asarray(lab)
     if arr.ndim != 1:
         raise ValueError(f"`{name}` must be a 1-d index array, got shape {arr.shape}")
-    if arr.size and arr.dtype.kind not in "iu":
-        if arr.dtype.kind != "f":
-            raise TypeError(f"`{name}` must hold integers (node indices, -1 = unmatched), got "
-                            f"dtype {arr.dtype}")
-        bad = ~np.isfinite(arr) | (arr != np.round(arr))
-        if bad.any():
-            raise TypeError(f"`{name}` must hold integers (node indices, -1 = unmatched), got "
-                            f"{float(arr[bad][0])} at position {int(np.flatnonzero(bad)[0])}")
-        if np.abs(arr).max() >= 2**62:
-            raise ValueError(f"`{name}` entries must be node indices, got {arr.max()!r}")
-    if arr.dtype.kind == "u" and arr.size and arr.max() >= 2**62:
-        raise ValueError(f"`{name}` entries must be node indices, got {int(arr.max())}")
-    return np.array(arr, dtype=np.int64)
+    kind = arr.dtype.kind
+    try:
+        arr = check_int_array(arr, name, integral_floats=True, copy=True,
+                              what="integers (node indices, -1 = unmatched)")
+    except ValueError:                         # integers beyond int64: no node indices either
+        top = arr.flat[np.argmax(np.abs(arr))].item()
+        raise ValueError(f"`{name}` entries must be node indices, got {top!r}") from None
+    if kind in "uf" and arr.size:              # float and unsigned input: bounded as ever
+        lo, hi = int(arr.min()), int(arr.max())
+        if hi >= 2**62 or (kind == "f" and lo <= -(2**62)):
+            raise ValueError(f"`{name}` entries must be node indices, got "
+                             f"{hi if hi >= 2**62 else lo}")
+    return arr
 
 
 def check_assignment(assignment, name: str = "assignment", *, n2: int | None = None,
@@ -484,17 +484,6 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
     return cycle_inconsistency_arrays(pairs, maps, size_arr, max_triangles=max_triangles, rng=rng)
 
 
-def _int_array(x, name: str, ndim: int) -> np.ndarray:
-    arr = np.asarray(x) if isinstance(x, np.ndarray) else check_array(x, name, ndim=ndim)
-    if arr.dtype.kind not in "iu":
-        arr = check_array(arr, name, ndim=ndim)
-        if not np.all(arr == np.round(arr)):
-            raise TypeError(f"`{name}` must hold integers")
-    if arr.ndim != ndim:
-        raise ValueError(f"`{name}` must have {ndim} dimensions, got shape {arr.shape}")
-    return arr.astype(np.int64, copy=False)
-
-
 def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_000,
                                rng=None) -> dict[str, float]:
     """:func:`cycle_inconsistency` on stacked arrays (no dict; for large collections).
@@ -532,8 +521,11 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
     >>> cycle_inconsistency_arrays([[0, 1], [1, 2], [0, 2]], [[1, 0], [1, 0], [0, 1]], [2, 2, 2])
     {'n_triangles': 1, 'inconsistent_triangles': 0.0, 'cycle_error': 0.0, 'sampled': False}
     """
-    pairs, maps = _int_array(pairs, "pairs", 2), _int_array(maps, "maps", 2)
-    sizes = _int_array(sizes, "sizes", 1)
+    # integral floats and (as ever here) bools are accepted; NaN is a ValueError
+    policy = {"integral_floats": True, "allow_bool": True, "finite": True}
+    pairs = check_int_array(pairs, "pairs", ndim=2, **policy)
+    maps = check_int_array(maps, "maps", ndim=2, **policy)
+    sizes = check_int_array(sizes, "sizes", ndim=1, **policy)
     if pairs.shape[1:] != (2,) or maps.shape[0] != pairs.shape[0]:
         raise ValueError(f"`pairs` must be (Q, 2) and `maps` (Q, n), got shapes {pairs.shape} "
                          f"and {maps.shape}")

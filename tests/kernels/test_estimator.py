@@ -625,7 +625,7 @@ def test_precomputed_assignments_reproduce_the_fit():
     with pytest.raises(ValueError, match=r"`assignments` must have shape \(P, n\)"):
         TransitiveAssignmentKernel(matcher="node", n_neighbors=3).fit(
             graphs, assignments=a.assignments_[1:])
-    with pytest.raises(TypeError, match="`assignments` must be an integer array"):
+    with pytest.raises(TypeError, match="`assignments` must hold integers, got dtype float64"):
         TransitiveAssignmentKernel(matcher="node", n_neighbors=3).fit_transform(
             graphs, assignments=a.assignments_.astype(float))
     with pytest.raises(ValueError, match="assignments"):           # not a permutation

@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_generator, check_array, check_choice, check_int, check_positive
+from .._validation import (as_generator, check_array, check_choice, check_int, check_int_array,
+                           check_positive)
 from ..geometry import transfer_points
 from ._sparse import _METHODS, _robust_fit
 
@@ -165,13 +166,19 @@ def misclassification_error(pred, truth) -> float:
 
     p = check_array(pred, "pred", dtype=None).ravel()
     t = check_array(truth, "truth", dtype=None).ravel()
+    checked = []
     for name, a in (("pred", p), ("truth", t)):
-        if a.dtype.kind not in "uibf":
-            raise TypeError(f"`{name}` must hold integer labels, got dtype {a.dtype}")
-        if a.size and not np.all(a == np.round(a)):
-            raise ValueError(f"`{name}` must hold integer labels, got non-integer values")
+        try:
+            a = check_int_array(a, name, integral_floats=True, allow_bool=True,
+                                what="integer labels")
+        except TypeError as exc:
+            if a.dtype.kind != "f":
+                raise
+            raise ValueError(str(exc)) from None     # here a fractional label is a wrong value
         if a.size and a.min() < 0:
             raise ValueError(f"`{name}` must hold labels >= 0 (0 = outlier), got {a.min()}")
+        checked.append(a)
+    p, t = checked
     # compact labels (0 stays 0): the contingency table is as small as the labels used
     p = np.unique(np.concatenate([[0], p]), return_inverse=True)[1][1:]
     t = np.unique(np.concatenate([[0], t]), return_inverse=True)[1][1:]

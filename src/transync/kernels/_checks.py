@@ -4,8 +4,9 @@ One home for the checks that several modules need: a sequence with one entry per
 (:func:`check_sequence`), node features (:func:`check_feature_list`), adjacencies
 (:func:`check_adjacency`, :func:`check_graph_list`), integer node labels
 (:func:`check_label_array`, :func:`check_node_labels`) and integer arrays
-(:func:`check_int_array`). A wrong type raises ``TypeError``, a wrong value ``ValueError``; the
-message names the argument, what was expected and what arrived.
+(:func:`check_int_array`, the kernels' policy over :func:`transync._validation.check_int_array`).
+A wrong type raises ``TypeError``, a wrong value ``ValueError``; the message names the argument,
+what was expected and what arrived.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .._validation import check_array
+from .._validation import check_array, check_int_array as _check_int_array
 from ..graphs import Graph
 
 __all__ = [
@@ -146,13 +147,11 @@ def check_label_array(labels, name: str, n: int | None = None) -> np.ndarray:
 
     A non-integer dtype (float, NaN included, string, object) raises ``TypeError``.
     """
-    lab = check_array(labels, name, ndim=1, dtype=None, finite=False)
-    if lab.dtype.kind not in "iub":
-        raise TypeError(f"`{name}` must hold integer labels, got dtype {lab.dtype}")
+    lab = _check_int_array(labels, name, ndim=1, allow_bool=True, what="integer labels")
     if n is not None and lab.shape[0] != n:
         raise ValueError(f"`{name}` must have length {n} (the graph's node count), got "
                          f"{lab.shape[0]}")
-    return lab.astype(np.int64, copy=False)
+    return lab
 
 
 def check_node_labels(node_labels, sizes, name: str = "node_labels", *,
@@ -187,14 +186,8 @@ def check_int_array(x, name: str, ndim: int | None = None,
                     keep_dtype: bool = False) -> np.ndarray:
     """Integer array (of ``ndim`` dims when given), as int64; an empty one of any dtype too.
 
-    With ``keep_dtype`` a signed integer array keeps its own dtype (no int64 copy of a large
-    int32 assignment array).
+    :func:`transync._validation.check_int_array` with the kernels' policy: no float dtype (not
+    even integral floats), NaN or infinite entries a ``ValueError``. With ``keep_dtype`` a signed
+    integer array keeps its own dtype (no int64 copy of a large int32 assignment array).
     """
-    arr = check_array(x, name, ndim=ndim, dtype=None)
-    if arr.size == 0:
-        return arr.astype(np.int64)
-    if arr.dtype.kind not in "iu":
-        raise TypeError(f"`{name}` must hold integers, got dtype {arr.dtype}")
-    if keep_dtype and arr.dtype.kind == "i":
-        return arr
-    return arr.astype(np.int64, copy=False)
+    return _check_int_array(x, name, ndim=ndim, finite=True, keep_dtype=keep_dtype)

@@ -10,7 +10,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
-from .._validation import check_choice, check_int, check_positive
+from .._validation import check_choice, check_int, check_int_array, check_positive
 from ..graphs import Graph
 from ._checks import check_label_array, check_sequence
 from ._hks import hks_features
@@ -370,10 +370,7 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
         pairs = view_graph(descriptors, k)
         sigma2 = self._sigma2(hks)
         if assignments is not None:
-            assignments = np.asarray(assignments)
-            if assignments.dtype.kind not in "iu":
-                raise TypeError(f"`assignments` must be an integer array, got dtype "
-                                f"{assignments.dtype}")
+            assignments = check_int_array(assignments, "assignments", keep_dtype=True)
             if assignments.shape != (pairs.shape[0], n):
                 raise ValueError(f"`assignments` must have shape (P, n) = ({pairs.shape[0]}, "
                                  f"{n}), one row per matched pair, got shape "

@@ -43,7 +43,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._blas import blas_limit
-from .._validation import check_array, check_choice, check_int, check_positive
+from .._validation import check_array, check_choice, check_int, check_int_array, check_positive
 from ..exceptions import DegenerateInputError
 from ..graphs import Graph
 
@@ -294,10 +294,7 @@ def _check_edge_list(edges, n: int, name: str) -> np.ndarray:
         return np.zeros((0, 2), dtype=np.int64)
     if E.ndim != 2 or E.shape[1] != 2:
         raise ValueError(f"`{name}` must have shape (m, 2), got {E.shape}")
-    if E.dtype.kind not in "iu":
-        if E.dtype.kind != "f" or not np.all(E == np.round(E)):
-            raise TypeError(f"`{name}` must hold integer node indices, got dtype {E.dtype}")
-    E = E.astype(np.int64)
+    E = check_int_array(E, name, integral_floats=True, what="integer node indices", copy=True)
     if E.min() < 0 or E.max() >= n:
         raise ValueError(f"`{name}` must hold node indices in [0, {n}), got range "
                          f"[{E.min()}, {E.max()}]")

@@ -49,7 +49,7 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.sparse as sp
 
-from .._validation import check_array, check_int, check_positive
+from .._validation import check_array, check_int, check_int_array, check_positive
 from ..graphs import Graph
 from ..matching import (
     DEFAULT_SIGMA2,
@@ -91,11 +91,8 @@ def check_pairs(pairs, n_graphs: int, name: str = "pairs") -> np.ndarray:
     arr = check_array(pairs, name, dtype=None)
     if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] == 0:
         raise ValueError(f"`{name}` must have shape (P, 2) with P >= 1, got shape {arr.shape}")
-    if arr.dtype.kind == "f" and np.all(arr == np.round(arr)):
-        arr = arr.astype(np.int64)
-    if arr.dtype.kind not in "iu":
-        raise TypeError(f"`{name}` must hold integer graph indices, got dtype {arr.dtype}")
-    arr = arr.astype(np.int64)
+    arr = check_int_array(arr, name, integral_floats=True, what="integer graph indices",
+                          copy=True)
     if arr.min() < 0 or arr.max() >= n_graphs:
         raise ValueError(f"`{name}` must hold graph indices in [0, {n_graphs}), got range "
                          f"[{arr.min()}, {arr.max()}]")
@@ -697,9 +694,7 @@ class PairAffinities:
         if pairs.ndim != 2 or pairs.shape[1] != 2 or pairs.shape[0] == 0:
             raise ValueError(f"`pairs` must have shape (P, 2) with P >= 1, got shape "
                              f"{pairs.shape}")
-        if pairs.dtype.kind not in "iu":
-            raise TypeError(f"`pairs` must hold integer indices, got dtype {pairs.dtype}")
-        pairs = pairs.astype(np.int64)
+        pairs = check_int_array(pairs, "pairs", what="integer indices", copy=True)
         for col, name, size in ((0, "F", F.shape[0]), (1, "G", G.shape[0])):
             lo, hi = int(pairs[:, col].min()), int(pairs[:, col].max())
             if lo < 0 or hi >= size:
@@ -720,9 +715,11 @@ class PairAffinities:
         affs = list(affinities)
         if not affs:
             raise ValueError("`affinities` must not be empty")
-        pairs = check_array(pairs, "pairs", dtype=np.int64)
+        pairs = check_array(pairs, "pairs", dtype=None, finite=False)
         if pairs.shape != (len(affs), 2):
             raise ValueError(f"`pairs` must have shape ({len(affs)}, 2), got {pairs.shape}")
+        pairs = check_int_array(pairs, "pairs", integral_floats=True, allow_bool=True,
+                                what="integer graph indices")
         n1, n2 = affs[0].n1, affs[0].n2
         for k, a in enumerate(affs):
             if not isinstance(a, Affinity):
@@ -914,10 +911,7 @@ class PairAffinities:
         if A.ndim != 2 or A.shape != (len(p_idx), self.n1):
             raise ValueError(f"`assignments` must have shape (c, n1) = ({len(p_idx)}, {self.n1}),"
                              f" got {A.shape}")
-        if A.dtype.kind not in "iu":
-            if A.dtype.kind != "f" or not np.all(A == np.round(A)):
-                raise TypeError(f"`assignments` must hold integers, got dtype {A.dtype}")
-        A = A.astype(np.int64)
+        A = check_int_array(A, "assignments", integral_floats=True, copy=True)
         if A.size and (A.min() < -1 or A.max() >= self.n2):
             raise ValueError(f"`assignments` entries must lie in [-1, {self.n2}), got range "
                              f"[{A.min()}, {A.max()}]")

@@ -38,7 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._progress import progress_bar
-from .._validation import check_choice, check_int, check_positive, check_probability
+from .._validation import (check_choice, check_int, check_int_array, check_positive,
+                           check_probability)
 from ._affinity import check_pairs
 
 __all__ = ["CAOOutcome", "cao", "CAO_VARIANTS", "CAO_UPDATES"]
@@ -297,10 +298,8 @@ def _check_initial(initial, P: int) -> np.ndarray:
     if arr.ndim != 2 or arr.shape[0] != P or arr.shape[1] == 0:
         raise ValueError(f"`initial` must have shape (P, n) with P={P} (one row per pair) "
                          f"and n >= 1, got shape {arr.shape}")
-    if arr.dtype.kind not in "iu":
-        if arr.dtype.kind != "f" or not np.all(np.isfinite(arr)) or np.any(arr != np.round(arr)):
-            raise TypeError(f"`initial` must hold integer assignments, got dtype {arr.dtype}")
-    arr = arr.astype(np.intp)
+    arr = check_int_array(arr, "initial", integral_floats=True,
+                          what="integer assignments").astype(np.intp)
     n = arr.shape[1]
     ok = np.all(np.sort(arr, axis=1) == np.arange(n), axis=1)
     if not np.all(ok):

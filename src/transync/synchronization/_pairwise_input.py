@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import check_array, check_int
+from .._validation import check_array, check_int, check_int_array
 from ..permutations import (
     MAX_NODES,
     assignment_to_matrix,
@@ -243,17 +243,14 @@ def _check_sizes_arg(sizes, pairwise):
         sizes = np.full(pairwise.shape[0], pairwise.shape[2], dtype=np.int64)
     if sizes is None:
         return None
-    fixed = check_array(sizes, "sizes", dtype=None)
-    if fixed.dtype.kind == "f" and np.all(fixed == np.round(fixed)):
-        fixed = fixed.astype(np.int64)                    # integer-valued floats are sizes
-    if fixed.dtype.kind not in "iu":
-        raise TypeError(f"`sizes` must hold integers, got dtype {fixed.dtype}")
+    fixed = check_array(sizes, "sizes", dtype=None)     # not complex, NaN, infinite
+    fixed = check_int_array(fixed, "sizes", integral_floats=True, copy=True)  # 2.0 is a size
     if fixed.ndim != 1 or (fixed.size and fixed.min() < 1):
         raise ValueError(f"`sizes` must be a 1-d array of positive ints, got {sizes!r:.80}")
     if fixed.size and fixed.max() > MAX_NODES:
         raise ValueError(f"`sizes` must be <= {MAX_NODES} nodes per object, got "
                          f"{int(fixed.max())}")
-    return fixed.astype(np.int64)
+    return fixed
 
 
 @dataclass

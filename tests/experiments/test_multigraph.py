@@ -11,6 +11,7 @@ from transync.datasets import make_graph_collection
 from transync.experiments import REGISTRY, run_experiment
 from transync.experiments.multigraph import (
     FIGURES,
+    HARD_DEFORMATION,
     METHODS,
     build,
     collection_metrics,
@@ -19,7 +20,8 @@ from transync.experiments.multigraph import (
 )
 from transync.matching import gaussian_edge_affinity
 
-SWEEPS = {"deformation", "density", "outliers", "flip", "nodes", "graphs"}
+SWEEPS = {"deformation", "density", "outliers", "flip", "nodes", "graphs", "nodes_hard",
+          "graphs_hard"}
 
 
 def test_registered_and_builds():
@@ -32,6 +34,10 @@ def test_registered_and_builds():
     assert build().trials >= 20
     assert full["deformation"].base["n_graphs"] == 8 and full["deformation"].base["sigma2"] == 0.05
     assert max(full["graphs"].values) == 32 and min(full["density"].values) == 0.3
+    for name in ("nodes", "graphs"):          # the hard twins differ from them only in deformation
+        easy, hard = full[name], full[name + "_hard"]
+        assert hard.values == easy.values and hard.variable == easy.variable
+        assert hard.base == {**easy.base, "deformation": HARD_DEFORMATION} != easy.base
 
 
 def test_figures_name_known_methods_and_sweeps():

@@ -7,6 +7,7 @@ import functools
 import inspect
 import itertools
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -22,6 +23,7 @@ from transync.matching import (
     RRWMStepper,
     SMStepper,
     Stepper,
+    default_beta_max,
     ga,
     gaussian_edge_affinity,
     hungarian,
@@ -398,3 +400,20 @@ def test_rrwm_pygmtools_sinkhorn_half_sweeps(shape, rng):
         np.testing.assert_allclose(X, ref, rtol=1e-9, atol=1e-300)
         small_axis = 1 if shape[0] <= shape[1] else 0     # the last (7th) sweep normalised it
         np.testing.assert_allclose(X.sum(axis=small_axis), 1.0, rtol=1e-12)
+
+
+def test_ga_default_final_temperature_grows_beyond_ten_nodes():
+    from transync.datasets import make_graph_collection
+
+    assert default_beta_max(5, 8) == 10.0 and default_beta_max(10, 10) == 10.0
+    assert default_beta_max(30, 12) == 30.0 and default_beta_max(12, 30) == 30.0
+    # 30-node complete graphs, deformation 0.1: the original final temperature 10 ends with a
+    # soft matrix whose rounding misses (0.80 on 12 such pairs); the size-scaled default is exact
+    for seed in (700, 701, 702):
+        p = make_graph_collection(2, 30, 0, 0.1, 1.0, shuffle=True, rng=seed)
+        aff = gaussian_edge_affinity(*p.graphs, sigma2=0.05)
+        truth = p.ground_truth.pairwise(0, 1)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = ga(aff)
+        assert accuracy(res.assignment, truth) == 1.0

@@ -246,3 +246,21 @@ def test_birkhoff_synchronizer_as_sync_point():
     plain = run_lockstep(A, solver="rrwm", options={"max_iter": 20})
     assert out.n_sync == len(calls) >= 1
     assert _accuracy(prob, A.pairs, out.assignments) >= _accuracy(prob, A.pairs, plain.assignments)
+
+
+def test_ga_final_temperature_follows_the_pair_size():
+    """GA's default final temperature grows with the graphs (``default_beta_max``): the batched
+    solver must resolve it from the pairs' size as the pairwise GA does (14-node graphs: 14)."""
+    prob = make_graph_collection(n_graphs=3, n_inliers=12, n_outliers=2, deformation=0.1,
+                                 rng=3)
+    pairs = all_pairs(3)
+    affs = [AFF(prob.graphs[i], prob.graphs[j]) for i, j in pairs]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        ref = [ga(a) for a in affs]
+        out = run_lockstep(PairAffinities.from_affinities(affs, pairs), solver="ga")
+    assert all(r.n_iter == ref[0].n_iter for r in ref)
+    assert ref[0].n_iter == int(np.ceil(np.log(14 / 0.5) / np.log(1.075)))   # beta 0.5 -> 14
+    for p, r in enumerate(ref):
+        np.testing.assert_array_equal(out.assignments[p], r.assignment)
+        np.testing.assert_allclose(out.soft[p], r.soft, atol=1e-10, rtol=0)

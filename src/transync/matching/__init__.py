@@ -14,7 +14,7 @@ from ._affinity import (
     gaussian_node_affinity,
 )
 from ._front import METHODS, match_graphs, solver_options
-from ._ga import GAStepper, ga
+from ._ga import GAStepper, default_beta_max, ga
 from ._ipfp import IPFPStepper, ipfp
 from ._linear import hungarian, sinkhorn
 from ._pf import PFStepper, pf
@@ -44,6 +44,7 @@ __all__ = [
     "RRWMStepper",
     "SMStepper",
     "Stepper",
+    "default_beta_max",
     "ga",
     "hungarian",
     "ipfp",

@@ -23,10 +23,22 @@ from ._result import MatchingResult
 from ._sinkhorn import sinkhorn_normalize
 from ._stepwise import _BaseStepper, _run, _symmetric
 
-__all__ = ["GAStepper", "ga"]
+__all__ = ["GAStepper", "default_beta_max", "ga"]
 
 _DEFAULTS = {"beta0": 0.5, "beta_max": 10.0, "beta_rate": 1.075, "max_inner": 4,
              "inner_tol": 0.5, "sinkhorn_max_iter": 30, "sinkhorn_tol": 0.05}
+
+
+def default_beta_max(n1: int, n2: int) -> float:
+    """Final inverse temperature when none is given: ``max(10, n1, n2)``.
+
+    Gold & Rangarajan's ``beta_f = 10`` up to 10 nodes. On larger graphs the annealing ended
+    with a soft matrix whose rounding is poor: on 12 pairs of complete 30-node graphs
+    (deformation 0.1 / 0.15) ``beta_max = 10`` gave accuracy 0.80 / 0.24 (score 0.85 / 0.68 of
+    the truth), ``beta_max = 20`` and ``30`` gave 1.0 / 0.64-0.65 (score 1.0 / 0.93); on 20-node
+    graphs 0.44 -> 0.75 at deformation 0.15; unchanged at 10 nodes; 30-60 % more time.
+    """
+    return max(_DEFAULTS["beta_max"], float(max(n1, n2)))
 
 
 def _slack_sinkhorn(M: np.ndarray, *, max_iter: int, tol: float) -> np.ndarray:
@@ -73,13 +85,15 @@ class GAStepper(_BaseStepper):
     method = "ga"
 
     def __init__(self, affinity, *, n1: int | None = None, n2: int | None = None,
-                 beta0: float = _DEFAULTS["beta0"], beta_max: float = _DEFAULTS["beta_max"],
+                 beta0: float = _DEFAULTS["beta0"], beta_max: float | None = None,
                  beta_rate: float = _DEFAULTS["beta_rate"], max_inner: int = _DEFAULTS["max_inner"],
                  inner_tol: float = _DEFAULTS["inner_tol"],
                  sinkhorn_max_iter: int = _DEFAULTS["sinkhorn_max_iter"],
                  sinkhorn_tol: float = _DEFAULTS["sinkhorn_tol"]):
         aff = as_affinity(affinity, n1=n1, n2=n2)
         self.beta0 = check_positive(beta0, "beta0")
+        if beta_max is None:
+            beta_max = default_beta_max(aff.n1, aff.n2)
         self.beta_max = check_positive(beta_max, "beta_max")
         self.beta_rate = check_positive(beta_rate, "beta_rate")
         if self.beta_rate <= 1:
@@ -154,11 +168,12 @@ class GAStepper(_BaseStepper):
 
 
 def ga(K, *, n1: int | None = None, n2: int | None = None, beta0: float = _DEFAULTS["beta0"],
-       beta_max: float = _DEFAULTS["beta_max"], beta_rate: float = _DEFAULTS["beta_rate"],
+       beta_max: float | None = None, beta_rate: float = _DEFAULTS["beta_rate"],
        max_inner: int = _DEFAULTS["max_inner"], inner_tol: float = _DEFAULTS["inner_tol"],
        sinkhorn_max_iter: int = _DEFAULTS["sinkhorn_max_iter"],
        sinkhorn_tol: float = _DEFAULTS["sinkhorn_tol"]) -> MatchingResult:
-    """Graduated assignment with slack row and column (Gold & Rangarajan's defaults).
+    """Graduated assignment with slack row and column (Gold & Rangarajan's defaults; the final
+    temperature grows with the graphs beyond 10 nodes).
 
     Deterministic annealing on ``max vec(M)^T K vec(M)``: for ``beta = beta0, beta0 * beta_rate,
     ...`` below ``beta_max``, repeat ``Q = K vec(M)``, ``M = exp(beta Q)`` (softassign) and a slack
@@ -174,8 +189,9 @@ def ga(K, *, n1: int | None = None, n2: int | None = None, beta0: float = _DEFAU
         Graph sizes; required when ``K`` is a matrix.
     beta0 : float, default=0.5
         Initial inverse temperature.
-    beta_max : float, default=10.0
-        Final inverse temperature.
+    beta_max : float, optional
+        Final inverse temperature. Default :func:`default_beta_max`: ``max(10, n1, n2)``
+        (Gold & Rangarajan's 10 up to 10 nodes; larger graphs need a longer annealing).
     beta_rate : float, default=1.075
         Annealing factor (> 1).
     max_inner : int, default=4

@@ -47,6 +47,7 @@ from ..matching import (
     GAStepper,
     PFStepper,
     RRWMStepper,
+    default_beta_max,
     sinkhorn_augmented_batch,
     sinkhorn_batch,
     solver_options,
@@ -265,6 +266,8 @@ class _GA(_Batch):
 
     def __init__(self, aff, o):
         self.beta0, self.beta_max, self.beta_rate = o["beta0"], o["beta_max"], o["beta_rate"]
+        if self.beta_max is None:
+            self.beta_max = default_beta_max(aff.n1, aff.n2)
         levels = int(np.ceil(np.log(self.beta_max / self.beta0) / np.log(self.beta_rate))) + 1
         super().__init__(aff, levels)
         self.max_inner, self.inner_tol = o["max_inner"], o["inner_tol"]
@@ -508,8 +511,8 @@ def _resolve_options(solver: str, options) -> dict:
         return {"variant": st.variant, "c": st.c, "amplification": st.amplification,
                 "max_iter": st.max_iter, "tol": st.tol, "sinkhorn_tol": st.sinkhorn_tol,
                 "sinkhorn_max_iter": st.sinkhorn_max_iter}
-    if solver == "ga":
-        return {"beta0": st.beta0, "beta_max": st.beta_max, "beta_rate": st.beta_rate,
+    if solver == "ga":          # beta_max None: the pairs' size decides (default_beta_max)
+        return {"beta0": st.beta0, "beta_max": kw.get("beta_max"), "beta_rate": st.beta_rate,
                 "max_inner": st.max_inner, "inner_tol": st.inner_tol,
                 "sinkhorn_max_iter": st.sinkhorn_max_iter, "sinkhorn_tol": st.sinkhorn_tol}
     return {"max_iter": st.max_iter, "step": st.max_step, "min_step": st.min_step,

@@ -37,6 +37,9 @@ def default_beta_max(n1: int, n2: int) -> float:
     (deformation 0.1 / 0.15) ``beta_max = 10`` gave accuracy 0.80 / 0.24 (score 0.85 / 0.68 of
     the truth), ``beta_max = 20`` and ``30`` gave 1.0 / 0.64-0.65 (score 1.0 / 0.93); on 20-node
     graphs 0.44 -> 0.75 at deformation 0.15; unchanged at 10 nodes; 30-60 % more time.
+
+    >>> default_beta_max(8, 8), default_beta_max(30, 24)
+    (10.0, 30.0)
     """
     return max(_DEFAULTS["beta_max"], float(max(n1, n2)))
 

@@ -261,6 +261,7 @@ def test_ga_final_temperature_follows_the_pair_size():
         out = run_lockstep(PairAffinities.from_affinities(affs, pairs), solver="ga")
     assert all(r.n_iter == ref[0].n_iter for r in ref)
     assert ref[0].n_iter == int(np.ceil(np.log(14 / 0.5) / np.log(1.075)))   # beta 0.5 -> 14
+    assert out.info["options"]["beta_max"] == 14.0
     for p, r in enumerate(ref):
         np.testing.assert_array_equal(out.assignments[p], r.assignment)
         np.testing.assert_allclose(out.soft[p], r.soft, atol=1e-10, rtol=0)

@@ -658,6 +658,7 @@ def run_lockstep(affinities: PairAffinities, *, solver: str, sync=None,
         info.update(lam=st.lam.copy(), mu=st.mu / st.factor, fw_iterations=st.fw_iterations.copy())
     if solver == "ga":
         info["beta"] = st.beta
+        info["options"] = {**opts, "beta_max": st.beta_max}      # as resolved for these pairs
     return LockstepOutcome(soft=soft, scores=scores, assignments=assignments, n_iter=rounds,
                            converged=st.converged.copy(), n_sync=n_sync, seconds_solve=t_solve,
                            seconds_sync=t_sync, info=info)

@@ -317,9 +317,9 @@ def test_from_factors_validation(rng):
 @pytest.mark.parametrize("with_node", [False, True])
 def test_loop_backend_scores_factorized_and_separable_pairs_without_products(with_node, rng):
     """Mixed per-pair types (sparse graphs next to dense ones) take the per-pair backend; its
-    candidate scores gather edge pairs (factorized) or factor entries (separable) and must equal
-    ``x^T K x``, with unmatched nodes (-1) and unary terms, and an edge list that repeats an edge
-    (no lookup table: the product route)."""
+    candidate scores (each pair through a one-pair separable or sparse backend) must equal
+    ``x^T K x``, with unmatched nodes (-1) and unary terms, and an edge list that repeats an
+    edge (its entries summed)."""
     n = 6
     affs = []
     for k in range(6):

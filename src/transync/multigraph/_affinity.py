@@ -425,7 +425,7 @@ class _Loop:
 
     def __init__(self, affs, n1, n2):
         self.affs, self.n1, self.n2 = list(affs), n1, n2
-        self._tables = {}                 # pair -> edge table of a FactorizedAffinity (or None)
+        self._scorers = {}                # pair -> its one-pair backend (_pair_scorer) or None
 
     def subset(self, idx):
         return _Loop([self.affs[k] for k in np.asarray(idx).ravel()], self.n1, self.n2)
@@ -446,69 +446,32 @@ class _Loop:
         out = np.empty(len(A))
         for p in np.unique(p_idx):
             rows = np.flatnonzero(p_idx == p)
-            aff = self.affs[p]
-            if isinstance(aff, FactorizedAffinity):
-                if p not in self._tables:
-                    self._tables[p] = _edge_table(aff)
-                if self._tables[p] is not None:
-                    out[rows] = _score_factorized(aff, self._tables[p], A[rows], valid[rows])
-                    continue
-            elif isinstance(aff, SeparableAffinity):
-                out[rows] = _score_separable(aff, A[rows], valid[rows])
+            if p not in self._scorers:
+                self._scorers[p] = _pair_scorer(self.affs[p])
+            if self._scorers[p] is not None:
+                out[rows] = self._scorers[p].score_assignments(
+                    np.zeros(len(rows), dtype=np.int64), A[rows], valid[rows])
                 continue
             for k in rows:
                 X = np.zeros((self.n1, self.n2))
                 X[np.flatnonzero(valid[k]), A[k][valid[k]]] = 1.0
-                out[k] = aff.score(X)
+                out[k] = self.affs[p].score(X)
         return out
 
     def drop_conflicts(self):
         return _Loop([a.drop_conflicts() for a in self.affs], self.n1, self.n2)
 
 
-def _edge_table(aff: FactorizedAffinity):
-    """``(n2 + 1, n2 + 1)`` int table: the index of edge ``(a, b)`` of graph 2 in
-    ``aff.edges2``, -1 for non-edges and in the last row and column (unmatched nodes); ``None``
-    when ``edges2`` repeats an edge (the scores then sum several entries: no table)."""
-    n2 = aff.n2
-    e = np.asarray(aff.edges2, dtype=np.int64)
-    table = np.full((n2 + 1, n2 + 1), -1, dtype=np.int64)
-    table[e[:, 0], e[:, 1]] = np.arange(len(e))
-    return table if np.count_nonzero(table >= 0) == len(e) else None
-
-
-def _score_factorized(aff: FactorizedAffinity, table: np.ndarray, A: np.ndarray,
-                      valid: np.ndarray) -> np.ndarray:
-    """``x^T K x`` of assignments ``A`` (c, n1) under a :class:`FactorizedAffinity`: edge
-    ``e1 = (u, v)`` of graph 1 meets edge ``(A[u], A[v])`` of graph 2 when that is an edge
-    (``O(m1)`` gathers per candidate instead of a product)."""
-    n2 = aff.n2
-    Ai = np.where(valid, A, n2)                        # unmatched -> the table's -1 row/col
-    e1 = np.asarray(aff.edges1, dtype=np.int64)
-    out = np.zeros(len(A))
-    if len(e1) and aff.edge is not None and aff.edge.size:
-        e2 = table[Ai[:, e1[:, 0]], Ai[:, e1[:, 1]]]                   # (c, m1)
-        hit = e2 >= 0
-        vals = aff.edge[np.arange(len(e1))[None, :], np.where(hit, e2, 0)]
-        out += np.where(hit, vals, 0.0).sum(1)
-    if aff.node is not None:
-        u = np.arange(A.shape[1])[None, :]
-        out += np.where(valid, aff.node[u, np.where(valid, A, 0)], 0.0).sum(1)
-    return out
-
-
-def _score_separable(aff: SeparableAffinity, A: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """``x^T K x`` of assignments ``A`` (c, n1) under a :class:`SeparableAffinity`:
-    ``sum_{r, u, v} F[r, u, v] G[r, A[u], A[v]]`` over matched ``u, v`` plus the unary terms."""
-    Ac = np.where(valid, A, 0)
-    w = (valid[:, :, None] & valid[:, None, :]).astype(float)            # (c, n1, n1)
-    out = np.zeros(len(A))
-    for r in range(aff.rank):
-        out += np.einsum("uv,cuv->c", aff.F[r], aff.G[r][Ac[:, :, None], Ac[:, None, :]] * w)
-    if aff.node is not None:
-        u = np.arange(A.shape[1])[None, :]
-        out += np.where(valid, aff.node[u, Ac], 0.0).sum(1)
-    return out
+def _pair_scorer(aff):
+    """One pair's affinity as a batched backend, for candidate scores without a product per
+    candidate: a :class:`SeparableAffinity` as :class:`_Separable`, an explicit or factorized
+    one as :class:`_Sparse` (its K entries; repeated edges summed); ``None`` for others."""
+    if isinstance(aff, SeparableAffinity):
+        node = None if aff.node is None else aff.node[None]
+        return _Separable(aff.F[None], aff.G[None], [0], [0], node)
+    if isinstance(aff, (DenseAffinity, SparseAffinity, FactorizedAffinity)):
+        return _Sparse.from_triplets([_triplets(aff)], aff.n1, aff.n2)
+    return None
 
 
 # --------------------------------------------------------------------------- the public class

@@ -5,17 +5,20 @@ one problem is generated with :func:`transync.datasets.make_point_matching_probl
 inlier points in the unit square, the second graph a rotated, permuted and Gaussian-deformed copy;
 with outliers, a third of the ``n`` nodes of *each* graph are extra uniform points
 (``n_in = n - n // 3``), so both libraries see ``n x n`` problems of the same size with and
-without outliers. Graphs are fully connected; the affinity is Cho et al.'s Gaussian
-edge-length affinity ``exp(-(d1 - d2)^2 / sigma2)`` with the same ``sigma2`` for both libraries.
+without outliers. Graphs are fully connected (``--edges delaunay``: Delaunay triangulations, the
+same edges for both libraries); the affinity is Cho et al.'s Gaussian edge-length affinity
+``exp(-(d1 - d2)^2 / sigma2)`` with the same ``sigma2`` for both libraries.
 
 Pipelines, timed from the point sets to the assignment:
 
 * transync: ``Graph.from_points(edges="full")`` x2, ``gaussian_edge_affinity`` (auto backend),
   solver (``sm``, ``rrwm`` or ``ipfp``; each rounds with Hungarian internally). ``rrwm`` is the
-  original authors' algorithm (transync's default); ``rrwm-pygmtools`` is
-  ``rrwm(variant="pygmtools")``, which runs pygmtools' own RRWM loop -- both are compared with
-  ``pygm.rrwm``.
-* pygmtools (numpy backend): distance matrices, ``dense_to_sparse``, ``build_aff_mat`` with
+  original authors' algorithm with its Sinkhorn warm-started (transync's default);
+  ``rrwm-authors`` is ``rrwm(warm_start=False)``, the authors' loop exactly;
+  ``rrwm-pygmtools`` is ``rrwm(variant="pygmtools")``, which runs pygmtools' own RRWM loop --
+  all three are compared with ``pygm.rrwm``.
+* pygmtools (numpy backend): distance matrices (masked to the Delaunay edges, which transync's
+  ``Graph.from_points`` computes for both), ``dense_to_sparse``, ``build_aff_mat`` with
   ``gaussian_aff_fn(sigma=sigma2)``, ``pygm.sm/rrwm/ipfp`` (pygmtools defaults), ``pygm.hungarian``.
 
 The affinity of a problem is built once per library and its build time is added to each solver's
@@ -49,10 +52,11 @@ from transync.graphs import Graph
 from transync.matching import gaussian_edge_affinity, ipfp, rrwm, sm
 from transync.metrics import matching_accuracy
 
-METHODS = ("sm", "rrwm", "rrwm-pygmtools", "ipfp")
-_TS = {"sm": sm, "rrwm": rrwm, "rrwm-pygmtools": functools.partial(rrwm, variant="pygmtools"),
-       "ipfp": ipfp}
-_PG = {"sm": "sm", "rrwm": "rrwm", "rrwm-pygmtools": "rrwm", "ipfp": "ipfp"}
+METHODS = ("sm", "rrwm", "rrwm-authors", "rrwm-pygmtools", "ipfp")
+_TS = {"sm": sm, "rrwm": rrwm, "rrwm-authors": functools.partial(rrwm, warm_start=False),
+       "rrwm-pygmtools": functools.partial(rrwm, variant="pygmtools"), "ipfp": ipfp}
+_PG = {"sm": "sm", "rrwm": "rrwm", "rrwm-authors": "rrwm", "rrwm-pygmtools": "rrwm",
+       "ipfp": "ipfp"}
 
 
 def make_problem(n: int, deformation: float, outliers: bool, rng: np.random.Generator):
@@ -68,9 +72,9 @@ def accuracy(assignment, truth) -> float:
 
 
 # --------------------------------------------------------------------------- transync
-def ts_build(P1, P2, sigma2):
-    g1 = Graph.from_points(P1, edges="full")
-    g2 = Graph.from_points(P2, edges="full")
+def ts_build(P1, P2, sigma2, edges="full"):
+    g1 = Graph.from_points(P1, edges=edges)
+    g2 = Graph.from_points(P2, edges=edges)
     return gaussian_edge_affinity(g1, g2, sigma2=sigma2)
 
 
@@ -81,10 +85,13 @@ def ts_solve(aff, method):
 
 
 # --------------------------------------------------------------------------- pygmtools
-def pg_build(pygm, P1, P2, sigma2):
+def pg_build(pygm, P1, P2, sigma2, edges="full"):
     n1, n2 = len(P1), len(P2)
     D1 = np.linalg.norm(P1[:, None] - P1[None], axis=-1)
     D2 = np.linalg.norm(P2[:, None] - P2[None], axis=-1)
+    if edges != "full":     # the same edges as transync's graphs (zero entries are non-edges)
+        D1 = D1 * (Graph.from_points(P1, edges=edges).adjacency > 0)
+        D2 = D2 * (Graph.from_points(P2, edges=edges).adjacency > 0)
     conn1, e1 = pygm.utils.dense_to_sparse(D1)
     conn2, e2 = pygm.utils.dense_to_sparse(D2)
     aff_fn = functools.partial(pygm.utils.gaussian_aff_fn, sigma=sigma2)
@@ -120,7 +127,7 @@ def _peak(fn, *args) -> float:
     return peak / 2**20
 
 
-def run(sizes, deformations, trials, sigma2, methods, seed, memory=True):
+def run(sizes, deformations, trials, sigma2, methods, seed, memory=True, edges="full"):
     import pygmtools as pygm
 
     pygm.set_backend("numpy")
@@ -139,8 +146,8 @@ def run(sizes, deformations, trials, sigma2, methods, seed, memory=True):
                 for t in range(trials):
                     rng = np.random.default_rng([seed, n, int(outliers), int(1000 * deformation), t])
                     P1, P2, truth = make_problem(n, deformation, outliers, rng)
-                    aff, tb_ts = _timed(ts_build, P1, P2, sigma2)
-                    K, tb_pg = _timed(pg_build, pygm, P1, P2, sigma2)
+                    aff, tb_ts = _timed(ts_build, P1, P2, sigma2, edges)
+                    K, tb_pg = _timed(pg_build, pygm, P1, P2, sigma2, edges)
                     pg_done = {}     # pygmtools' rrwm is deterministic: solve it once per trial
                     for m in methods:
                         a_ts, t_ts = _timed(ts_solve, aff, m)
@@ -156,15 +163,15 @@ def run(sizes, deformations, trials, sigma2, methods, seed, memory=True):
                     if memory and t == 0:
                         for m in methods:
                             mem[m] = (
-                                _peak(lambda: ts_solve(ts_build(P1, P2, sigma2), m)),
-                                _peak(lambda: pg_solve(pygm, pg_build(pygm, P1, P2, sigma2),
-                                                       n, n, m)),
+                                _peak(lambda: ts_solve(ts_build(P1, P2, sigma2, edges), m)),
+                                _peak(lambda: pg_solve(pygm, pg_build(pygm, P1, P2, sigma2,
+                                                                      edges), n, n, m)),
                             )
                 for m in methods:
                     r = rec[m]
                     row = {
                         "n": n, "outliers": outliers, "deformation": deformation, "method": m,
-                        "trials": trials,
+                        "trials": trials, "sigma2": sigma2, "edges": edges,
                         "acc_transync": float(np.mean(r["ts_acc"])),
                         "acc_pygmtools": float(np.mean(r["pg_acc"])),
                         "time_transync_s": float(np.median(r["ts_time"])),
@@ -195,14 +202,18 @@ def _print_row(row):
 
 
 def markdown(rows) -> str:
-    """The README's table rows for stored result rows (one line per row)."""
+    """The README's table rows for stored result rows (one line per row); files with rows that
+    record ``edges`` and ``sigma2`` get those two columns first."""
     lines = []
     for r in rows:
+        lead = ""
+        if "edges" in r:
+            lead = f"| {r['edges']} | {r['sigma2']} "
         mem = "—"
         if "peak_mib_transync" in r:
             mem = f"{r['peak_mib_transync']:.1f} / {r['peak_mib_pygmtools']:.0f} MiB"
         lines.append(
-            f"| {r['n']} | {'yes' if r['outliers'] else 'no'} | {r['deformation']} | "
+            f"{lead}| {r['n']} | {'yes' if r['outliers'] else 'no'} | {r['deformation']} | "
             f"{r['method']} | {r['acc_transync']:.3f} / {r['acc_pygmtools']:.3f} | "
             f"{1e3 * r['time_transync_s']:.1f} ms / {1e3 * r['time_pygmtools_s']:.0f} ms | "
             f"{r['time_ratio']:.1f}x | {mem} |")
@@ -217,6 +228,7 @@ def main(argv=None):
     ap.add_argument("--deformations", type=float, nargs="+", default=[0.0, 0.02, 0.04])
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     ap.add_argument("--sigma2", type=float, default=0.15)
+    ap.add_argument("--edges", default="full", choices=("full", "delaunay"))
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-memory", action="store_true", help="skip the tracemalloc runs")
     ap.add_argument("--out", type=Path, default=None, help="write JSON results here")
@@ -234,7 +246,7 @@ def main(argv=None):
     print(_HEADER)
     t0 = time.time()
     rows = run(sizes, args.deformations, trials, args.sigma2, args.methods, args.seed,
-               memory=not args.no_memory)
+               memory=not args.no_memory, edges=args.edges)
     print(f"total {time.time() - t0:.0f} s")
     if args.out is not None:
         import pygmtools
@@ -242,7 +254,8 @@ def main(argv=None):
         args.out.parent.mkdir(parents=True, exist_ok=True)
         meta = {"python": platform.python_version(), "numpy": np.__version__,
                 "pygmtools": getattr(pygmtools, "__version__", "?"), "machine": platform.machine(),
-                "sizes": sizes, "trials": trials, "sigma2": args.sigma2, "seed": args.seed}
+                "sizes": sizes, "trials": trials, "sigma2": args.sigma2, "seed": args.seed,
+                "edges": args.edges}
         args.out.write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
         print(f"wrote {args.out}")
 

@@ -239,6 +239,10 @@ def test_assignments_unchanged_by_consolidation(case, method):
     ({"slack": "bogus"}, ValueError, "slack"),
     ({"domain": "augmented"}, ValueError, "domain"),
     ({"tol": -1.0}, ValueError, "tol"),
+    ({"warm_start": np.ones((2, 2))}, ValueError, "warm_start"),
+    ({"warm_start": np.zeros((2, 3))}, ValueError, "warm_start"),
+    ({"warm_start": np.ones((2, 3)), "domain": "log"}, ValueError, "warm_start"),
+    ({"warm_start": "ones"}, TypeError, "warm_start"),
 ])
 def test_sinkhorn_batch_refuses_bad_options(kwargs, exc, match):
     from transync.matching import sinkhorn_batch
@@ -264,13 +268,25 @@ def test_sinkhorn_batch_equals_the_two_dimensional_call():
     from transync.matching import sinkhorn_batch
 
     A = np.random.default_rng(1).random((5, 4, 6)) + 0.05
-    X, sweeps, ok = sinkhorn_batch(A, tol=1e-8, check_every=2)
+    X, sweeps, ok, scaling = sinkhorn_batch(A, tol=1e-8, check_every=2)
     for k in range(5):
         ref = sinkhorn_normalize(A[k], domain="scaling", tol=1e-8, check_every=2)
         np.testing.assert_allclose(X[k], ref.X, atol=1e-12)
         assert sweeps[k] == ref.n_sweeps and ok[k] == ref.converged
+        np.testing.assert_allclose(scaling[k], ref.col_scaling, rtol=1e-12)
+    # warm-started, both orientations (the scaling is the longer side's)
+    for B in (A * 1.3, np.swapaxes(A, 1, 2) * 1.3):
+        V = scaling if B.shape[2] == 6 else scaling * 2.0
+        out = sinkhorn_batch(B, tol=1e-8, check_every=2, warm_start=V)
+        for k in range(5):
+            ref = sinkhorn_normalize(B[k], domain="scaling", tol=1e-8, check_every=2,
+                                     warm_start=V[k])
+            np.testing.assert_allclose(out.X[k], ref.X, atol=1e-12)
+            assert out.n_sweeps[k] == ref.n_sweeps and out.converged[k] == ref.converged
+            assert out.n_sweeps[k] < sweeps[k]
     L = np.log(A)
-    Xl = sinkhorn_batch(L, domain="log", half_sweeps=9)[0]
+    Xl, _, _, none = sinkhorn_batch(L, domain="log", half_sweeps=9)
+    assert none is None
     for k in range(5):
         ref = sinkhorn_normalize(L[k], domain="log", half_sweeps=9)
         np.testing.assert_allclose(Xl[k], ref.X, atol=1e-12)

@@ -325,6 +325,11 @@ def test_validation_errors(rng):
         rrwm(K, n1=4, n2=4, variant="matlab")
     with pytest.raises(ValueError, match="`sinkhorn_tol` is not used by variant='pygmtools'"):
         rrwm(K, n1=4, n2=4, variant="pygmtools", sinkhorn_tol=1e-3)
+    with pytest.raises(ValueError, match="`warm_start` is not used by variant='pygmtools'"):
+        rrwm(K, n1=4, n2=4, variant="pygmtools", warm_start=True)
+    with pytest.raises(TypeError, match="`warm_start` must be a bool or None, got int 1"):
+        rrwm(K, n1=4, n2=4, warm_start=1)
+    assert rrwm(K, n1=4, n2=4, variant="pygmtools", warm_start=False).info["warm_start"] is False
     with pytest.raises(ValueError, match="`init` must be one of"):
         ipfp(K, n1=4, n2=4, init="random")
     with pytest.raises(ValueError, match="`beta_rate` must be > 1"):

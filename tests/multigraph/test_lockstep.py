@@ -30,6 +30,8 @@ AFF = functools.partial(gaussian_edge_affinity, sigma2=0.05)
 PAIRWISE = {
     "rrwm-original": (functools.partial(rrwm, variant="original", max_iter=25), "rrwm",
                       {"variant": "original", "max_iter": 25}),
+    "rrwm-authors": (functools.partial(rrwm, variant="original", warm_start=False, max_iter=25),
+                     "rrwm", {"variant": "original", "warm_start": False, "max_iter": 25}),
     "rrwm-pygmtools": (functools.partial(rrwm, variant="pygmtools"), "rrwm",
                        {"variant": "pygmtools"}),
     "ga": (ga, "ga", {}),
@@ -156,7 +158,8 @@ def test_batched_sinkhorn_matches_sinkhorn_normalize():
     for shape, slack in [((6, 5, 5), "mass"), ((6, 4, 7), "mass"), ((6, 7, 4), "mass"),
                          ((6, 5, 5), "none")]:
         A = np.exp(4 * rng.random(shape))
-        X, sweeps, conv = sinkhorn_batch(A, slack=slack, tol=1e-6, max_iter=50, check_every=3)
+        X, sweeps, conv, _ = sinkhorn_batch(A, slack=slack, tol=1e-6, max_iter=50,
+                                             check_every=3)
         for k in range(len(A)):
             ref = sinkhorn_normalize(A[k], domain="scaling", slack=slack, tol=1e-6, max_iter=50,
                                      check_every=3)

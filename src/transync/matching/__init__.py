@@ -20,7 +20,7 @@ from ._linear import hungarian, sinkhorn
 from ._pf import PFStepper, pf
 from ._result import MatchingResult
 from ._rrwm import RRWMStepper, rrwm
-from ._sinkhorn import sinkhorn_augmented_batch, sinkhorn_batch
+from ._sinkhorn import SinkhornBatchOutput, sinkhorn_augmented_batch, sinkhorn_batch
 from ._sm import SMStepper, sm
 from ._stepwise import Stepper
 
@@ -43,6 +43,7 @@ __all__ = [
     "PFStepper",
     "RRWMStepper",
     "SMStepper",
+    "SinkhornBatchOutput",
     "Stepper",
     "default_beta_max",
     "ga",

@@ -3,7 +3,9 @@
 The default (``variant="original"``) follows the authors' MATLAB code (``RRWM.m`` v1.22):
 conflicting entries of ``K`` are dropped, ``Mo = K / max column sum``, and each iteration mixes a
 random-walk step (weight ``c = 0.2``) with a reweighted jump (weight ``1 - c = 0.8``) towards the
-Sinkhorn-normalised, exponentially amplified current scores. ``variant="pygmtools"`` reproduces
+Sinkhorn-normalised, exponentially amplified current scores; its inner Sinkhorn is warm-started
+from one iteration to the next unless ``warm_start=False`` (the authors' loop exactly, about 7x
+slower, the same assignments on 283 of 288 problems measured). ``variant="pygmtools"`` reproduces
 ``pygmtools.rrwm`` instead (same iterates, same assignments), so results can be compared with, or
 swapped for, that library's.
 
@@ -33,14 +35,21 @@ from ._stepwise import _BaseStepper, _run
 __all__ = ["RRWMStepper", "rrwm"]
 
 VARIANTS = ("original", "pygmtools")
-# per variant; the pygmtools values are pygmtools 0.6's defaults (alpha = 1 - c = 0.2, beta = 30,
-# max_iter = 50, sk_iter = 20 half-sweeps, its stopping threshold 1e-5)
+# per variant; the original values are RRWM.m's, the pygmtools values pygmtools 0.6's defaults
+# (alpha = 1 - c = 0.2, beta = 30, max_iter = 50, sk_iter = 20 half-sweeps, its threshold 1e-5)
 _DEFAULTS = {
     "original": {"c": 0.2, "amplification": 30.0, "max_iter": 300, "tol": 1e-25,
                  "sinkhorn_tol": 1e-3, "sinkhorn_max_iter": 1000},
     "pygmtools": {"c": 0.8, "amplification": 30.0, "max_iter": 50, "tol": 1e-5,
                   "sinkhorn_tol": 0.0, "sinkhorn_max_iter": 20},
 }
+# variant="original" with its Sinkhorn warm-started (the default): the sweeps carry over from one
+# iteration to the next, so each call is capped lower and the loop also waits for the Sinkhorn
+# tolerance; stopping at a squared change of 1e-12 instead of RRWM.m's 1e-25 (a bit-for-bit fixed
+# point, which a warm start never reaches). Measured on 288 problems (complete and Delaunay
+# graphs, n = 12-60, with outliers, CMU House pairs): identical assignments on 283, 7x less
+# time; see the rrwm docstring.
+_WARM_DEFAULTS = {"tol": 1e-12, "sinkhorn_max_iter": 100}
 
 
 def _sinkhorn_half_sweeps(S: np.ndarray, half_sweeps: int) -> np.ndarray:
@@ -63,8 +72,8 @@ class RRWMStepper(_BaseStepper):
 
     ``RRWMStepper(K, variant=...)`` returns the stepper of that variant, a subclass:
 
-    ``variant="original"`` (the authors' code). State: the walk scores ``x`` (sum 1) and the jump
-    distribution ``y``. The public :attr:`iterate` is ``y`` before its sum-normalisation, i.e. the
+    ``variant="original"`` (the authors' code). State: the walk scores ``x`` (sum 1), the jump
+    distribution ``y`` and, with ``warm_start``, the Sinkhorn scaling carried to the next step. The public :attr:`iterate` is ``y`` before its sum-normalisation, i.e. the
     Sinkhorn output -- a doubly-stochastic matrix (``n1 == n2``) or, with the slack convention,
     one whose smaller side is stochastic and larger side sub-stochastic. :meth:`set_iterate`
     replaces ``y`` (``x`` is kept). The rounding uses the walk scores ``x``, as the original code
@@ -86,7 +95,7 @@ class RRWMStepper(_BaseStepper):
         Which published implementation to follow (default ``"original"``), as in :func:`rrwm`.
     **kwargs
         ``n1``, ``n2`` and the options of :func:`rrwm` (``c``, ``amplification``, ``max_iter``,
-        ``tol``, ``sinkhorn_tol``, ``sinkhorn_max_iter``).
+        ``tol``, ``sinkhorn_tol``, ``sinkhorn_max_iter``, ``warm_start``).
 
     Raises
     ------
@@ -121,8 +130,13 @@ class RRWMStepper(_BaseStepper):
                  variant: str = "original", c: float | None = None,
                  amplification: float | None = None, max_iter: int | None = None,
                  tol: float | None = None, sinkhorn_tol: float | None = None,
-                 sinkhorn_max_iter: int | None = None):
-        d = _DEFAULTS[self.variant]
+                 sinkhorn_max_iter: int | None = None, warm_start: bool | None = None):
+        if warm_start is not None and not isinstance(warm_start, (bool, np.bool_)):
+            raise TypeError(f"`warm_start` must be a bool or None, got "
+                            f"{type(warm_start).__name__} {warm_start!r}")
+        self.warm_start = self._resolve_warm_start(None if warm_start is None
+                                                   else bool(warm_start))
+        d = {**_DEFAULTS[self.variant], **(_WARM_DEFAULTS if self.warm_start else {})}
         pick = lambda value, key: d[key] if value is None else value  # noqa: E731
         aff = as_affinity(affinity, n1=n1, n2=n2)
         super().__init__(aff, max_iter=check_int(pick(max_iter, "max_iter"), "max_iter",
@@ -137,6 +151,9 @@ class RRWMStepper(_BaseStepper):
         # the Sinkhorn output before any step: uniform, feasible with and without slack
         self._X = np.full((self.n1, self.n2), 1.0 / max(self.n1, self.n2))
         self._setup(aff, sinkhorn_tol)
+
+    def _resolve_warm_start(self, warm_start) -> bool:  # pragma: no cover - overridden
+        raise NotImplementedError
 
     def _setup(self, aff, sinkhorn_tol) -> None:  # pragma: no cover - overridden
         raise NotImplementedError
@@ -159,13 +176,17 @@ class RRWMStepper(_BaseStepper):
 
     def _info(self) -> dict:
         return {"scores": self._rounding_scores().copy(), "max_degree": self.max_degree,
-                "sinkhorn_sweeps": self.sinkhorn_sweeps, "variant": self.variant}
+                "sinkhorn_sweeps": self.sinkhorn_sweeps, "variant": self.variant,
+                "warm_start": self.warm_start}
 
 
 class _OriginalRRWMStepper(RRWMStepper):
     """RRWM as in the authors' MATLAB code (``RRWM.m`` v1.22); see :class:`RRWMStepper`."""
 
     variant = "original"
+
+    def _resolve_warm_start(self, warm_start) -> bool:
+        return True if warm_start is None else warm_start
 
     def _setup(self, aff, sinkhorn_tol) -> None:
         self.sinkhorn_tol = check_positive(
@@ -178,6 +199,7 @@ class _OriginalRRWMStepper(RRWMStepper):
         self._x = np.full((self.n1, self.n2), 1.0 / size)       # prev_score
         self._x2 = self._x.copy()                                 # prev_score2
         self._y = np.full((self.n1, self.n2), 1.0 / size)         # prev_assign (sum 1)
+        self._scaling = None                                      # Sinkhorn warm start
 
     def _set_jump(self, X, total) -> None:
         self._y = X / total
@@ -192,7 +214,9 @@ class _OriginalRRWMStepper(RRWMStepper):
         amp = self.amplification / xmax if xmax > 0 else 0.0
         out = sinkhorn_normalize(np.exp(amp * x), domain="scaling", slack="mass",
                                  tol=self.sinkhorn_tol, max_iter=self.sinkhorn_max_iter,
-                                 check_every=4)
+                                 check_every=4, warm_start=self._scaling)
+        if self.warm_start:
+            self._scaling = out.col_scaling
         # sweeps begun: a converged run stops at the test that opens the next sweep
         self.sinkhorn_sweeps += out.n_sweeps + int(out.converged)
         X = self._X = out.X
@@ -200,7 +224,8 @@ class _OriginalRRWMStepper(RRWMStepper):
         y = X / sy if sy > 0 else X
         diff = min(float(np.sum((x - self._x) ** 2)), float(np.sum((x - self._x2) ** 2)))
         self._x2, self._x, self._y = self._x, x, y
-        if diff < self.tol:
+        # warm: the Sinkhorn goes on converging across steps, so its tolerance must hold too
+        if diff < self.tol and (out.converged or not self.warm_start):
             self.converged = True
 
     def _rounding_scores(self) -> np.ndarray:
@@ -211,6 +236,12 @@ class _PygmtoolsRRWMStepper(RRWMStepper):
     """RRWM as ``pygmtools.rrwm`` (0.6, numpy backend); see :class:`RRWMStepper`."""
 
     variant = "pygmtools"
+
+    def _resolve_warm_start(self, warm_start) -> bool:
+        if warm_start:
+            raise ValueError("`warm_start` is not used by variant='pygmtools' (its Sinkhorn starts "
+                             f"afresh every iteration, as pygmtools'), got {warm_start!r}")
+        return False
 
     def _setup(self, aff, sinkhorn_tol) -> None:
         if sinkhorn_tol is not None:
@@ -256,9 +287,9 @@ class _PygmtoolsRRWMStepper(RRWMStepper):
 def rrwm(K, *, n1: int | None = None, n2: int | None = None, variant: str = "original",
          c: float | None = None, amplification: float | None = None,
          max_iter: int | None = None, tol: float | None = None,
-         sinkhorn_tol: float | None = None,
-         sinkhorn_max_iter: int | None = None) -> MatchingResult:
-    """Reweighted random walks (RRWM), by default with the original authors' code and defaults.
+         sinkhorn_tol: float | None = None, sinkhorn_max_iter: int | None = None,
+         warm_start: bool | None = None) -> MatchingResult:
+    """Reweighted random walks (RRWM): by default the original authors' model, warm-started.
 
     ``variant="original"``: with ``Mo`` the conflict-free ``K`` divided by its largest column
     sum, iterate
@@ -269,6 +300,17 @@ def rrwm(K, *, n1: int | None = None, n2: int | None = None, variant: str = "ori
     until ``min(||x - x_prev||^2, ||x - x_prev2||^2) < tol``, and round ``x`` with the Hungarian
     algorithm. Sinkhorn runs to ``sinkhorn_tol`` and uses a slack row/column of mass
     ``|n2 - n1|`` when the sizes differ.
+
+    By default (``warm_start=True``) each Sinkhorn starts from the previous iteration's scaling
+    instead of ones, at most 100 sweeps a call, and the loop stops once the squared change is
+    below 1e-12 *and* the last Sinkhorn met its tolerance. The authors' code restarts Sinkhorn
+    from ones (up to 1000 sweeps: on a peaked ``exp(30 x / max x)`` it often needs hundreds) and
+    stops at 1e-25, i.e. at a bit-for-bit fixed point; ``warm_start=False`` runs exactly that
+    loop. Measured on 288 problems (complete graphs n = 20, 50 at sigma2 0.02 / 0.05 / 0.15 with
+    and without a third outliers; 12 points against 16 or 20 with slack; Delaunay graphs n = 30,
+    60; CMU House pairs; deformation 0-0.04): the same assignment on 283, the other 5 as
+    accurate on average (0.3 points higher), in 1/7 of the time (2.7 s against 19.5 s in all;
+    pygmtools' variant 1.4 s).
 
     ``variant="pygmtools"``: the loop of ``pygmtools.rrwm`` (0.6): ``K`` (conflicts kept) divided
     by its largest row sum; ``w = normalise(K v)``, ``S`` = ``sinkhorn_max_iter`` log-domain
@@ -301,13 +343,18 @@ def rrwm(K, *, n1: int | None = None, n2: int | None = None, variant: str = "ori
     max_iter : int, optional
         Maximum number of iterations. Default 300 (original), 50 (pygmtools).
     tol : float, optional
-        Convergence threshold: on the squared change of the scores (original, default 1e-25), on
-        the change of the mixture ``v`` (pygmtools, default 1e-5).
+        Convergence threshold: on the squared change of the scores (original: default 1e-12,
+        1e-25 with ``warm_start=False``), on the change of the mixture ``v`` (pygmtools, default
+        1e-5).
     sinkhorn_tol : float, optional
         Row-sum tolerance of the inner Sinkhorn normalisation (original only; default 1e-3).
     sinkhorn_max_iter : int, optional
-        Original: maximum Sinkhorn sweeps (default 1000). pygmtools: the exact number of
-        half-sweeps (default 20).
+        Original: maximum Sinkhorn sweeps per iteration (default 100; 1000 with
+        ``warm_start=False``). pygmtools: the exact number of half-sweeps (default 20).
+    warm_start : bool, optional
+        Original only: start each Sinkhorn from the previous one's scaling (default ``True``);
+        ``False`` reproduces ``RRWM.m`` (with its defaults ``tol=1e-25``,
+        ``sinkhorn_max_iter=1000``). pygmtools' variant refuses ``True``.
 
     Returns
     -------
@@ -337,10 +384,12 @@ def rrwm(K, *, n1: int | None = None, n2: int | None = None, variant: str = "ori
     array([0, 1])
     >>> rrwm(K, n1=2, n2=2, variant="pygmtools").assignment
     array([0, 1])
+    >>> rrwm(K, n1=2, n2=2, warm_start=False).assignment     # RRWM.m's loop exactly
+    array([0, 1])
     """
     return _run(RRWMStepper(K, n1=n1, n2=n2, variant=variant, c=c, amplification=amplification,
                             max_iter=max_iter, tol=tol, sinkhorn_tol=sinkhorn_tol,
-                            sinkhorn_max_iter=sinkhorn_max_iter))
+                            sinkhorn_max_iter=sinkhorn_max_iter, warm_start=warm_start))
 
 
 # variant name -> stepper class (explicit: subclasses elsewhere never replace a variant)

@@ -151,6 +151,7 @@ class _RRWMOriginal(_Batch):
         super().__init__(aff, o["max_iter"])
         self.c, self.beta, self.tol = o["c"], o["amplification"], o["tol"]
         self.sk_tol, self.sk_max = o["sinkhorn_tol"], o["sinkhorn_max_iter"]
+        self.warm = o["warm_start"]
         self.walk = aff.drop_conflicts()
         deg = self.walk.column_sums().max((1, 2))
         self.scale = np.where(deg > 0, 1.0 / np.where(deg > 0, deg, 1.0), 0.0)
@@ -160,6 +161,7 @@ class _RRWMOriginal(_Batch):
         self.y = self.x.copy()
         self.X = np.full((self.P, self.n1, self.n2), 1.0 / max(self.n1, self.n2))
         self.sinkhorn_sweeps = np.zeros(self.P, np.int64)
+        self.scaling = np.ones((self.P, max(self.n1, self.n2)))   # Sinkhorn warm start
 
     @property
     def iterate(self):
@@ -178,15 +180,18 @@ class _RRWMOriginal(_Batch):
         x /= np.where(s > 0, s, 1.0)[:, None, None]
         xmax = x.max((1, 2))
         amp = np.where(xmax > 0, self.beta / np.where(xmax > 0, xmax, 1.0), 0.0)
-        X, sweeps, conv = sinkhorn_batch(np.exp(amp[:, None, None] * x), slack="mass",
-                                          tol=self.sk_tol, max_iter=self.sk_max, check_every=4)
+        X, sweeps, conv, scaling = sinkhorn_batch(
+            np.exp(amp[:, None, None] * x), slack="mass", tol=self.sk_tol, max_iter=self.sk_max,
+            check_every=4, warm_start=self.scaling[a] if self.warm else None)
+        if self.warm:
+            self.scaling[a] = scaling
         self.sinkhorn_sweeps[a] += sweeps + conv
         sy = X.sum((1, 2))
         y = X / np.where(sy > 0, sy, 1.0)[:, None, None]
         diff = np.minimum(((x - self.x[a]) ** 2).sum((1, 2)), ((x - self.x2[a]) ** 2).sum((1, 2)))
         self.x2[a], self.x[a], self.y[a], self.X[a] = self.x[a], x, y, X
         self.n_iter[a] += 1
-        self.converged[a] = diff < self.tol
+        self.converged[a] = (diff < self.tol) & (conv | (not self.warm))
 
     def scores(self):
         return self.x
@@ -228,9 +233,9 @@ class _RRWMPygmtools(_Batch):
         top = scores.max((1, 2))
         if np.all(top - scores.min((1, 2)) < 600.0):
             S = sinkhorn_batch(np.exp(scores - top[:, None, None]), slack="none",
-                               tol=None, half_sweeps=self.sk_half)[0]
+                               tol=None, half_sweeps=self.sk_half).X
         else:       # amplification >= 600: the log domain (pair by pair)
-            S = sinkhorn_batch(scores, slack="none", domain="log", half_sweeps=self.sk_half)[0]
+            S = sinkhorn_batch(scores, slack="none", domain="log", half_sweeps=self.sk_half).X
         v = alpha * S + (1.0 - alpha) * w
         v /= _norm1(v)[:, None, None]
         va = self.v[a]
@@ -510,7 +515,7 @@ def _resolve_options(solver: str, options) -> dict:
     if solver == "rrwm":
         return {"variant": st.variant, "c": st.c, "amplification": st.amplification,
                 "max_iter": st.max_iter, "tol": st.tol, "sinkhorn_tol": st.sinkhorn_tol,
-                "sinkhorn_max_iter": st.sinkhorn_max_iter}
+                "sinkhorn_max_iter": st.sinkhorn_max_iter, "warm_start": st.warm_start}
     if solver == "ga":          # beta_max None: the pairs' size decides (default_beta_max)
         return {"beta0": st.beta0, "beta_max": kw.get("beta_max"), "beta_rate": st.beta_rate,
                 "max_inner": st.max_inner, "inner_tol": st.inner_tol,
@@ -556,10 +561,11 @@ def run_lockstep(affinities: PairAffinities, *, solver: str, sync=None,
         unknown names raise ``TypeError`` listing the valid ones. Defaults are the pairwise
         solver's, except RRWM's ``variant``: ``"pygmtools"`` here (``c=0.8``, 20 Sinkhorn
         half-sweeps, at most 50 iterations, stop when the mixture moves by less than 1e-5). The
-        authors' ``"original"`` variant (at most 300 iterations to a squared change of 1e-25,
-        Sinkhorn to 1e-3) is available with ``options={"variant": "original"}``; batched on the
-        Yan preset (N = 32, n = 20, 496 pairs) it needs several times more products for the same
-        accuracy (measurements in docs/multigraph.md).
+        authors' ``"original"`` variant (at most 300 iterations, Sinkhorn to 1e-3,
+        warm-started unless ``"warm_start": False`` as in :func:`~transync.matching.rrwm`) is
+        available with ``options={"variant": "original"}``; batched on the Yan preset (N = 32,
+        n = 20, 496 pairs) it needed several times more products for the same accuracy
+        (measured with the authors' cold-started loop; docs/multigraph.md).
     progress : bool, default=False
         Show a tqdm bar over the outer steps.
 

@@ -180,8 +180,15 @@ def test_partial_noisy_sub_doubly_stochastic_and_monotone(rng):
     assert data.accuracy(res.labels) == 1.0
 
 
-def test_matrix_free_branch_matches_dense(rng):
-    """The k-hat step's matrix-free eigensolver (used above 2000 nodes) on a small problem."""
+@pytest.mark.parametrize("operator", ["dense array", "batched blocks"])
+def test_matrix_free_branch_matches_dense(rng, operator, monkeypatch):
+    """The k-hat step's matrix-free eigensolver (used above 2000 nodes) on a small problem, with
+    its product through the dense block matrix (views covering a quarter of it, as all pairs
+    here) and through the batched blocks (sparser views)."""
+    from transync.synchronization import _birkhoff
+
+    if operator == "batched blocks":
+        monkeypatch.setattr(_birkhoff, "DENSE_OPERATOR_MAX", 0)
     data, X = _soft_collection(10, 6, 0.3, rng, corruption=0.1)
     # the initial vertex (spectral start on X, no sweeps) is the same for both eigensolvers
     init = {s: synchronize_doubly_stochastic(X, max_iter=0, inner_sweeps=0, solver=s, rng=0)

@@ -128,11 +128,13 @@ _DROP = 1e-12
 #: Matrix-free eigensolver: the block matrix is formed densely (one GEMM per product) when the
 #: view covers at least a quarter of it and it has at most this many rows (8 000: 512 MB).
 DENSE_OPERATOR_MAX = 8000
-#: Restarts of the matrix-free eigensolver for the spectral start of the k-hat step. The start is
-#: only rounded and then improved by the sweeps; on a residual with a flat spectrum (input that
-#: is already nearly consistent) the default 300 restarts were spent for nothing (N = 128,
-#: n = 30: 208 restarts, 15 s, of a 24 s synchronization).
-ORACLE_MAX_RESTARTS = 25
+#: Restarts of the matrix-free eigensolver for the spectral start of the first k-hat step (on the
+#: residual). The start is only rounded and then improved by the sweeps; on a residual with a
+#: flat spectrum (input that is already nearly consistent) the default 300 restarts were spent
+#: for nothing (N = 128, n = 30: 208 restarts, 15 s, of a 24 s synchronization). The initial
+#: vertex (the spectral rounding of the input itself) keeps the default: capped at 25 there,
+#: N = 256, n = 20 on a view graph of degree 16 fell from accuracy 1.000 to 0.938.
+RESIDUAL_MAX_RESTARTS = 25
 
 
 @dataclass(frozen=True)
@@ -379,8 +381,9 @@ class _Oracle:
         B = B4.reshape(N * n, N * n)
         return B if flat.all() else B[np.ix_(flat, flat)]
 
-    def spectral(self, wG, D) -> np.ndarray:
-        """Top-``d`` eigenvectors of the block matrix of ``wG`` rounded into ``d`` slots."""
+    def spectral(self, wG, D, max_restarts: int = 300) -> np.ndarray:
+        """Top-``d`` eigenvectors of the block matrix of ``wG`` rounded into ``d`` slots
+        (``max_restarts``: of the matrix-free eigensolver)."""
         N, n = self.N, self.n_max
         k = min(self.d, self.M)
         if self.use == "dense":
@@ -389,8 +392,7 @@ class _Oracle:
         elif self.dense_operator:
             B = self.block_matrix(wG)
             _, U, _, _, _ = spec.block_krylov_eigs(B.__matmul__, self.M, k, V0=self._V,
-                                                   max_restarts=ORACLE_MAX_RESTARTS,
-                                                   rng=self.rng)
+                                                   max_restarts=max_restarts, rng=self.rng)
             self._V = U
         else:
             ptr, dst, Dm = self.ptr, self.dst, D[:, :, :n]
@@ -407,8 +409,7 @@ class _Oracle:
                 return out[self.valid]
 
             _, U, _, _, _ = spec.block_krylov_eigs(matmat, self.M, k, V0=self._V,
-                                                   max_restarts=ORACLE_MAX_RESTARTS,
-                                                   rng=self.rng)
+                                                   max_restarts=max_restarts, rng=self.rng)
             self._V = U
         lab_list = spec.round_to_universe(U, self.sizes, self.d, refine=1)
         labels = np.full((N, n), -1, dtype=np.int64)
@@ -455,13 +456,13 @@ class _Oracle:
         vals = np.take_along_axis(wG[None], np.maximum(maps, 0)[..., None], axis=3)[..., 0]
         return labels, np.where(maps >= 0, vals, 0.0).sum((1, 2))
 
-    def __call__(self, G, w, starts=(), spectral=True):
+    def __call__(self, G, w, starts=(), spectral=True, max_restarts: int = 300):
         """Configurations (canonical labels) and their scores ``<G, X X^T>_w``, best first:
-        the spectral start (``spectral``) and the given ``starts``, each improved by the
-        sweeps; duplicates removed."""
+        the spectral start (``spectral``, its eigensolver capped at ``max_restarts``) and the
+        given ``starts``, each improved by the sweeps; duplicates removed."""
         wG = G * w[:, None, None]
         D = self.directed(wG)
-        cands = ([self.spectral(wG, D)] if spectral else []) + list(starts)
+        cands = ([self.spectral(wG, D, max_restarts)] if spectral else []) + list(starts)
         F = [D[lo:hi, : self.sizes[g]].transpose(0, 2, 1).reshape(-1, self.sizes[g])
              for g, (lo, hi) in enumerate(zip(self.ptr[:-1], self.ptr[1:]))]
         labels, scores = self.sweep(F, wG, np.stack(cands))
@@ -551,7 +552,8 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
         else matrix-free block Krylov on the residual block operator (warm-started from the
         previous iteration's eigenvectors; the operator is one dense array when the observed
         pairs cover at least a quarter of the block matrix and ``sum n_i <= 8000``, batched
-        blocks otherwise; at most 25 restarts, as the result is only a start for the sweeps).
+        blocks otherwise; on the residual at most 25 restarts, as the result is only a start
+        for the sweeps).
     init : BirkhoffSyncResult, optional
         A previous result on the same number of objects, the same object sizes and the same
         universe size (any observed pairs): warm start, see above.
@@ -864,7 +866,8 @@ class _FrankWolfe:
             G = X - Y
             heavy = np.argsort(-alpha, kind="stable")[: 8 if fully_corrective else 1]
             starts = list(labs[heavy])
-            found = self.oracle(G, w, starts, spectral=it == 1 and start is None)
+            found = self.oracle(G, w, starts, spectral=it == 1 and start is None,
+                                max_restarts=RESIDUAL_MAX_RESTARTS)
             lab = found[0][0]
             maps_hat = _maps_of(lab, self.pairs, self.d)
             S_hat = self.blocks(maps_hat[None], [1.0])

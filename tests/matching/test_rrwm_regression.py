@@ -58,7 +58,7 @@ class ReferenceRRWM:
 
     def __init__(self, aff, *, c=0.2, amplification=30.0, max_iter=300, tol=None,
                  sinkhorn_tol=1e-3, sinkhorn_max_iter=None, warm=False):
-        self.warm, self.v = warm, None
+        self.warm, self.v, self.roundings = warm, None, []
         tol = (1e-12 if warm else 1e-25) if tol is None else tol
         sinkhorn_max_iter = (100 if warm else 1000) if sinkhorn_max_iter is None \
             else sinkhorn_max_iter
@@ -81,7 +81,7 @@ class ReferenceRRWM:
     def set_iterate(self, X):
         self.X = np.array(X, dtype=float)
         self.y = self.X / self.X.sum()
-        self.converged = False
+        self.converged, self.roundings = False, []
 
     def step(self):
         c = self.c
@@ -104,6 +104,10 @@ class ReferenceRRWM:
         self.x2, self.x, self.y = self.x, x, y
         if diff < self.tol and (conv or not self.warm):
             self.converged = True
+        elif self.warm and (self.n_iter + 1) % 10 == 0:      # the rounding is stable: 3 checks
+            self.roundings = (self.roundings + [solve_lap(x).tolist()])[-3:]
+            if len(self.roundings) == 3 and self.roundings.count(self.roundings[0]) == 3:
+                self.converged = True
         self.n_iter += 1
 
 
@@ -269,3 +273,20 @@ def test_scaling_sinkhorn_warm_start_unchanged():
     np.testing.assert_array_equal(v0, keep)          # the caller's array is not modified
     assert (out.n_sweeps, out.converged) == (n_sweeps, converged) and _close(out.X, X)
     assert out.col_scaling is not v0 and out.col_scaling.shape == (9,)
+
+
+@pytest.mark.parametrize("case", range(len(CASES)))
+def test_warm_default_whole_run_as_the_reference(case):
+    """Whole runs, both stops (the tolerance, and the rounding stable over three checks)."""
+    aff, opts = _problem(case)
+    st, ref = RRWMStepper(aff, **opts), ReferenceRRWM(aff, warm=True, **opts)
+    while not ref.done:
+        st.step()
+        ref.step()
+    assert st.done and (st.n_iter, st.converged) == (ref.n_iter, ref.converged)
+    np.testing.assert_array_equal(st.result().assignment, solve_lap(ref.x))
+    assert st.result().info["stop"] == STOPS[case]
+
+
+# how the warm-started default stops on each case (recorded; case 10 on the stable rounding)
+STOPS = ["tolerance"] * 10 + ["stable rounding", "tolerance"]

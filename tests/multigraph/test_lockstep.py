@@ -65,6 +65,21 @@ def test_each_pair_reproduces_the_pairwise_solver(name, hard):
     assert out.n_iter == max(r.n_iter for r in ref)
 
 
+def test_warm_rrwm_original_stops_per_pair_as_the_pairwise_solver():
+    """Whole runs of the warm-started original variant: some pairs stop on the tolerance,
+    some on their rounding being stable over three checks, each as its pairwise run."""
+    prob = make_graph_collection(n_graphs=4, n_inliers=7, n_outliers=1, deformation=0.15, rng=6)
+    pairs = all_pairs(4)
+    affs = [AFF(prob.graphs[i], prob.graphs[j]) for i, j in pairs]
+    ref = [rrwm(a) for a in affs]
+    assert {r.info["stop"] for r in ref} == {"tolerance", "stable rounding"}
+    out = run_lockstep(PairAffinities.from_affinities(affs, pairs), solver="rrwm",
+                       options={"variant": "original"})
+    for p, r in enumerate(ref):
+        np.testing.assert_array_equal(out.assignments[p], r.assignment)
+        assert out.converged[p] and out.info["steps_per_pair"][p] == r.n_iter
+
+
 def test_unequal_sizes_rrwm_original_slack():
     """n1 != n2: the slack-mass Sinkhorn, per pair as the pairwise solver."""
     rng = np.random.default_rng(2)

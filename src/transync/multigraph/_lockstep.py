@@ -162,6 +162,10 @@ class _RRWMOriginal(_Batch):
         self.X = np.full((self.P, self.n1, self.n2), 1.0 / max(self.n1, self.n2))
         self.sinkhorn_sweeps = np.zeros(self.P, np.int64)
         self.scaling = np.ones((self.P, max(self.n1, self.n2)))   # Sinkhorn warm start
+        # warm: the rounding-stability stop of the pairwise stepper (last checks per pair)
+        self.every, self.checks = RRWMStepper.stable_every, RRWMStepper.stable_checks
+        self.roundings = np.full((self.P, self.checks, self.n1), -1, np.int64)
+        self.n_roundings = np.zeros(self.P, np.int64)
 
     @property
     def iterate(self):
@@ -171,6 +175,7 @@ class _RRWMOriginal(_Batch):
         self.X = X.copy()
         self.y = X / X.sum((1, 2))[:, None, None]
         self.converged[:] = False
+        self.n_roundings[:] = 0
 
     def step(self, a):
         c = self.c
@@ -191,7 +196,21 @@ class _RRWMOriginal(_Batch):
         diff = np.minimum(((x - self.x[a]) ** 2).sum((1, 2)), ((x - self.x2[a]) ** 2).sum((1, 2)))
         self.x2[a], self.x[a], self.y[a], self.X[a] = self.x[a], x, y, X
         self.n_iter[a] += 1
-        self.converged[a] = (diff < self.tol) & (conv | (not self.warm))
+        done = (diff < self.tol) & (conv | (not self.warm))
+        self.converged[a] = done
+        if self.warm:
+            check = ~done & (self.n_iter[a] % self.every == 0)
+            if check.any():
+                self._check_stable(a[check], x[check])
+
+    def _check_stable(self, idx, x):
+        """Record the roundings of pairs ``idx``; stop those unchanged over the last checks."""
+        r = round_blocks(x)
+        self.roundings[idx] = np.roll(self.roundings[idx], -1, axis=1)
+        self.roundings[idx, -1] = r
+        self.n_roundings[idx] += 1
+        same = np.all(self.roundings[idx] == r[:, None, :], axis=(1, 2))
+        self.converged[idx[same & (self.n_roundings[idx] >= self.checks)]] = True
 
     def scores(self):
         return self.x

@@ -75,11 +75,12 @@ class RRWMStepper(_BaseStepper):
     ``RRWMStepper(K, variant=...)`` returns the stepper of that variant, a subclass:
 
     ``variant="original"`` (the authors' code). State: the walk scores ``x`` (sum 1), the jump
-    distribution ``y`` and, with ``warm_start``, the Sinkhorn scaling carried to the next step. The public :attr:`iterate` is ``y`` before its sum-normalisation, i.e. the
-    Sinkhorn output -- a doubly-stochastic matrix (``n1 == n2``) or, with the slack convention,
-    one whose smaller side is stochastic and larger side sub-stochastic. :meth:`set_iterate`
-    replaces ``y`` (``x`` is kept). The rounding uses the walk scores ``x``, as the original code
-    does.
+    distribution ``y`` and, with ``warm_start``, the Sinkhorn scaling carried to the next step
+    and the last roundings of the stability stop. The public :attr:`iterate` is ``y`` before its
+    sum-normalisation, i.e. the Sinkhorn output -- a doubly-stochastic matrix (``n1 == n2``)
+    or, with the slack convention, one whose smaller side is stochastic and larger side
+    sub-stochastic. :meth:`set_iterate` replaces ``y`` (``x`` is kept). The rounding uses the
+    walk scores ``x``, as the original code does.
 
     ``variant="pygmtools"``. State: the mixture ``v = normalise(alpha S + (1 - alpha) w)`` of the
     normalised walk ``w = Mo v`` and the (truncated) Sinkhorn output ``S``; :attr:`iterate` is
@@ -369,7 +370,8 @@ def rrwm(K, *, n1: int | None = None, n2: int | None = None, variant: str = "ori
         Original: maximum Sinkhorn sweeps per iteration (default 100; 1000 with
         ``warm_start=False``). pygmtools: the exact number of half-sweeps (default 20).
     warm_start : bool, optional
-        Original only: start each Sinkhorn from the previous one's scaling (default ``True``);
+        Original only: start each Sinkhorn from the previous one's scaling, with the stops
+        described above (default ``True``);
         ``False`` reproduces ``RRWM.m`` (with its defaults ``tol=1e-25``,
         ``sinkhorn_max_iter=1000``). pygmtools' variant refuses ``True``.
 

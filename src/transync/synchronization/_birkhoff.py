@@ -126,7 +126,8 @@ WARM_MAX_ATOMS = 32
 #: Atoms whose weight falls to or below this value are dropped (weights renormalized).
 _DROP = 1e-12
 #: Matrix-free eigensolver: the block matrix is formed densely (one GEMM per product) when the
-#: view covers at least a quarter of it and it has at most this many rows (8 000: 512 MB).
+#: view covers at least a quarter of it and it has at most this many rows, padding included
+#: (8 000: 512 MB).
 DENSE_OPERATOR_MAX = 8000
 #: Restarts of the matrix-free eigensolver for the spectral start of the first k-hat step (on the
 #: residual). The start is only rounded and then improved by the sweeps; on a residual with a
@@ -356,7 +357,7 @@ class _Oracle:
         # matrix-free on a dense view (e.g. all pairs): the block matrix as one dense array costs
         # no more memory than the stacked blocks, and one GEMM per product instead of a batched
         # matmul + reduceat is ~5x faster (N = 128, n = 30, 72 columns: 0.08 s vs 0.37 s)
-        self.dense_operator = (self.use == "matrix_free" and self.M <= DENSE_OPERATOR_MAX
+        self.dense_operator = (self.use == "matrix_free" and N * self.n_max <= DENSE_OPERATOR_MAX
                                and 2 * P * self.n_max ** 2 >= 0.25 * self.M ** 2)
         self._V = None                                    # warm eigenvectors (matrix-free)
         self.col_base = np.arange(int(np.diff(self.ptr).max(initial=0))) * (self.n_max + 1)
@@ -381,18 +382,19 @@ class _Oracle:
         B = B4.reshape(N * n, N * n)
         return B if flat.all() else B[np.ix_(flat, flat)]
 
-    def spectral(self, wG, D, max_restarts: int = 300) -> np.ndarray:
+    def spectral(self, wG, D, max_restarts: int | None = None) -> np.ndarray:
         """Top-``d`` eigenvectors of the block matrix of ``wG`` rounded into ``d`` slots
-        (``max_restarts``: of the matrix-free eigensolver)."""
+        (``max_restarts``: of the matrix-free eigensolver, default its own)."""
         N, n = self.N, self.n_max
         k = min(self.d, self.M)
+        kw = {} if max_restarts is None else {"max_restarts": max_restarts}
         if self.use == "dense":
             _, U = sla.eigh(self.block_matrix(wG), subset_by_index=[self.M - k, self.M - 1])
             U = U[:, ::-1]
         elif self.dense_operator:
             B = self.block_matrix(wG)
             _, U, _, _, _ = spec.block_krylov_eigs(B.__matmul__, self.M, k, V0=self._V,
-                                                   max_restarts=max_restarts, rng=self.rng)
+                                                   rng=self.rng, **kw)
             self._V = U
         else:
             ptr, dst, Dm = self.ptr, self.dst, D[:, :, :n]
@@ -409,7 +411,7 @@ class _Oracle:
                 return out[self.valid]
 
             _, U, _, _, _ = spec.block_krylov_eigs(matmat, self.M, k, V0=self._V,
-                                                   max_restarts=max_restarts, rng=self.rng)
+                                                   rng=self.rng, **kw)
             self._V = U
         lab_list = spec.round_to_universe(U, self.sizes, self.d, refine=1)
         labels = np.full((N, n), -1, dtype=np.int64)
@@ -456,7 +458,7 @@ class _Oracle:
         vals = np.take_along_axis(wG[None], np.maximum(maps, 0)[..., None], axis=3)[..., 0]
         return labels, np.where(maps >= 0, vals, 0.0).sum((1, 2))
 
-    def __call__(self, G, w, starts=(), spectral=True, max_restarts: int = 300):
+    def __call__(self, G, w, starts=(), spectral=True, max_restarts: int | None = None):
         """Configurations (canonical labels) and their scores ``<G, X X^T>_w``, best first:
         the spectral start (``spectral``, its eigensolver capped at ``max_restarts``) and the
         given ``starts``, each improved by the sweeps; duplicates removed."""
@@ -551,7 +553,7 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
         Eigensolver of the k-hat step: dense ``eigh`` when ``sum n_i <= 2000`` under ``"auto"``,
         else matrix-free block Krylov on the residual block operator (warm-started from the
         previous iteration's eigenvectors; the operator is one dense array when the observed
-        pairs cover at least a quarter of the block matrix and ``sum n_i <= 8000``, batched
+        pairs cover at least a quarter of the block matrix and ``N max n_i <= 8000``, batched
         blocks otherwise; on the residual at most 25 restarts, as the result is only a start
         for the sweeps).
     init : BirkhoffSyncResult, optional

@@ -225,6 +225,33 @@ def test_psd_table_and_spectra_plot(tmp_path):
     assert png.stat().st_size > 1000
 
 
+def test_spectra_survive_a_finish_without_the_gram_cache(tmp_path):
+    """The spectra a finish saw are kept beside the tables; a later finish whose cache lacks
+    them (cleared, another machine) reuses them, and a recomputed Gram matrix wins."""
+    import shutil
+
+    cache, out = tmp_path / "cache", tmp_path / "out"
+    rng = np.random.default_rng(1)
+    X = rng.normal(size=(8, 3))
+    K = X @ X.T
+    kx.save_npz(kx.gram_path(cache, "S@1", "TAK-lin"), K=K, spectrum=np.linalg.eigvalsh(K),
+                seconds=1.0, params=np.str_("{}"))
+    first = kx._spectra(["S@1"], ["TAK-lin", "WL"], {}, cache, out)
+    assert list(first) == [("S@1", "TAK-lin")] and (out / kx.SPECTRA_FILE).exists()
+    shutil.rmtree(cache)
+    again = kx._spectra(["S@1"], ["TAK-lin", "WL"], {}, cache, out)
+    np.testing.assert_array_equal(again[("S@1", "TAK-lin")], first[("S@1", "TAK-lin")])
+    assert "| TAK-lin | ✓" in kx._psd(again, ["S@1"], ["TAK-lin"], out).read_text()
+    new = np.arange(8.0)
+    kx.save_npz(kx.gram_path(cache, "S@1", "TAK-lin"), K=K, spectrum=new, seconds=1.0,
+                params=np.str_("{}"))
+    np.testing.assert_array_equal(kx._spectra(["S@1"], ["TAK-lin"], {}, cache, out)
+                                  [("S@1", "TAK-lin")], new)
+    other = kx._spectra(["T@2"], ["WL"], {}, tmp_path / "none", out)     # other sets: kept
+    assert other == {}
+    assert set(kx._load_npz(out / kx.SPECTRA_FILE)) == {"S@1::TAK-lin"}
+
+
 def test_dimensionality_plot(tmp_path):
     recs = []
     for s in ("MUTAG@1", "PTC_MR@2"):

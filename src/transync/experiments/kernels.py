@@ -39,7 +39,8 @@ TAK variant with ``n + k`` universe slots, k in {0, 5, 10, 20}, and with T in {2
 HKS scales, on MUTAG and PTC_MR). Besides ``summary.csv`` / ``summary.md`` and the standard
 plot, a run writes ``table_4_2.md`` (accuracy, mean ± std over repetitions, best in bold; data
 sets and pruning; Gram times), ``table_4_3.md`` (paired t-tests of every TAK variant against
-every baseline), ``psd.md`` and ``spectra.png`` (eigenvalues of every Gram matrix) and
+every baseline), ``psd.md`` and ``spectra.png`` (eigenvalues of every Gram matrix; kept in
+``spectra.npz`` so that a later finish without the Gram cache does not lose them) and
 ``dimensionality.png``.
 
 ``quick``: MUTAG only, node-only matcher, 2 repetitions, six kernels, no §4.5 sweeps (about
@@ -749,7 +750,7 @@ def finish(records, summary, out_dir, *, sources: dict, cache_dir) -> list:
     methods = sorted(dict.fromkeys(m for _, m in table), key=_method_order)
     paths = [_table_4_2(table, sets, methods, sources, out),
              _table_4_3(table, sets, methods, out)]
-    spectra = _spectra(sets, methods, sources, cache_dir)
+    spectra = _spectra(sets, methods, sources, cache_dir, out)
     paths += [_psd(spectra, sets, methods, out), _plot_spectra(spectra, sets, methods, out)]
     dim = _plot_dimensionality(records, out)
     if dim is not None:
@@ -904,8 +905,22 @@ def _table_4_3(table, sets, methods, out: Path) -> Path:
     return path
 
 
-def _spectra(sets, methods, sources, cache_dir) -> dict:
-    """(set, method) -> eigenvalues of the cached Gram matrix (those in the cache only)."""
+#: the spectra of every Gram matrix a finish has seen, beside the tables (``set::method`` keys)
+SPECTRA_FILE = "spectra.npz"
+
+
+def _spectra(sets, methods, sources, cache_dir, out_dir=None) -> dict:
+    """(set, method) -> eigenvalues of the cached Gram matrix, else the ones kept in
+    ``out_dir / SPECTRA_FILE`` by an earlier finish; the file is then updated with every
+    spectrum known. A finish without the Gram cache (cleared, or another machine) so keeps the
+    spectra it cannot recompute instead of dropping them from psd.md and spectra.png."""
+    kept = {}
+    store = None if out_dir is None else Path(out_dir) / SPECTRA_FILE
+    if store is not None:
+        for key, ev in (_load_npz(store) or {}).items():
+            s, sep, m = key.partition("::")
+            if sep:
+                kept[(s, m)] = np.asarray(ev, dtype=float)
     out = {}
     for s in sets:
         for m in methods:
@@ -914,6 +929,11 @@ def _spectra(sets, methods, sources, cache_dir) -> dict:
                 with contextlib.suppress(OSError, ValueError, KeyError), \
                         np.load(path, allow_pickle=False) as z:
                     out[(s, m)] = np.asarray(z["spectrum"], dtype=float)
+            if (s, m) not in out and (s, m) in kept:
+                out[(s, m)] = kept[(s, m)]
+    if store is not None and out:
+        merged = {**kept, **out}
+        save_npz(store, **{f"{s}::{m}": ev for (s, m), ev in merged.items()})
     return out
 
 

@@ -180,14 +180,32 @@ def test_partial_noisy_sub_doubly_stochastic_and_monotone(rng):
     assert data.accuracy(res.labels) == 1.0
 
 
-@pytest.mark.parametrize("operator", ["dense array", "batched blocks"])
+def test_oracle_sparse_block_matrix_equals_the_dense_one():
+    """Objects of different sizes (padding excluded), a view graph that is not complete."""
+    from transync.synchronization._birkhoff import _Oracle
+
+    rng = np.random.default_rng(4)
+    sizes = np.array([3, 5, 2, 5, 4])
+    pairs = np.array([[0, 1], [0, 3], [1, 2], [1, 4], [2, 3], [3, 4]])
+    o = _Oracle(pairs, sizes, 6, sweeps=1, rng=0, solver="matrix_free")
+    wG = np.zeros((len(pairs), 5, 5))
+    for p, (i, j) in enumerate(pairs):
+        wG[p, : sizes[i], : sizes[j]] = rng.random((sizes[i], sizes[j]))
+    B = o.block_matrix(wG)
+    S = o.sparse_block_matrix(o.directed(wG))
+    assert B.shape == S.shape == (sizes.sum(), sizes.sum())
+    np.testing.assert_array_equal(S.toarray(), B)
+    np.testing.assert_array_equal(B, B.T)
+
+
+@pytest.mark.parametrize("operator", ["dense array", "sparse matrix"])
 def test_matrix_free_branch_matches_dense(rng, operator, monkeypatch):
     """The k-hat step's matrix-free eigensolver (used above 2000 nodes) on a small problem, with
     its product through the dense block matrix (views covering a quarter of it, as all pairs
-    here) and through the batched blocks (sparser views)."""
+    here) and through the sparse one (sparser views)."""
     from transync.synchronization import _birkhoff
 
-    if operator == "batched blocks":
+    if operator == "sparse matrix":
         monkeypatch.setattr(_birkhoff, "DENSE_OPERATOR_MAX", 0)
     data, X = _soft_collection(10, 6, 0.3, rng, corruption=0.1)
     # the initial vertex (spectral start on X, no sweeps) is the same for both eigensolvers

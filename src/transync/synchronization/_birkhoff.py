@@ -30,12 +30,14 @@ from typing import Any
 
 import numpy as np
 import scipy.linalg as sla
+import scipy.sparse as sp
 from scipy.optimize import linear_sum_assignment
 
 from .._validation import as_generator, check_array, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning
 from ..permutations import MultiMatching
 from . import _spectral as spec
+from ._linalg import RowBlockProduct
 from ._pairwise_input import check_universe, parse_pairwise
 from ._result import CarriesMatching
 
@@ -335,7 +337,7 @@ class _Oracle:
     The observed pairs as directed edges sorted by source object, so that every object's
     incident blocks are one contiguous slice: the Gauss-Seidel update of object ``g`` is one
     batched gather over its edges plus one Hungarian; the block operator of the matrix-free
-    eigensolver is one batched ``matmul`` plus one ``reduceat``.
+    eigensolver is one GEMM (dense views) or one sparse product.
     """
 
     def __init__(self, pairs, sizes, d, *, sweeps, rng, solver):
@@ -382,6 +384,20 @@ class _Oracle:
         B = B4.reshape(N * n, N * n)
         return B if flat.all() else B[np.ix_(flat, flat)]
 
+    def sparse_block_matrix(self, D):
+        """The block matrix of the directed blocks ``D`` as CSR, real nodes only (sparse
+        views: N = 256, n = 20, degree 16, 52 columns: 16 ms a product against 61 ms for a
+        batched matmul of the blocks plus a ``reduceat``)."""
+        n = self.n_max
+        src = np.repeat(np.arange(self.N), np.diff(self.ptr))          # (2P,) edge sources
+        u = np.arange(n)
+        rows = np.broadcast_to((src[:, None] * n + u)[:, :, None], (src.size, n, n))
+        cols = np.broadcast_to((self.dst[:, None] * n + u)[:, None, :], (src.size, n, n))
+        pos = np.cumsum(self.valid.ravel()) - 1                         # padded -> real index
+        ok = self.valid.ravel()[rows] & self.valid.ravel()[cols]
+        return sp.csr_matrix((D[:, :, :n][ok], (pos[rows[ok]], pos[cols[ok]])),
+                             shape=(self.M, self.M))
+
     def spectral(self, wG, D, max_restarts: int | None = None) -> np.ndarray:
         """Top-``d`` eigenvectors of the block matrix of ``wG`` rounded into ``d`` slots
         (``max_restarts``: of the matrix-free eigensolver, default its own)."""
@@ -397,20 +413,8 @@ class _Oracle:
                                                    rng=self.rng, **kw)
             self._V = U
         else:
-            ptr, dst, Dm = self.ptr, self.dst, D[:, :, :n]
-            starts = np.minimum(ptr[:-1], Dm.shape[0])
-            empty = ptr[:-1] == ptr[1:]
-
-            def matmat(V):
-                Vp = np.zeros((N, n, V.shape[1]))
-                Vp[self.valid] = V
-                T = np.matmul(Dm, Vp[dst])                              # (2P, n, k)
-                T = np.concatenate([T, np.zeros((1,) + T.shape[1:])])
-                out = np.add.reduceat(T, starts, axis=0)
-                out[empty] = 0.0
-                return out[self.valid]
-
-            _, U, _, _, _ = spec.block_krylov_eigs(matmat, self.M, k, V0=self._V,
+            A = RowBlockProduct(self.sparse_block_matrix(D))
+            _, U, _, _, _ = spec.block_krylov_eigs(A.__matmul__, self.M, k, V0=self._V,
                                                    rng=self.rng, **kw)
             self._V = U
         lab_list = spec.round_to_universe(U, self.sizes, self.d, refine=1)
@@ -553,8 +557,8 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
         Eigensolver of the k-hat step: dense ``eigh`` when ``sum n_i <= 2000`` under ``"auto"``,
         else matrix-free block Krylov on the residual block operator (warm-started from the
         previous iteration's eigenvectors; the operator is one dense array when the observed
-        pairs cover at least a quarter of the block matrix and ``N max n_i <= 8000``, batched
-        blocks otherwise; on the residual at most 25 restarts, as the result is only a start
+        pairs cover at least a quarter of the block matrix and ``N max n_i <= 8000``, a sparse
+        matrix otherwise; on the residual at most 25 restarts, as the result is only a start
         for the sweeps).
     init : BirkhoffSyncResult, optional
         A previous result on the same number of objects, the same object sizes and the same

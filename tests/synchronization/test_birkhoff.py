@@ -194,7 +194,8 @@ def test_oracle_sparse_block_matrix_equals_the_dense_one():
     B = o.block_matrix(wG)
     S = o.sparse_block_matrix(o.directed(wG))
     assert B.shape == S.shape == (sizes.sum(), sizes.sum())
-    np.testing.assert_array_equal(S.toarray(), B)
+    assert S.dtype == np.float32
+    np.testing.assert_array_equal(S.toarray(), B.astype(np.float32))
     np.testing.assert_array_equal(B, B.T)
 
 

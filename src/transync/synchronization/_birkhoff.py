@@ -385,9 +385,9 @@ class _Oracle:
         return B if flat.all() else B[np.ix_(flat, flat)]
 
     def sparse_block_matrix(self, D):
-        """The block matrix of the directed blocks ``D`` as CSR, real nodes only (sparse
-        views: N = 256, n = 20, degree 16, 52 columns: 16 ms a product against 61 ms for a
-        batched matmul of the blocks plus a ``reduceat``)."""
+        """The block matrix of the directed blocks ``D`` as float32 CSR, real nodes only
+        (sparse views: N = 256, n = 20, degree 16, 52 columns: 16 ms a product in float64
+        against 61 ms for a batched matmul of the blocks plus a ``reduceat``)."""
         n = self.n_max
         src = np.repeat(np.arange(self.N), np.diff(self.ptr))          # (2P,) edge sources
         u = np.arange(n)
@@ -395,8 +395,8 @@ class _Oracle:
         cols = np.broadcast_to((self.dst[:, None] * n + u)[:, None, :], (src.size, n, n))
         pos = np.cumsum(self.valid.ravel()) - 1                         # padded -> real index
         ok = self.valid.ravel()[rows] & self.valid.ravel()[cols]
-        return sp.csr_matrix((D[:, :, :n][ok], (pos[rows[ok]], pos[cols[ok]])),
-                             shape=(self.M, self.M))
+        return sp.csr_matrix((D[:, :, :n][ok].astype(np.float32),
+                              (pos[rows[ok]], pos[cols[ok]])), shape=(self.M, self.M))
 
     def spectral(self, wG, D, max_restarts: int | None = None) -> np.ndarray:
         """Top-``d`` eigenvectors of the block matrix of ``wG`` rounded into ``d`` slots
@@ -414,7 +414,11 @@ class _Oracle:
             self._V = U
         else:
             A = RowBlockProduct(self.sparse_block_matrix(D))
-            _, U, _, _, _ = spec.block_krylov_eigs(A.__matmul__, self.M, k, V0=self._V,
+
+            def matmat(X):      # float32 products (as the permutation synchronization's)
+                return (A @ X.astype(np.float32)).astype(np.float64)
+
+            _, U, _, _, _ = spec.block_krylov_eigs(matmat, self.M, k, V0=self._V,
                                                    rng=self.rng, **kw)
             self._V = U
         lab_list = spec.round_to_universe(U, self.sizes, self.d, refine=1)

@@ -596,8 +596,9 @@ def test_match_graphs_on_permuted_points(method, case, use_unary):
 @COSTLY
 @given(method=st.sampled_from(["rrwm", "sm", "hungarian", "bogus"]),
        options=st.dictionaries(st.sampled_from(["maxiter", "max_iter", "tol", "n1", "variant",
-                                                "beta"]),
-                               st.sampled_from([5, -1, 0, np.nan, "x", 1e-6]), max_size=2))
+                                                "beta", "warm_start"]),
+                               st.sampled_from([5, -1, 0, np.nan, "x", 1e-6, True, False,
+                                                "pygmtools"]), max_size=2))
 @example(method="rrwm", options={"maxiter": 5})                      # issue 9 item 10
 def test_match_graphs_options(method, options):
     """Unknown or bad options are refused at the front door with the accepted ones listed."""
@@ -611,6 +612,34 @@ def test_match_graphs_options(method, options):
         return
     check(method != "bogus", "accepted method='bogus'")
     _check_matching_result(res, 4, 4)
+
+
+@MEDIUM
+@given(A=st.one_of(st.tuples(st.integers(1, 3), st.integers(1, 4), st.integers(1, 4)).flatmap(
+           lambda shape: float_arrays(shape, elements=st.floats(1e-3, 1e3))), any_arrays()),
+       warm=st.one_of(st.none(), st.just("same"), any_arrays(max_dims=2)),
+       domain=st.sampled_from(["scaling", "scaling", "log"]))
+def test_sinkhorn_batch(A, warm, domain):
+    """Kernels and warm starts of any kind: normalised stacks with their scalings, or refused."""
+    from transync.matching import sinkhorn_batch
+
+    if isinstance(warm, str):     # a valid warm start for A, when A is a stack
+        shape = np.shape(A)
+        warm = np.ones((shape[0], max(shape[1:]))) * 2.0 if len(shape) == 3 else None
+    res = call(sinkhorn_batch, A, tol=1e-6, max_iter=50, domain=domain, warm_start=warm)
+    if res is REFUSED:
+        return
+    X, n_sweeps, converged, scaling = res
+    A = np.asarray(A)
+    check(A.ndim == 3 and X.shape == A.shape, f"accepted A of shape {A.shape}")
+    check_finite_array(X, "X")
+    check(bool(np.all(X >= 0)), "negative entries in X")
+    check(n_sweeps.shape == converged.shape == (A.shape[0],), "per-matrix counts")
+    if domain == "log":
+        check(scaling is None and warm is None, "log domain with a scaling / warm start")
+    else:
+        check(scaling.shape == (A.shape[0], max(A.shape[1:])), f"scaling {scaling.shape}")
+        check_finite_array(scaling, "scaling")
 
 
 def _clean_adjacency(n):

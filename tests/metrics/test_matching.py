@@ -35,3 +35,9 @@ def test_metric_errors():
         affinity_score(np.eye(4), [0, 1])
     with pytest.raises(ValueError, match="shape"):
         affinity_score(np.eye(5), [0, 1], n2=2)
+    K = np.zeros((2, 2))
+    K[0, 0] = np.inf                             # inf * 0 would be a silent NaN score
+    with pytest.raises(ValueError, match="`affinity`"):
+        affinity_score(K, [1], n2=2)
+    with pytest.raises(ValueError, match="`affinity`"):
+        affinity_score(np.full((1, 1), np.nan), [0], n2=1)

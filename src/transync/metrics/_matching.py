@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._validation import check_array
 from ..permutations import (
     MultiMatching,
     assignment_to_matrix,
@@ -179,7 +180,8 @@ def affinity_score(affinity, assignment, *, n2: int | None = None,
     TypeError
         A matrix ``affinity`` without ``n2``; invalid assignments.
     ValueError
-        A matrix ``affinity`` of the wrong shape; invalid assignments.
+        A matrix ``affinity`` of the wrong shape or with non-finite entries; invalid
+        assignments.
 
     Examples
     --------
@@ -193,9 +195,9 @@ def affinity_score(affinity, assignment, *, n2: int | None = None,
         n2 = affinity.n2
         score = affinity.score
     else:
-        K = np.asarray(affinity, dtype=float)
         if n2 is None:
             raise TypeError("`n2` is required when `affinity` is a matrix")
+        K = check_array(affinity, "affinity", ndim=2)         # finite: no silent NaN score
         if K.shape != (a.shape[0] * n2, a.shape[0] * n2):
             raise ValueError(f"`affinity` must have shape ({a.shape[0] * n2}, {a.shape[0] * n2}), "
                              f"got {K.shape}")

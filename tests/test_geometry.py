@@ -45,6 +45,8 @@ def test_transfer_points_round_trip_and_composition():
     both = transfer_points(np.stack([A, B]), pts)
     assert both.shape == (2, 20, 2)
     np.testing.assert_allclose(both[1], transfer_points(B, pts))
+    with pytest.raises(ValueError, match="`points`.*`H`.*do not broadcast"):
+        transfer_points(np.stack([A, B, A]), np.zeros((2, 5, 2)))
 
 
 def test_translation_and_corners():

@@ -17,6 +17,16 @@ def test_from_points_variants(rng):
     assert np.allclose(knn.adjacency, knn.adjacency.T)
 
 
+def test_from_points_delaunay_on_degenerate_sets():
+    """Collinear points are joggled into a triangulation; points all at one place are refused
+    with a named error (scipy's QhullError never escapes)."""
+    line = Graph.from_points(np.c_[np.arange(5.0), np.zeros(5)], edges="delaunay")
+    assert line.n_edges >= 4
+    with pytest.raises(ValueError, match="`points` admit no Delaunay triangulation"):
+        Graph.from_points(np.ones((4, 2)), edges="delaunay")
+    assert Graph.from_points(np.ones((4, 2)), edges="full").n_edges == 6
+
+
 def test_distances_and_weighted(rng):
     P = np.array([[0.0, 0.0], [3.0, 4.0]])
     g = Graph.from_points(P, edges="full", weighted=True)

@@ -159,6 +159,11 @@ def transfer_points(H, points) -> np.ndarray:
     pts = check_array(points, "points", finite=False)
     if pts.ndim < 2 or pts.shape[-1] != 2:
         raise ValueError(f"`points` must have shape (k, 2) or (..., k, 2), got shape {pts.shape}")
+    try:
+        np.broadcast_shapes(pts.shape[:-2], H.shape[:-2])
+    except ValueError:
+        raise ValueError(f"the leading dimensions of `points` {pts.shape[:-2]} and `H` "
+                         f"{H.shape[:-2]} do not broadcast") from None
     with np.errstate(all="ignore"):
         p = pts @ H[..., :2, :2].swapaxes(-1, -2) + H[..., None, :2, 2]
         z = pts @ H[..., 2, :2][..., :, None] + H[..., 2, 2][..., None, None]

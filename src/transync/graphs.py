@@ -190,6 +190,12 @@ class Graph:
             Neighbours per node for ``edges="knn"``.
         weighted : bool, default=False
             Store edge lengths as weights instead of 1.
+
+        Raises
+        ------
+        ValueError
+            No points, non-finite coordinates, ``edges="delaunay"`` on points that are not 2-d
+            or that no triangulation covers (e.g. all at one place).
         """
         P = check_array(points, "points", ndim=2)
         n = P.shape[0]
@@ -258,11 +264,18 @@ class Graph:
 
 
 def _delaunay(P: np.ndarray) -> np.ndarray:
-    """Delaunay simplices; degenerate sets (collinear or repeated points) are joggled (``QJ``)."""
+    """Delaunay simplices; degenerate sets (collinear or repeated points) are joggled (``QJ``);
+    a set that not even joggling triangulates (e.g. all points at one place) is refused."""
     try:
         return Delaunay(P).simplices
     except QhullError:
+        pass
+    try:
         return Delaunay(P, qhull_options="QJ").simplices
+    except QhullError:
+        distinct = np.unique(P, axis=0).shape[0]
+        raise ValueError(f"`points` admit no Delaunay triangulation ({P.shape[0]} points, "
+                         f"{distinct} distinct); use edges='full' or 'knn'") from None
 
 
 def _check_labels(labels) -> np.ndarray:

@@ -108,9 +108,12 @@ class GraphCollectionProblem:
 _MAX_ENTRIES = 2 * 10**8     # dense (n, n) arrays generated, summed over graphs
 
 
-def _check_size(n_graphs: int, n_nodes: int) -> None:
+def _check_size(n_graphs: int, n_nodes: int,
+                sizes: str = "`n_inliers` + `n_outliers`") -> None:
+    """Refuse collections whose dense adjacencies would not fit (``sizes``: the arguments that
+    make ``n_nodes``, named in the message)."""
     if n_graphs * n_nodes * n_nodes > _MAX_ENTRIES:
-        raise ValueError(f"{n_graphs} graph(s) of {n_nodes} nodes (inliers + outliers) would need "
+        raise ValueError(f"{sizes} = {n_nodes} nodes in each of {n_graphs} graph(s) would need "
                          f"{n_graphs * n_nodes * n_nodes:.3g} dense adjacency entries (more than "
                          f"{_MAX_ENTRIES:.0e}); use fewer nodes or graphs")
 

@@ -169,7 +169,7 @@ def make_subgraph_collection(n_graphs: int = 8, n_universe: int = 20, p_keep=(0.
     rho = check_probability(density, "density")
     p_flip = check_probability(flip, "flip")
     shuffle = _check_bool(shuffle, "shuffle")
-    _check_size(N, d + n_out)
+    _check_size(N, d + n_out, "`n_universe` + `n_outliers`")
     rng = as_generator(rng)
     base = _sym_uniform(rng, d)
     probs = rng.uniform(low, high, N) if high > low else np.full(N, low)

@@ -27,6 +27,18 @@ def test_from_points_delaunay_on_degenerate_sets():
     assert Graph.from_points(np.ones((4, 2)), edges="full").n_edges == 6
 
 
+def test_from_points_knn_scale_free_and_bad_dimensions():
+    """k-NN graphs do not depend on the scale of the points (no overflow at 1e300); points
+    without coordinates are refused by name."""
+    P = np.random.default_rng(0).random((10, 2))
+    ref = Graph.from_points(P, edges="knn", k=3).adjacency > 0
+    for scale in (1e-300, 1e6, 1e300):
+        np.testing.assert_array_equal(Graph.from_points(P * scale, edges="knn", k=3).adjacency > 0,
+                                      ref)
+    with pytest.raises(ValueError, match="`points` must have at least one coordinate"):
+        Graph.from_points(np.zeros((3, 0)), edges="knn")
+
+
 def test_distances_and_weighted(rng):
     P = np.array([[0.0, 0.0], [3.0, 4.0]])
     g = Graph.from_points(P, edges="full", weighted=True)

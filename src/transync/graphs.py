@@ -201,6 +201,8 @@ class Graph:
         n = P.shape[0]
         if n == 0:
             raise ValueError("`points` must hold at least one point, got 0")
+        if P.shape[1] == 0:
+            raise ValueError(f"`points` must have at least one coordinate, got shape {P.shape}")
         check_choice(edges, "edges", ("delaunay", "full", "knn"))
         M = np.zeros((n, n), dtype=bool)
         if edges == "full" or (edges == "delaunay" and n <= 3):
@@ -214,9 +216,11 @@ class Graph:
         else:
             k = check_int(k, "k", minimum=1)
             kk = min(k + 1, n)
-            _, idx = cKDTree(P).query(P, k=kk)
+            top = float(np.abs(P).max())        # scale-free neighbours: no overflow at 1e300
+            _, idx = cKDTree(P / top if top > 0 else P).query(P / top if top > 0 else P, k=kk)
             idx = np.atleast_2d(idx)
-            M[np.repeat(np.arange(n), kk), idx.ravel()] = True
+            found = idx < n                     # (the tree answers n for a missing neighbour)
+            M[np.repeat(np.arange(n), kk)[found.ravel()], idx[found]] = True
         M = M | M.T
         np.fill_diagonal(M, False)
         A = M.astype(float)

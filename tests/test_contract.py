@@ -1012,9 +1012,11 @@ def test_normalize_determinant(A):
                                              f"{o.tolist()} (documented: NaN)")
             continue
         sv = np.linalg.svd(a, compute_uv=False)
-        if sv[-1] <= sv[0] * 1e-12:                     # singular in floating point
+        if sv[-1] <= sv[0] * 1e-15:     # singular beyond the documented 1e14 condition number
             check(bool(np.all(np.isnan(o))), f"singular input {a.tolist()} came back as "
                                              f"{o.tolist()} (documented: NaN)")
+            continue
+        if sv[-1] <= sv[0] * 1e-13 and np.all(np.isnan(o)):     # at the threshold: either
             continue
         check_finite_array(o, f"normalize_determinant({a.tolist()})")
         sign, logdet = np.linalg.slogdet(o)

@@ -189,19 +189,22 @@ def pairwise_corner_error(H_est, H_true, *, image_size, min_overlap=0.05) -> np.
                 inv_e[k] = np.linalg.inv(Hk)
     out = []
     for i in range(n):
-        ci = _corners(sizes[i]).astype(np.float32)
-        area_i = float(sizes[i][0] * sizes[i][1])
+        # the overlap in units of view i's size (its area is 1): OpenCV's float32 never
+        # overflows on the corners, whatever the pixel scale
+        unit = np.asarray(sizes[i], dtype=float)
+        ci = (_corners(sizes[i]) / unit).astype(np.float32)
         for j in range(n):
             if i == j:
                 continue
             cj = _corners(sizes[j])
             Pt = inv_t[i] @ Ht[j]
-            foot = _transfer(Pt, cj).astype(np.float32)
+            with np.errstate(over="ignore", invalid="ignore"):    # far footprints: inf
+                foot = (_transfer(Pt, cj) / unit).astype(np.float32)
             try:
                 inter, _ = cv2.intersectConvexConvex(ci, foot)
             except cv2.error:
                 inter = 0.0
-            if inter < min_overlap * area_i:
+            if not inter >= min_overlap:
                 continue
             Pe = inv_e[i] @ He[j]
             with np.errstate(all="ignore"):

@@ -203,3 +203,14 @@ def test_core_module_imports_no_subpackage():
             assert not (node.module or "").startswith("transync")
         elif isinstance(node, ast.Import):
             assert not any(a.name.startswith("transync") for a in node.names)
+
+
+def test_check_array_refuses_text_for_numeric_dtypes():
+    """numpy parses "1" as 1.0; a numeric argument given as text is refused by name."""
+    from transync._validation import check_array
+
+    for text in (np.array([["1", "2"]]), [["1", "2"]], (b"1",)):
+        with pytest.raises(TypeError, match="`x` must be numeric, got text"):
+            check_array(text, "x")
+    np.testing.assert_array_equal(check_array(np.array([1, 2], dtype=object), "x"), [1.0, 2.0])
+    assert check_array(np.array(["a"]), "x", dtype=None).dtype.kind == "U"    # no dtype asked

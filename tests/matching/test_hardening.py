@@ -237,7 +237,7 @@ def test_linear_solvers_refuse_complex_and_nan(solver):
      "must be symmetric for an undirected"),
     ({"adjacency": np.zeros((0, 0))}, ValueError, "must describe a non-empty graph"),
     ({"adjacency": np.zeros((2, 2)) + 1j}, TypeError, "`adjacency` must be real"),
-    ({"adjacency": [["a", "b"], ["c", "d"]]}, TypeError, "`adjacency` must be convertible"),
+    ({"adjacency": [["a", "b"], ["c", "d"]]}, TypeError, "`adjacency` must be numeric"),
     ({"adjacency": np.full((2, 2), np.nan)}, ValueError, "`adjacency` must be finite"),
     ({"adjacency": np.zeros((2, 2)), "points": [[0, np.nan], [1, 1]]}, ValueError,
      "`points` must be finite"),

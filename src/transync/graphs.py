@@ -217,7 +217,8 @@ class Graph:
             k = check_int(k, "k", minimum=1)
             kk = min(k + 1, n)
             top = float(np.abs(P).max())        # scale-free neighbours: no overflow at 1e300
-            _, idx = cKDTree(P / top if top > 0 else P).query(P / top if top > 0 else P, k=kk)
+            Q = P / top if top > 0 else P
+            _, idx = cKDTree(Q).query(Q, k=kk)
             idx = np.atleast_2d(idx)
             found = idx < n                     # (the tree answers n for a missing neighbour)
             M[np.repeat(np.arange(n), kk)[found.ravel()], idx[found]] = True

@@ -58,10 +58,18 @@ def check_array(x, name: str, *, ndim: int | Sequence[int] | None = None, dtype=
         raise TypeError(f"`{name}` must be real, got complex values ({_describe(x)})")
     if isinstance(x, (str, bytes)):
         raise TypeError(f"`{name}` must be an array, got {type(x).__name__} {x!r:.40}")
-    if dtype is not None and np.dtype(dtype).kind in "biufc" and _text_kind(x):
+    src = x
+    if isinstance(x, (list, tuple)):         # read once: its dtype says whether it is text
+        try:
+            src = np.asarray(x)
+        except (TypeError, ValueError):      # ragged nesting: the conversion below reports it
+            pass
+    if dtype is not None and np.dtype(dtype).kind in "biufc" and \
+            isinstance(src, np.ndarray) and src.dtype.kind in "US":
+        # numpy would parse "1" as 1.0, which hides a wrong argument
         raise TypeError(f"`{name}` must be numeric, got text ({_describe(x)})")
     try:
-        arr = np.array(x, dtype=dtype, copy=copy) if copy else np.asarray(x, dtype=dtype)
+        arr = np.array(src, dtype=dtype, copy=copy) if copy else np.asarray(src, dtype=dtype)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"`{name}` must be convertible to a {np.dtype(dtype)} array, "
                         f"got {_describe(x)}: {exc}") from None
@@ -74,19 +82,6 @@ def check_array(x, name: str, *, ndim: int | Sequence[int] | None = None, dtype=
         bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
         raise ValueError(f"`{name}` must be finite, got {bad} NaN or infinite entries")
     return arr
-
-
-def _text_kind(x) -> bool:
-    """Whether ``x`` holds text (a str/bytes array, or a sequence numpy reads as one): numpy
-    would parse ``"1"`` as 1.0, which hides a wrong argument."""
-    if isinstance(x, np.ndarray):
-        return x.dtype.kind in "US"
-    if isinstance(x, (list, tuple)):
-        try:
-            return np.asarray(x).dtype.kind in "US"
-        except (TypeError, ValueError):      # ragged nesting: the conversion reports it
-            return False
-    return False
 
 
 def check_finite(x: np.ndarray, name: str) -> np.ndarray:

@@ -218,7 +218,7 @@ def test_psd_table_and_spectra_plot(tmp_path):
     for m, K in (("TAK-lin", psd), ("HKS-OA", indefinite)):
         kx.save_npz(kx.gram_path(cache, "S@1", m), K=K, spectrum=np.linalg.eigvalsh(K), seconds=1.0,
                     params=np.str_("{}"))
-    spectra = kx._spectra(["S@1"], ["TAK-lin", "HKS-OA"], {}, cache)
+    spectra = kx._spectra(["S@1"], ["TAK-lin", "HKS-OA"], cache)
     text = kx._psd(spectra, ["S@1"], ["TAK-lin", "HKS-OA"], tmp_path).read_text()
     assert "| TAK-lin | ✓" in text and "| HKS-OA | ✗ -" in text
     png = kx._plot_spectra(spectra, ["S@1"], ["TAK-lin", "HKS-OA"], tmp_path)
@@ -236,18 +236,18 @@ def test_spectra_survive_a_finish_without_the_gram_cache(tmp_path):
     K = X @ X.T
     kx.save_npz(kx.gram_path(cache, "S@1", "TAK-lin"), K=K, spectrum=np.linalg.eigvalsh(K),
                 seconds=1.0, params=np.str_("{}"))
-    first = kx._spectra(["S@1"], ["TAK-lin", "WL"], {}, cache, out)
+    first = kx._spectra(["S@1"], ["TAK-lin", "WL"], cache, out)
     assert list(first) == [("S@1", "TAK-lin")] and (out / kx.SPECTRA_FILE).exists()
     shutil.rmtree(cache)
-    again = kx._spectra(["S@1"], ["TAK-lin", "WL"], {}, cache, out)
+    again = kx._spectra(["S@1"], ["TAK-lin", "WL"], cache, out)
     np.testing.assert_array_equal(again[("S@1", "TAK-lin")], first[("S@1", "TAK-lin")])
     assert "| TAK-lin | ✓" in kx._psd(again, ["S@1"], ["TAK-lin"], out).read_text()
     new = np.arange(8.0)
     kx.save_npz(kx.gram_path(cache, "S@1", "TAK-lin"), K=K, spectrum=new, seconds=1.0,
                 params=np.str_("{}"))
-    np.testing.assert_array_equal(kx._spectra(["S@1"], ["TAK-lin"], {}, cache, out)
+    np.testing.assert_array_equal(kx._spectra(["S@1"], ["TAK-lin"], cache, out)
                                   [("S@1", "TAK-lin")], new)
-    other = kx._spectra(["T@2"], ["WL"], {}, tmp_path / "none", out)     # other sets: kept
+    other = kx._spectra(["T@2"], ["WL"], tmp_path / "none", out)     # other sets: kept
     assert other == {}
     assert set(kx._load_npz(out / kx.SPECTRA_FILE)) == {"S@1::TAK-lin"}
 

@@ -750,7 +750,7 @@ def finish(records, summary, out_dir, *, sources: dict, cache_dir) -> list:
     methods = sorted(dict.fromkeys(m for _, m in table), key=_method_order)
     paths = [_table_4_2(table, sets, methods, sources, out),
              _table_4_3(table, sets, methods, out)]
-    spectra = _spectra(sets, methods, sources, cache_dir, out)
+    spectra = _spectra(sets, methods, cache_dir, out)
     paths += [_psd(spectra, sets, methods, out), _plot_spectra(spectra, sets, methods, out)]
     dim = _plot_dimensionality(records, out)
     if dim is not None:
@@ -909,7 +909,7 @@ def _table_4_3(table, sets, methods, out: Path) -> Path:
 SPECTRA_FILE = "spectra.npz"
 
 
-def _spectra(sets, methods, sources, cache_dir, out_dir=None) -> dict:
+def _spectra(sets, methods, cache_dir, out_dir=None) -> dict:
     """(set, method) -> eigenvalues of the cached Gram matrix, else the ones kept in
     ``out_dir / SPECTRA_FILE`` by an earlier finish; the file is then updated with every
     spectrum known. A finish without the Gram cache (cleared, or another machine) so keeps the

@@ -407,16 +407,14 @@ class _Oracle:
         if self.use == "dense":
             _, U = sla.eigh(self.block_matrix(wG), subset_by_index=[self.M - k, self.M - 1])
             U = U[:, ::-1]
-        elif self.dense_operator:
-            B = self.block_matrix(wG)
-            _, U, _, _, _ = spec.block_krylov_eigs(B.__matmul__, self.M, k, V0=self._V,
-                                                   rng=self.rng, **kw)
-            self._V = U
         else:
-            A = RowBlockProduct(self.sparse_block_matrix(D))
+            if self.dense_operator:
+                matmat = self.block_matrix(wG).__matmul__
+            else:
+                A = RowBlockProduct(self.sparse_block_matrix(D))
 
-            def matmat(X):      # float32 products (as the permutation synchronization's)
-                return (A @ X.astype(np.float32)).astype(np.float64)
+                def matmat(X):      # float32 products (as the permutation synchronization's)
+                    return (A @ X.astype(np.float32)).astype(np.float64)
 
             _, U, _, _, _ = spec.block_krylov_eigs(matmat, self.M, k, V0=self._V,
                                                    rng=self.rng, **kw)

@@ -284,3 +284,23 @@ def test_blocks_for_different_sizes_are_checked_by_name():
                                              (1, 2): np.ones((4, 4))}, progress=False)
     with pytest.raises(ValueError, match="dict"):
         match_collection(c.graphs, affinity=np.ones((3, 3, 4, 4)), progress=False)
+
+
+@QUIET
+@pytest.mark.parametrize("kw", [{}, {"mode": "offline"}, {"mode": "offline", "sync": "spectral"}])
+def test_universe_estimated_on_a_sparse_view_graph(kw):
+    """Each graph matched to 4 of 15 others (circulant view graph): the estimate is the true
+    universe (the eigengap alone gave about 2.5 d there), and the output is the one the true
+    universe gives."""
+    c = make_subgraph_collection(n_graphs=16, n_universe=12, p_keep=(0.7, 1.0),
+                                 deformation=0.0, shuffle=True, rng=5)
+    pairs = sorted({tuple(sorted((i, (i + k) % 16))) for i in range(16) for k in (1, 2)})
+    res = match_collection(c.graphs, affinity=AFF, pairs=pairs, progress=False, rng=0, **kw)
+    _check_valid(res, c.sizes)
+    assert res.n_universe == 12
+    assert "incomplete view graph" in res.info["n_universe_rule"]
+    told = match_collection(c.graphs, affinity=AFF, pairs=pairs, progress=False, rng=0,
+                            n_universe=12, **kw)
+    np.testing.assert_array_equal(res.assignments, told.assignments)
+    m = multimatching_precision_recall(res, c.ground_truth, pairs=np.asarray(pairs))
+    assert m["f1"] > 0.9

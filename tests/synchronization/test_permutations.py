@@ -360,3 +360,20 @@ def test_refine_option_validation():
         synchronize_permutations(pw, method="matcheig", refine=3)
     with pytest.raises(ValueError, match="refine"):
         synchronize_permutations(pw, refine=-1)
+
+
+@pytest.mark.parametrize("method", ["spectral", "orthogonal"])
+@pytest.mark.parametrize("seed", [0, 1, 3])
+def test_universe_estimated_on_an_incomplete_view_graph(method, seed):
+    """Exact partial maps on 40 % of the pairs: the eigengap of the spectrum overestimates the
+    universe there (a universe node's block is the view graph's normalized adjacency, whose
+    other eigenvalues reach close to 1); the slots the orthogonal synchronization uses are
+    exact. (Seeds whose every universe node is seen by a connected set of objects; with seed
+    2 two nodes are seen by two unlinked groups each, and 10 is no longer identifiable.)"""
+    data = make_permutation_collection(16, 8, visibility=0.7, n_universe=10, observed=0.4,
+                                       rng=seed)
+    res = synchronize_permutations(data.pairwise, method=method, rng=0)
+    assert res.n_universe == 10 and data.accuracy(res.labels) == 1.0
+    assert "incomplete view graph" in res.info["n_universe_rule"]
+    assert res.info["n_universe_eigengap"] >= res.n_universe
+    assert res.info["eigenvalues"].size > res.n_universe         # the estimate's spectrum

@@ -115,11 +115,12 @@ FIGURES = {
 
 
 def run_method(method: str, graphs, affinity, rng: np.random.Generator, *,
-               n_universe: int | None = None):
+               n_universe: int | None = None, pairs=None):
     """Match ``graphs`` with one of :data:`METHODS`; returns ``(result, seconds)``.
 
     ``n_universe`` is the true universe size, used only by the methods told it
     (``"S-RRWM known d"``; raised to the largest graph when smaller, e.g. with outliers).
+    ``pairs``: a view graph (default: every pair), as ``match_collection`` takes it.
     """
     if method not in METHODS:
         raise ValueError(f"`method` must be one of {', '.join(METHODS)}, got {method!r}")
@@ -132,7 +133,8 @@ def run_method(method: str, graphs, affinity, rng: np.random.Generator, *,
     t0 = time.perf_counter()
     with warnings.catch_warnings():     # pairs stopped at their budget: `res.converged`
         warnings.simplefilter("ignore", ConvergenceWarning)
-        res = match_collection(graphs, affinity=affinity, rng=seed, progress=False, **kwargs)
+        res = match_collection(graphs, affinity=affinity, rng=seed, progress=False,
+                               pairs=pairs, **kwargs)
     return res, time.perf_counter() - t0
 
 

@@ -136,7 +136,9 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
         (equal sizes, or ``partial="dummies"``).
     n_universe : int, optional
         Universe size ``d``, ``max n_i <= d <= sum n_i``; ``None``: ``n`` for graphs of equal
-        size ``n``, else estimated by the synchronization (eigengap rule).
+        size ``n``, else estimated by the synchronization (eigengap rule; with a view graph
+        that leaves pairs out, the slots an orthogonal synchronization uses, see
+        :func:`~transync.synchronize_permutations`).
     partial : {"universe", "dummies"}, default="universe"
         How graphs of different sizes (or ``d > n``) are matched (see above). CAO composes full
         permutations and needs ``"dummies"`` there.
@@ -705,16 +707,27 @@ def _synchronize(pairs, assignments, soft, lay, n_universe, sync, gen):
     sizes = lay.sync_sizes
     if lay.kind != "universe":
         n_universe = lay.n_pad
+    A = np.asarray(assignments)
+    maps = {(int(i), int(j)): A[p, :sizes[i]] for p, (i, j) in enumerate(pairs.tolist())}
+    rule = None
+    if lay.kind == "universe" and n_universe is None and len(pairs) < len(sizes) * (len(sizes) - 1) // 2:
+        # On an incomplete view graph the eigengap rule overestimates the universe, on soft
+        # blocks and rounded maps alike; synchronize_permutations' rule for that case (the
+        # slots its orthogonal synchronization uses) decides for every method.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            est = synchronize_permutations(maps, method="spectral", sizes=sizes, rng=gen)
+        n_universe, rule = int(est.n_universe), est.info.get("n_universe_rule", "")
     if sync == "birkhoff" and soft is not None:
         soft = doubly_stochastic_iterates(soft)       # solver iterates are DS to ~1e-3 only
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
-            return synchronize_doubly_stochastic(_by_pair(pairs, soft, sizes),
-                                                 n_universe=n_universe, rng=gen)
-    A = np.asarray(assignments)
-    maps = {(int(i), int(j)): A[p, :sizes[i]] for p, (i, j) in enumerate(pairs.tolist())}
+            out = synchronize_doubly_stochastic(_by_pair(pairs, soft, sizes),
+                                                n_universe=n_universe, rng=gen)
+        if rule is not None:
+            out.info["n_universe_rule"] = rule
+        return out
     method = "spectral" if sync in ("birkhoff", "spectral") else "orthogonal"
-    rule = None
     if (lay.kind == "universe" and n_universe is None and soft is not None
             and int(sizes.sum()) <= SOFT_UNIVERSE_MAX):
         # The soft solutions keep the solver's uncertainty, which its rounded maps lose: a

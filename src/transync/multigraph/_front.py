@@ -710,7 +710,8 @@ def _synchronize(pairs, assignments, soft, lay, n_universe, sync, gen):
     A = np.asarray(assignments)
     maps = {(int(i), int(j)): A[p, :sizes[i]] for p, (i, j) in enumerate(pairs.tolist())}
     rule = None
-    if lay.kind == "universe" and n_universe is None and len(pairs) < len(sizes) * (len(sizes) - 1) // 2:
+    incomplete = len(pairs) < len(sizes) * (len(sizes) - 1) // 2
+    if lay.kind == "universe" and n_universe is None and incomplete:
         # On an incomplete view graph the eigengap rule overestimates the universe, on soft
         # blocks and rounded maps alike; synchronize_permutations' rule for that case (the
         # slots its orthogonal synchronization uses) decides for every method.

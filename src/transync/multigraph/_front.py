@@ -710,16 +710,17 @@ def _synchronize(pairs, assignments, soft, lay, n_universe, sync, gen):
     A = np.asarray(assignments)
     maps = {(int(i), int(j)): A[p, :sizes[i]] for p, (i, j) in enumerate(pairs.tolist())}
     rule = None
+    estimate = lay.kind == "universe" and n_universe is None
+    # On an incomplete view graph the eigengap rule overestimates the universe, on soft blocks
+    # and rounded maps alike; synchronize_permutations then applies its rule for that case
+    # (the slots its orthogonal synchronization uses), which decides for every method here.
     incomplete = len(pairs) < len(sizes) * (len(sizes) - 1) // 2
-    if lay.kind == "universe" and n_universe is None and incomplete:
-        # On an incomplete view graph the eigengap rule overestimates the universe, on soft
-        # blocks and rounded maps alike; synchronize_permutations' rule for that case (the
-        # slots its orthogonal synchronization uses) decides for every method.
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", ConvergenceWarning)
-            est = synchronize_permutations(maps, method="spectral", sizes=sizes, rng=gen)
-        n_universe, rule = int(est.n_universe), est.info.get("n_universe_rule", "")
     if sync == "birkhoff" and soft is not None:
+        if estimate and incomplete:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ConvergenceWarning)
+                est = synchronize_permutations(maps, method="spectral", sizes=sizes, rng=gen)
+            n_universe, rule = int(est.n_universe), est.info.get("n_universe_rule", "")
         soft = doubly_stochastic_iterates(soft)       # solver iterates are DS to ~1e-3 only
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
@@ -729,7 +730,7 @@ def _synchronize(pairs, assignments, soft, lay, n_universe, sync, gen):
             out.info["n_universe_rule"] = rule
         return out
     method = "spectral" if sync in ("birkhoff", "spectral") else "orthogonal"
-    if (lay.kind == "universe" and n_universe is None and soft is not None
+    if (estimate and not incomplete and soft is not None
             and int(sizes.sum()) <= SOFT_UNIVERSE_MAX):
         # The soft solutions keep the solver's uncertainty, which its rounded maps lose: a
         # universe node kept by few graphs whose hard matches went to other nodes keeps part

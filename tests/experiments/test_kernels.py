@@ -298,6 +298,27 @@ def test_tak_gram_equals_the_estimators(toy, tmp_path, method, kernel):
     assert len(list((tmp_path / "cache").rglob("alignment-*.npz"))) == 1
 
 
+@pytest.mark.parametrize("kernel", ["linear", "gaussian"])
+def test_non_transitive_gram_uses_the_tak_maps(toy, tmp_path, kernel):
+    """NT-lin / NT-gauss: the pairwise kernel on the very RRWM maps TAK-lin synchronizes (one
+    pairwise file for both), equal to pairwise_assignment_kernel on the estimator's maps."""
+    from transync.kernels import TransitiveAssignmentKernel, pairwise_assignment_kernel
+
+    prepared = kx.prepare(str(toy))
+    method = "NT-lin" if kernel == "linear" else "NT-gauss"
+    ours = kx.compute_gram(prepared, method, tmp_path / "cache")
+    kx.compute_gram(prepared, "TAK-lin", tmp_path / "cache")
+    assert len(list((tmp_path / "cache").rglob("pairwise-*.npz"))) == 1
+    est = TransitiveAssignmentKernel(matcher="rrwm", times=kx._times(10), random_state=0)
+    est.fit(list(prepared.graphs))
+    want = pairwise_assignment_kernel(est.kernel_features_, est.assignments_, est.pairs_,
+                                      kernel=kernel)
+    np.testing.assert_allclose(ours.K, want, atol=1e-12)
+    assert ours.seconds > 0 and np.isfinite(ours.cpu_seconds)
+    with pytest.raises(ValueError, match="TAK kernels only"):
+        kx.kernel_params(f"{method} n+5")
+
+
 # ---------------------------------------------------------------------------------------------
 # view-graph kernels on the larger sets, per-set kernel lists, Gram memory, repetitions per set
 # ---------------------------------------------------------------------------------------------

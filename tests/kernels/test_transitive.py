@@ -12,6 +12,7 @@ from transync.kernels import (
     cosine_normalize,
     median_gamma,
     min_eigenvalue_ratio,
+    pairwise_assignment_kernel,
     place_graphs,
     prune_by_size,
     relaxed_features,
@@ -286,6 +287,13 @@ def test_transitive_kernels_are_psd_where_pairwise_optimal_is_not():
     gamma = median_gamma(Fp)
     assert min_eigenvalue_ratio(_non_transitive_kernel(Fp, pairs, A, "linear")) < -5e-4
     assert min_eigenvalue_ratio(_non_transitive_kernel(Fp, pairs, A, "gaussian", gamma)) < -1e-3
+    # the public non-transitive kernel is this one
+    np.testing.assert_allclose(pairwise_assignment_kernel(feats, A, pairs),
+                               _non_transitive_kernel(Fp, pairs, A, "linear"), atol=1e-13)
+    np.testing.assert_allclose(pairwise_assignment_kernel(feats, A, pairs, kernel="gaussian",
+                                                          gamma=gamma),
+                               _non_transitive_kernel(Fp, pairs, A, "gaussian", gamma),
+                               atol=1e-13)
     al = synchronize_alignments(A, pairs, 12, n=n, keep_embedding=True, rng=0)
     X = aligned_features(feats, al.labels)
     for K in (assignment_kernel(X), assignment_kernel(X, kernel="gaussian", gamma=gamma),
@@ -305,6 +313,112 @@ def test_kernels_psd_on_random_alignments(seed):
               assignment_kernel(relaxed_features(feats, Q), kernel="relaxed"),
               assignment_kernel(X, kernel="gaussian", gamma=50.0, normalize=False)):
         assert min_eigenvalue_ratio(K) >= -1e-9
+
+
+# ---------------------------------------------------------------------------------------------
+# pairwise_assignment_kernel (the non-transitive counterpart)
+# ---------------------------------------------------------------------------------------------
+
+def _random_maps(N, n, rng):
+    pairs = np.column_stack(np.triu_indices(N, 1))
+    return pairs, np.array([rng.permutation(n) for _ in range(len(pairs))])
+
+
+@pytest.mark.parametrize("kernel", ["linear", "gaussian"])
+def test_pairwise_assignment_kernel_by_brute_force(kernel, rng):
+    """Entry by entry with loops over pairs and nodes: padded node u of i against the node
+    of j it is mapped to; dummies are zero features with indicator 0."""
+    feats = _random_features(6, 3, rng, 1, 5)
+    n = 7
+    pairs, A = _random_maps(6, n, rng)
+    gamma = 0.8
+
+    def node(g, u):
+        F = feats[g]
+        return np.r_[F[u], 1.0] if u < len(F) else np.zeros(F.shape[1] + 1)
+
+    def k(x, y):
+        if kernel == "linear":
+            return float(x @ y)
+        return float(x[-1] * y[-1] * np.exp(-gamma * ((x - y) ** 2).sum()))
+
+    K = np.zeros((6, 6))
+    for (i, j), a in zip(pairs, A):
+        K[i, j] = K[j, i] = sum(k(node(i, u), node(j, a[u])) for u in range(n))
+    for g in range(6):
+        K[g, g] = sum(k(node(g, u), node(g, u)) for u in range(n))
+    got = pairwise_assignment_kernel(feats, A, pairs, kernel=kernel,
+                                     gamma=gamma if kernel == "gaussian" else None,
+                                     normalize=False)
+    np.testing.assert_allclose(got, K, rtol=1e-12)
+    normed = pairwise_assignment_kernel(feats, A, pairs, kernel=kernel,
+                                        gamma=gamma if kernel == "gaussian" else None)
+    np.testing.assert_allclose(normed, cosine_normalize(K), rtol=1e-12)
+    np.testing.assert_array_equal(normed, normed.T)
+
+
+@pytest.mark.parametrize("kernel", ["linear", "gaussian"])
+def test_pairwise_assignment_kernel_on_transitive_maps_is_the_transitive_kernel(kernel, rng):
+    """Maps induced by one labelling: the pairwise kernel is the assignment kernel of the
+    aligned features, default Gaussian widths included (the same median rule)."""
+    feats = _random_features(9, 2, rng, 2, 6)
+    labels, pairs, A = _planted(9, 6, rng)
+    X = aligned_features(feats, labels)
+    np.testing.assert_allclose(pairwise_assignment_kernel(feats, A, pairs, kernel=kernel),
+                               assignment_kernel(X, kernel=kernel), rtol=1e-12)
+    assert min_eigenvalue_ratio(pairwise_assignment_kernel(feats, A, pairs, kernel=kernel)) \
+        >= -1e-9
+
+
+def test_pairwise_assignment_kernel_ignores_pair_order_and_orientation(rng):
+    feats = _random_features(7, 2, rng, 2, 5)
+    pairs, A = _random_maps(7, 5, rng)
+    K = pairwise_assignment_kernel(feats, A, pairs, kernel="gaussian")
+    order = rng.permutation(len(pairs))
+    flip = rng.random(len(pairs)) < 0.5
+    p2, A2 = pairs[order].copy(), A[order].copy()
+    p2[flip] = p2[flip, ::-1]
+    A2[flip] = np.argsort(A2[flip], axis=1)                  # the inverse maps
+    np.testing.assert_allclose(pairwise_assignment_kernel(feats, A2, p2, kernel="gaussian"), K,
+                               rtol=1e-12)
+
+
+def test_pairwise_assignment_kernel_validation(rng):
+    feats = _random_features(4, 2, rng, 2, 3)
+    pairs, A = _random_maps(4, 3, rng)
+    with pytest.raises(ValueError, match="cover all 6 pairs.*missing e.g. \\(2, 3\\)"):
+        pairwise_assignment_kernel(feats, A[:-1], pairs[:-1])
+    with pytest.raises(ValueError, match="once.*rows 0 and 5"):
+        pairwise_assignment_kernel(feats, A, np.r_[pairs[:5], [[1, 0]]])
+    with pytest.raises(ValueError, match="distinct graphs.*pairs\\[2\\]"):
+        pairwise_assignment_kernel(feats, A, np.r_[pairs[:2], [[3, 3]], pairs[3:]])
+    with pytest.raises(ValueError, match="index the 4 graphs"):
+        pairwise_assignment_kernel(feats, A, np.r_[pairs[:5], [[2, 4]]])
+    with pytest.raises(ValueError, match=r"shape \(P, 2\)"):
+        pairwise_assignment_kernel(feats, A, pairs[:, :1])
+    with pytest.raises(ValueError, match=r"\(6, n\), one row per pair.*\(5, 3\)"):
+        pairwise_assignment_kernel(feats, A[:5], pairs)
+    bad = A.copy()
+    bad[2] = [0, 0, 1]
+    with pytest.raises(ValueError, match="row 2 is not one"):
+        pairwise_assignment_kernel(feats, bad, pairs)
+    feats = [np.ones((2, 2))] * 4
+    feats[1] = np.ones((3, 2))
+    with pytest.raises(ValueError, match=r"features\[1\]` has 3 nodes, more than.*n=2"):
+        pairwise_assignment_kernel(feats, np.tile([1, 0], (6, 1)), pairs)
+    with pytest.raises(TypeError, match="assignments"):
+        pairwise_assignment_kernel(feats, A.astype(float), pairs)
+    with pytest.raises(ValueError, match="kernel"):
+        pairwise_assignment_kernel(feats, A, pairs, kernel="relaxed")
+    with pytest.raises(ValueError, match="gamma"):
+        pairwise_assignment_kernel(feats, A, pairs, gamma=1.0)
+    with pytest.raises(ValueError, match="gamma"):
+        pairwise_assignment_kernel(feats, A, pairs, kernel="gaussian", gamma=0.0)
+    with pytest.raises(TypeError, match="normalize"):
+        pairwise_assignment_kernel(feats, A, pairs, normalize=1)
+    # one graph: no pairs, the diagonal only
+    K = pairwise_assignment_kernel(feats[:1], np.zeros((0, 3), int), np.zeros((0, 2), int))
+    np.testing.assert_allclose(K, [[1.0]], rtol=1e-15)
 
 
 def test_median_gamma_rule(rng):

@@ -20,6 +20,7 @@ Front door: the scikit-learn transformer :class:`TransitiveAssignmentKernel` (``
   :func:`assignment_kernel` (:data:`KERNELS`, width :func:`median_gamma`); size pruning --
   :func:`prune_by_size`;
 * baselines -- :func:`graphlet3_kernel` (:func:`graphlet3_counts`), :func:`hks_oa_kernel`,
+  :func:`pairwise_assignment_kernel` (the kernel on the unsynchronized pairwise maps),
   :func:`hks_mean_kernel`, :func:`random_walk_kernel`, :func:`grakel_kernel`
   (:data:`GRAKEL_KERNELS`);
 * evaluation -- :func:`cosine_normalize`, :func:`spectrum`, :func:`min_eigenvalue_ratio`,
@@ -51,6 +52,7 @@ _LAZY = {
     "graph_descriptors": "._transitive",
     "nearest_graphs": "._transitive",
     "median_gamma": "._transitive",
+    "pairwise_assignment_kernel": "._transitive",
     "place_graphs": "._transitive",
     "prune_by_size": "._transitive",
     "relaxed_features": "._transitive",

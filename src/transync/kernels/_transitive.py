@@ -39,6 +39,7 @@ __all__ = [
     "graph_descriptors",
     "median_gamma",
     "nearest_graphs",
+    "pairwise_assignment_kernel",
     "place_graphs",
     "prune_by_size",
     "relaxed_features",
@@ -839,8 +840,14 @@ def median_gamma(aligned, *, rng=0) -> float:
         gen = np.random.default_rng(rng)
         i = gen.integers(0, N, _GAMMA_SAMPLE_PAIRS)
         j = (i + gen.integers(1, N, _GAMMA_SAMPLE_PAIRS)) % N
-    both = (X[i, :, -1] > 0) & (X[j, :, -1] > 0)
-    d2 = ((X[i] - X[j]) ** 2).sum(-1)[both]
+    return _inverse_median(X[i], X[j])
+
+
+def _inverse_median(Xi: np.ndarray, Xj: np.ndarray) -> float:
+    """``1 / median`` of ``||Xi[p, u] - Xj[p, u]||^2`` over rows real in both (last column);
+    the mean of the positive ones when the median is 0; 1.0 when none is positive."""
+    both = (Xi[..., -1] > 0) & (Xj[..., -1] > 0)
+    d2 = ((Xi - Xj) ** 2).sum(-1)[both]
     med = float(np.median(d2)) if d2.size else 0.0
     if med <= 0:
         pos = d2[d2 > 0]
@@ -949,6 +956,153 @@ def assignment_kernel(aligned, other=None, *, kernel: str = "linear", gamma=None
     if normalize:
         K = cosine_normalize(K)
     return 0.5 * (K + K.T)                                   # exactly symmetric
+
+
+def _matched_pairs(pairs, N: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows ``(i, j)`` of ``pairs`` checked to cover every unordered pair of ``N`` graphs once."""
+    pr = check_int_array(pairs, "pairs", 2)
+    if pr.shape[1:] != (2,):
+        raise ValueError(f"`pairs` must have shape (P, 2), got shape {pr.shape}")
+    if pr.size and (pr.min() < 0 or pr.max() >= N):
+        raise ValueError(f"`pairs` must index the {N} graphs of `features` (0..{N - 1}), got "
+                         f"values in [{pr.min()}, {pr.max()}]")
+    self_pairs = np.flatnonzero(pr[:, 0] == pr[:, 1])
+    if self_pairs.size:
+        raise ValueError(f"`pairs` must pair distinct graphs, got pairs[{self_pairs[0]}] = "
+                         f"{pr[self_pairs[0]].tolist()}")
+    lo, hi = pr.min(axis=1), pr.max(axis=1)
+    code = lo * N + hi
+    uniq, first, count = np.unique(code, return_index=True, return_counts=True)
+    if (count > 1).any():
+        k = np.flatnonzero(code == uniq[np.argmax(count > 1)])
+        raise ValueError(f"`pairs` must give each pair of graphs once, got "
+                         f"{pr[k[0]].tolist()} at rows {k[0]} and {k[1]}")
+    expected = N * (N - 1) // 2
+    if uniq.size != expected:
+        iu, ju = np.triu_indices(N, 1)
+        missing = np.setdiff1d(iu * N + ju, uniq)[0]
+        raise ValueError(f"`pairs` must cover all {expected} pairs of the {N} graphs (the "
+                         f"kernel compares every pair through its own map), got {uniq.size}; "
+                         f"missing e.g. ({missing // N}, {missing % N})")
+    return pr[:, 0], pr[:, 1]
+
+
+def pairwise_assignment_kernel(features, assignments, pairs, *, kernel: str = "linear",
+                               gamma=None, normalize: bool = True) -> np.ndarray:
+    r"""The assignment kernel on the *unsynchronized* pairwise maps: the non-transitive
+    counterpart of :func:`assignment_kernel` (thesis Table 4.2's "HKS + RRWM" / "HKS + SM"
+    kernels, which the transitive ones replace).
+
+    Every pair is compared through its own matched permutation :math:`\pi_{ij}`
+    (``assignments``, from :func:`match_pairs`) instead of the universe slots:
+
+    * ``"linear"``: :math:`k_{ij} = \sum_u \langle \bar f_i(u), \bar f_j(\pi_{ij}(u))
+      \rangle`;
+    * ``"gaussian"``: :math:`k_{ij} = \sum_u \delta_i(u)\,\delta_j(\pi_{ij}(u))\,
+      \exp(-\gamma \|\bar f_i(u) - \bar f_j(\pi_{ij}(u))\|^2)`,
+
+    with :math:`\bar f = [f, \delta]` the features of the padded nodes and the real-node
+    indicator, exactly the slot features of :func:`aligned_features`; the diagonal is each
+    graph matched to itself. When the maps are transitive (``pi_ij = labels_j^{-1} o labels_i``
+    for one labelling) this *is* :func:`assignment_kernel` on the aligned features (tested);
+    for the maps of a pairwise matcher it is **indefinite in general**, because the maps
+    contradict each other around cycles -- the defect the transitive kernel removes.
+
+    Parameters
+    ----------
+    features : sequence of N arrays of shape (n_i, f)
+        Node features of the real nodes (the same as for :func:`aligned_features`).
+    assignments : ndarray of shape (P, n), int
+        Row ``p`` maps padded node ``u`` of graph ``pairs[p, 0]`` to padded node
+        ``assignments[p, u]`` of graph ``pairs[p, 1]`` (the layout of :func:`match_pairs`);
+        every row a permutation of ``range(n)``, ``n`` at least the largest graph.
+    pairs : array_like of shape (P, 2), int
+        The matched pairs: every unordered pair of distinct graphs exactly once, in either
+        orientation (``(j, i)`` with the inverse map gives the same kernel).
+    kernel : {"linear", "gaussian"}, default="linear"
+        The node kernel (``"relaxed"`` has no pairwise counterpart).
+    gamma : float > 0, optional
+        Gaussian width; default ``1 / median`` of the squared distances of the matched
+        real-real nodes (over all pairs up to 2000 of them, else 2000 pairs drawn with a fixed
+        seed) -- the rule of :func:`median_gamma` applied to the pairwise maps.
+    normalize : bool, default=True
+        Cosine-normalize (unit diagonal).
+
+    Returns
+    -------
+    ndarray of shape (N, N)
+        Exactly symmetric kernel matrix.
+
+    Raises
+    ------
+    ValueError
+        ``assignments`` not (P, n) with permutation rows, ``n`` below the largest graph,
+        ``pairs`` that miss or repeat a pair of graphs, pair a graph with itself or index
+        outside the graphs; a bad ``kernel``, a non-positive ``gamma`` or ``gamma`` with
+        ``kernel="linear"``.
+    TypeError
+        ``normalize`` not a bool; non-integer ``assignments`` or ``pairs``.
+
+    Examples
+    --------
+    Three one-node-feature graphs whose pairwise maps disagree around the cycle 0 -> 1 -> 2
+    -> 0 (the transitive map 0 -> 2 is the identity, the matched one swaps):
+
+    >>> import numpy as np
+    >>> F = [np.array([[1.0], [0.0]])] * 3
+    >>> pairs = np.array([[0, 1], [0, 2], [1, 2]])
+    >>> maps = np.array([[0, 1], [1, 0], [0, 1]])
+    >>> pairwise_assignment_kernel(F, maps, pairs, normalize=False)
+    array([[3., 3., 2.],
+           [3., 3., 3.],
+           [2., 3., 3.]])
+    """
+    check_choice(kernel, "kernel", ("linear", "gaussian"))
+    if not isinstance(normalize, (bool, np.bool_)):
+        raise TypeError(f"`normalize` must be a bool, got {type(normalize).__name__}")
+    feats = check_feature_list(features)
+    N = len(feats)
+    A = check_int_array(assignments, "assignments", 2)
+    i, j = _matched_pairs(pairs, N)
+    if A.shape[0] != i.size or A.shape[1] < 1:
+        raise ValueError(f"`assignments` must have shape (P, n) = ({i.size}, n), one row per "
+                         f"pair of `pairs`, got shape {A.shape}")
+    n = A.shape[1]
+    _check_permutation_rows(A, "assignments")
+    X = _padded_features(feats, n)                          # own node order, real first
+    if kernel == "gaussian":
+        gamma = (_pairwise_median_gamma(X, i, j, A) if gamma is None
+                 else check_positive(gamma, "gamma"))
+    elif gamma is not None:
+        raise ValueError(f"`gamma` applies to kernel='gaussian' only, got gamma={gamma!r}")
+    K = np.zeros((N, N))
+    step = max(1, _SLOT_BLOCK_ELEMENTS // (n * X.shape[2]))
+    for s in range(0, A.shape[0], step):                    # blocks of pairs in lock-step
+        e = slice(s, s + step)
+        Xi, Xj = X[i[e]], X[j[e][:, None], A[e]]
+        if kernel == "linear":
+            vals = np.einsum("puf,puf->p", Xi, Xj)
+        else:
+            d2 = ((Xi - Xj) ** 2).sum(-1)
+            vals = (Xi[..., -1] * Xj[..., -1] * np.exp(-gamma * d2)).sum(1)
+        K[i[e], j[e]] = vals
+        K[j[e], i[e]] = vals
+    diag = (np.einsum("guf,guf->g", X, X) if kernel == "linear" else X[..., -1].sum(1))
+    K[np.diag_indices(N)] = diag
+    if normalize:
+        K = cosine_normalize(K)
+    return 0.5 * (K + K.T)
+
+
+def _pairwise_median_gamma(X: np.ndarray, i: np.ndarray, j: np.ndarray, A: np.ndarray) -> float:
+    """``1 / median`` squared distance of matched real-real nodes (:func:`median_gamma`'s rule)."""
+    P = i.size
+    if P == 0:
+        return 1.0
+    if P > _GAMMA_SAMPLE_PAIRS:
+        pick = np.sort(np.random.default_rng(0).choice(P, _GAMMA_SAMPLE_PAIRS, replace=False))
+        i, j, A = i[pick], j[pick], A[pick]
+    return _inverse_median(X[i], X[j[:, None], A])
 
 
 # --------------------------------------------------------------------------------------------

@@ -1069,6 +1069,156 @@ def test_translation(tx, ty):
     check_finite_array(out, "translation")
 
 
+# ----------------------------------------------------------------------------------- kernels
+
+@st.composite
+def node_feature_lists(draw):
+    """(features, n): up to 4 graphs' node features (some nasty or empty), a padded size n."""
+    N = draw(st.integers(0, 4))
+    f = draw(st.integers(1, 2))
+    sizes = [draw(st.sampled_from([1, 2, 3] * 3 + [0])) for _ in range(N)]
+    nasty = draw(st.integers(0, 3)) == 0
+    feats = [draw(float_arrays((m, f), elements=nasty_floats if nasty else
+                               st.floats(-2, 2, allow_nan=False, width=64))) for m in sizes]
+    n = max(sizes, default=1) + draw(st.sampled_from([0, 0, 0, 1, -1]))
+    return feats, n
+
+
+@st.composite
+def slot_maps(draw, N, n, transitive=None):
+    """(pairs, assignments): all pairs of N graphs with a map of range(n) each -- induced by one
+    labelling (transitive), arbitrary permutations, or junk (non-permutations, missing or
+    repeated pairs)."""
+    kind = draw(st.sampled_from(["transitive", "random", "random", "junk"])) \
+        if transitive is None else ("transitive" if transitive else "random")
+    iu, ju = np.triu_indices(N, 1)
+    pairs = np.column_stack([iu, ju]).astype(np.int64)
+    m = max(n, 0)
+    if kind == "transitive":
+        labels = np.array([draw(st.permutations(list(range(m)))) for _ in range(N)],
+                          dtype=np.int64).reshape(N, m)
+        inv = np.argsort(labels, axis=1)
+        A = inv[ju[:, None], labels[iu]] if len(pairs) else np.zeros((0, m), np.int64)
+    else:
+        A = np.array([draw(st.permutations(list(range(m)))) for _ in range(len(pairs))],
+                     dtype=np.int64).reshape(len(pairs), m)
+    if kind == "junk":
+        what = draw(st.sampled_from(["entries", "drop", "repeat", "flip"]))
+        if what == "entries" and A.size:
+            A = draw(hnp.arrays(np.int64, A.shape, elements=st.integers(-1, m + 1)))
+        elif what == "drop" and len(pairs):
+            pairs, A = pairs[1:], A[1:]
+        elif what == "repeat" and len(pairs):
+            pairs, A = np.r_[pairs, pairs[:1, ::-1]], np.r_[A, A[:1]]
+        elif what == "flip" and len(pairs):
+            pairs = pairs[:, ::-1].copy()          # valid: the maps read the other way
+            kind = "random"
+        else:
+            kind = "random"                        # nothing to spoil: no pairs, no entries
+    return pairs, A, kind
+
+
+def _check_kernel_matrix(K, N, what, psd=False):
+    check_finite_array(K, what)
+    check(K.shape == (N, N), f"{what}: shape {K.shape}, expected ({N}, {N})")
+    check(bool(np.array_equal(K, K.T)), f"{what}: not exactly symmetric")
+    if psd and N:
+        ev = np.linalg.eigvalsh(K)
+        check(ev[0] >= -1e-9 * max(abs(ev).max(), 1.0), f"{what}: not PSD (lambda_min {ev[0]})")
+
+
+@MEDIUM
+@given(node_feature_lists(), st.data(), st.sampled_from(["linear", "gaussian", "relaxed"]),
+       st.sampled_from([None] * 4 + [1.0, 0.0, -1.0, np.nan, np.inf, 1e300]),
+       st.sampled_from([True, True, False]))
+def test_transitive_kernel_stages(feats_n, data, kernel, gamma, normalize):
+    """aligned_features -> median_gamma -> assignment_kernel on any features and labels: a
+    finite, exactly symmetric, PSD Gram matrix, or a named refusal."""
+    from transync import kernels as tk
+
+    feats, n = feats_n
+    N = len(feats)
+    if data.draw(st.booleans()):
+        labels = np.array([data.draw(st.permutations(list(range(max(n, 0)))))
+                           for _ in range(N)], dtype=np.int64).reshape(N, max(n, 0))
+    else:
+        labels = data.draw(hnp.arrays(np.int64, (N, max(n, 0)), elements=st.integers(-1, n)))
+    X = call(tk.aligned_features, feats, labels, n)
+    if X is REFUSED:
+        return
+    check_finite_array(X, "aligned_features")
+    check(X.shape == (N, n, feats[0].shape[1] + 1), f"aligned_features: shape {X.shape}")
+    check(bool(np.all(X[..., -1].sum(1) == [len(F) for F in feats])),
+          "aligned_features: real-node indicators do not count each graph's nodes")
+    g = call(tk.median_gamma, X)
+    if g is not REFUSED:
+        check_finite_scalar(g, "median_gamma")
+        check(g > 0, f"median_gamma: {g} <= 0")
+    gam = gamma if kernel == "gaussian" else data.draw(st.sampled_from([None, None, 1.0]))
+    K = call(tk.assignment_kernel, X, kernel=kernel, gamma=gam, normalize=normalize)
+    if K is REFUSED:
+        return
+    _check_kernel_matrix(K, N, "assignment_kernel", psd=True)
+
+
+@MEDIUM
+@given(node_feature_lists(), st.data(), st.sampled_from(["linear", "gaussian", "relaxed"]),
+       st.sampled_from([None] * 4 + [1.0, 0.0, -1.0, np.nan, 1e300]),
+       st.sampled_from([True, True, False]))
+def test_pairwise_assignment_kernel(feats_n, data, kernel, gamma, normalize):
+    """Any maps: a finite, exactly symmetric matrix (PSD when the maps are transitive), or a
+    named refusal -- missing, repeated or non-permutation maps among them."""
+    from transync import kernels as tk
+
+    feats, n = feats_n
+    pairs, A, kind = data.draw(slot_maps(len(feats), n))
+    K = call(tk.pairwise_assignment_kernel, feats, A, pairs, kernel=kernel,
+             gamma=gamma if kernel == "gaussian" else None, normalize=normalize)
+    if K is REFUSED:
+        return
+    valid = bool(np.all(np.sort(A, axis=1) == np.arange(A.shape[1])))
+    check(kind != "junk" or valid, "pairwise_assignment_kernel: accepted junk maps or pairs")
+    _check_kernel_matrix(K, len(feats), "pairwise_assignment_kernel",
+                         psd=kind == "transitive" and bool(np.isfinite(
+                             np.concatenate([F.ravel() for F in feats])).all()))
+
+
+@MEDIUM
+@given(node_feature_lists(), st.sampled_from([None] * 3 + [1.0, 0.0, -1.0, np.nan, 1e-300]),
+       st.booleans())
+def test_hks_baseline_kernels(feats_n, sigma2, labelled):
+    """hks_oa_kernel and hks_mean_kernel on any features (and labels)."""
+    from transync import kernels as tk
+
+    feats, _ = feats_n
+    labels = [np.arange(len(F)) % 2 for F in feats] if labelled else None
+    K = call(tk.hks_oa_kernel, feats, sigma2=sigma2, node_labels=labels)
+    if K is not REFUSED:
+        _check_kernel_matrix(K, len(feats), "hks_oa_kernel")
+        check(bool(np.allclose(np.diag(K), 1.0)), "hks_oa_kernel: diagonal not 1")
+    K = call(tk.hks_mean_kernel, feats, node_labels=labels)
+    if K is not REFUSED:
+        _check_kernel_matrix(K, len(feats), "hks_mean_kernel", psd=True)
+
+
+@MEDIUM
+@given(st.one_of(any_arrays(max_dims=2, max_side=5),
+                 hnp.arrays(np.float64, st.integers(1, 5).map(lambda m: (m, m)),
+                            elements=st.sampled_from([0.0, 0.0, 1.0, 2.0, -1.0, np.nan]))),
+       st.sampled_from([None, None, [0.1, 1.0], [1.0], [], [0.0, 1.0], [-1.0], [np.nan],
+                        [1e300]]))
+def test_heat_kernel_signature(adj, times):
+    """Any adjacency (asymmetric, negative, NaN, non-square, any dtype) and time grid."""
+    from transync import kernels as tk
+
+    H = call(tk.heat_kernel_signature, adj, times)
+    if H is REFUSED:
+        return
+    check_finite_array(H, "heat_kernel_signature")
+    check(H.ndim == 2 and H.shape[0] == np.shape(adj)[0],
+          f"heat_kernel_signature: shape {H.shape} for an adjacency of shape {np.shape(adj)}")
+
+
 def test_harness_flags_low_level_errors():
     """The harness itself: documented errors pass, low-level ones are violations."""
     def named():

@@ -167,3 +167,36 @@ def test_int_array_bad_inputs():
     a32 = np.zeros((2, 2), np.int32)
     assert check_int_array(a32, "a", 2, keep_dtype=True) is a32
     assert check_int_array(a32, "a", 2).dtype == np.int64
+
+
+def test_feature_values_beyond_the_limit_and_widths_near_float_limits():
+    """Huge features, tiny or huge widths: named refusals, never an overflowed (NaN) kernel."""
+    from transync.kernels import (aligned_features, default_sigma2, hks_oa_kernel,
+                                  hks_mean_kernel, match_pairs, median_gamma)
+    from transync.kernels._checks import FEATURE_LIMIT, SIGMA2_MIN, check_width
+
+    big = [np.array([[0.0], [1.0]]), np.array([[2e100]])]
+    for fn in (default_sigma2, hks_oa_kernel, hks_mean_kernel):
+        with pytest.raises(ValueError, match=r"`features\[1\]` has values up to 2e\+100"):
+            fn(big)
+    assert FEATURE_LIMIT == 1e100
+    close = [np.array([[0.0], [1e-160]]), np.array([[0.0]])]
+    with pytest.raises(ValueError, match="`features` are too close"):
+        default_sigma2(close)
+    X = aligned_features([close[0], close[0][::-1]], np.array([[0, 1], [0, 1]]))
+    with pytest.raises(ValueError, match="`aligned` are too close"):
+        median_gamma(X)
+    with pytest.raises(ValueError, match=r"`sigma2` must be at least 1e-300"):
+        hks_oa_kernel([np.array([[0.0], [1.0]])] * 2, sigma2=1e-310)
+    with pytest.raises(ValueError, match=r"`sigma2` must be at least"):
+        match_pairs([np.zeros((2, 1))] * 2, [np.zeros((2, 2))] * 2, [[0, 1]], n=2,
+                    sigma2=SIGMA2_MIN / 10)
+    with pytest.raises(ValueError, match=r"`gamma` must be at most 1e\+300"):
+        hks_mean_kernel([np.zeros((2, 1))] * 2, kernel="rbf", gamma=1e301)
+    assert check_width(SIGMA2_MIN, "sigma2") == SIGMA2_MIN
+    # the smallest width accepted: far nodes get affinity exactly 0, no warning, no NaN
+    with __import__("warnings").catch_warnings():
+        __import__("warnings").simplefilter("error")
+        K = hks_oa_kernel([np.array([[0.0], [1e9]]), np.array([[1e9], [0.0]])],
+                          sigma2=SIGMA2_MIN)
+    np.testing.assert_allclose(K, 1.0)

@@ -229,3 +229,17 @@ def test_repeated_cv_selects_the_kernel_jointly_with_C():
     np.testing.assert_array_equal(single.chosen_kernel, 0)
     with pytest.raises(ValueError, match="stack of square"):
         repeated_cv(np.zeros((2, 30, 29)), y)
+
+
+def test_cosine_normalize_tiny_self_similarities():
+    """Self-similarities near the smallest float64 (the outer product of their inverse square
+    roots overflows): still the cosine, exactly symmetric, no warning."""
+    import warnings
+
+    x = np.array([[1e-160], [2e-160], [3e-160]])
+    K = x @ x.T                                     # entries ~1e-320, subnormal
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        Kn = cosine_normalize(K)
+    np.testing.assert_allclose(Kn, 1.0, rtol=1e-6)
+    np.testing.assert_array_equal(Kn, Kn.T)

@@ -31,7 +31,7 @@ from .._validation import check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning
 from ..graphs import Graph
 from ..parallel import map_chunks, split_chunks
-from ._checks import check_feature_list, check_graph_list, check_node_labels
+from ._checks import check_feature_list, check_graph_list, check_node_labels, check_width
 from ._evaluate import cosine_normalize
 from ._pairwise import default_sigma2
 
@@ -169,7 +169,8 @@ def _oa_chunk(pair_idx: np.ndarray, *, pairs: np.ndarray, features: list, offset
         rows = np.flatnonzero(P[:, 0] == i)
         js = P[rows, 1]
         cols = np.concatenate([np.arange(offsets[j], offsets[j + 1]) for j in js])
-        S = np.exp(-_sq_dist(features[i], X[cols]) / sigma2)
+        with np.errstate(over="ignore", under="ignore"):        # far nodes: exactly 0
+            S = np.exp(-_sq_dist(features[i], X[cols]) / sigma2)
         if labels is not None:
             S *= labels[offsets[i]:offsets[i + 1], None] == labels[None, cols]
         starts = np.concatenate([[0], np.cumsum(offsets[js + 1] - offsets[js])])
@@ -227,7 +228,7 @@ def hks_oa_kernel(features, *, sigma2: float | None = None, node_labels=None,
     feats = check_feature_list(features)
     sizes = np.array([F.shape[0] for F in feats])
     labels = None if node_labels is None else check_node_labels(node_labels, sizes)
-    sigma2 = default_sigma2(feats) if sigma2 is None else check_positive(sigma2, "sigma2")
+    sigma2 = default_sigma2(feats) if sigma2 is None else check_width(sigma2, "sigma2")
     N = len(feats)
     offsets = np.concatenate([[0], np.cumsum(sizes)])
     pairs = np.stack(np.triu_indices(N, 1), axis=1)
@@ -304,13 +305,15 @@ def hks_mean_kernel(features, *, kernel: str = "linear", gamma: float | None = N
             Phi = Phi.reshape(N, -1) / sizes[:, None]
         K = Phi @ Phi.T
     else:
-        g = 1.0 / default_sigma2(feats) if gamma is None else check_positive(gamma, "gamma")
+        g = (1.0 / default_sigma2(feats) if gamma is None
+             else check_width(gamma, "gamma", inverse=True))
         lab = None if labels is None else np.concatenate(labels)
         starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
         K = np.zeros((N, N))
         for s in range(0, X.shape[0], block_nodes):
             blk = slice(s, min(s + block_nodes, X.shape[0]))
-            S = np.exp(-g * _sq_dist(X[blk], X))
+            with np.errstate(over="ignore", under="ignore"):    # far nodes: exactly 0
+                S = np.exp(-g * _sq_dist(X[blk], X))
             if lab is not None:
                 S *= lab[blk, None] == lab[None, :]
             col_sums = np.add.reduceat(S, starts, axis=1)          # (block, N)

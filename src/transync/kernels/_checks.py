@@ -61,6 +61,29 @@ def check_sequence(x, name: str, expected: str, *, allow_empty: bool = False,
     return list(x)
 
 
+#: smallest Gaussian width sigma2 (largest inverse width gamma = 1 / SIGMA2_MIN) the kernels
+#: accept: 1 / sigma2 must stay finite
+SIGMA2_MIN = 1e-300
+
+
+def check_width(value, name: str, *, inverse: bool = False) -> float:
+    """A Gaussian width ``sigma2`` (>= :data:`SIGMA2_MIN`) or, with ``inverse``, a ``gamma``
+    (<= 1 / :data:`SIGMA2_MIN`): positive, finite and with a finite inverse."""
+    from .._validation import check_positive
+
+    v = check_positive(value, name)
+    if (v > 1.0 / SIGMA2_MIN) if inverse else (v < SIGMA2_MIN):
+        bound = f"at most {1.0 / SIGMA2_MIN:g}" if inverse else f"at least {SIGMA2_MIN:g}"
+        raise ValueError(f"`{name}` must be {bound} (its inverse must be a finite float64), "
+                         f"got {v!r}")
+    return v
+
+
+#: largest absolute node-feature value the kernels accept: their squares, summed over the
+#: features of a node, must stay far inside float64
+FEATURE_LIMIT = 1e100
+
+
 def check_feature_list(features, name: str = "features", *,
                        ndim: int | tuple[int, ...] = 2) -> list[np.ndarray]:
     """One ``(n_i, f)`` float array per graph (``n_i >= 1``, one ``f`` for all), validated.
@@ -82,6 +105,11 @@ def check_feature_list(features, name: str = "features", *,
         if F.shape[0] == 0:
             raise ValueError(f"`{name}[{g}]` must describe at least one node, got shape "
                              f"{F.shape}")
+        big = float(np.abs(F).max())
+        if big > FEATURE_LIMIT:
+            raise ValueError(f"`{name}[{g}]` has values up to {big:.3g}: node features must "
+                             f"stay within +-{FEATURE_LIMIT:g} (kernels square them; beyond "
+                             f"that float64 overflows), rescale them")
     return out
 
 
@@ -191,3 +219,14 @@ def check_int_array(x, name: str, ndim: int | None = None,
     integer array keeps its own dtype (no int64 copy of a large int32 assignment array).
     """
     return _check_int_array(x, name, ndim=ndim, finite=True, keep_dtype=keep_dtype)
+
+
+def squared_distances(X, Y, name: str) -> np.ndarray:
+    """``((X - Y) ** 2).sum(-1)``, refusing features too large for float64 (a ``ValueError``
+    naming ``name``) instead of returning infinite distances and a zero or NaN kernel width."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        d2 = ((X - Y) ** 2).sum(-1)
+    if d2.size and not np.isfinite(d2).all():
+        raise ValueError(f"`{name}` are too large: squared distances between node features "
+                         f"overflow float64; rescale them")
+    return d2

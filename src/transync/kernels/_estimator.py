@@ -10,9 +10,9 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
-from .._validation import check_choice, check_int, check_int_array, check_positive
+from .._validation import check_choice, check_int, check_int_array
 from ..graphs import Graph
-from ._checks import check_label_array, check_sequence
+from ._checks import check_label_array, check_sequence, check_width
 from ._hks import hks_features
 from ._pairwise import PAIRWISE_MATCHERS, default_sigma2, match_pairs
 from ._transitive import (
@@ -274,9 +274,9 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
         check_choice(self.sync, "sync", SYNC_METHODS)
         check_choice(self.kernel, "kernel", KERNELS)
         if self.sigma2 is not None:
-            check_positive(self.sigma2, "sigma2")
+            check_width(self.sigma2, "sigma2")
         if self.gamma is not None:
-            check_positive(self.gamma, "gamma")
+            check_width(self.gamma, "gamma", inverse=True)
         if not (isinstance(self.node_labels, (bool, np.bool_))
                 or (isinstance(self.node_labels, str) and self.node_labels == "auto")):
             raise ValueError(f"`node_labels` must be 'auto', True or False, got "

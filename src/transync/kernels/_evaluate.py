@@ -94,8 +94,22 @@ def cosine_normalize(K, diag_rows=None, diag_cols=None) -> np.ndarray:
             label = "the diagonal of `K`" if diag_rows is None else f"`{name}`"
             raise ValueError(f"{label} must be non-negative (self-similarities), got minimum "
                              f"{float(d.min()):.6g}")
-    # one outer product: a symmetric K stays exactly symmetric
-    return K * np.outer(_inv_sqrt(d_rows), _inv_sqrt(d_cols))
+    a_rows, a_cols = _inv_sqrt(d_rows), _inv_sqrt(d_cols)
+    with np.errstate(over="ignore", invalid="ignore"):
+        # one outer product: a symmetric K stays exactly symmetric
+        out = K * np.outer(a_rows, a_cols)
+    if np.isfinite(out).all():
+        return out
+    # self-similarities near the float64 limits (tiny features): scale one side at a time,
+    # then restore exact symmetry
+    with np.errstate(over="ignore", invalid="ignore", under="ignore"):
+        out = (K * a_rows[:, None]) * a_cols[None, :]
+    if diag_rows is None and np.array_equal(K, K.T):
+        out = 0.5 * (out + out.T)
+    if not np.isfinite(out).all():
+        raise ValueError("`K` cannot be cosine-normalized in float64: its entries are too large "
+                         "for its self-similarities (not a kernel matrix?)")
+    return out
 
 
 def _inv_sqrt(d: np.ndarray) -> np.ndarray:

@@ -85,8 +85,8 @@ from ..matching import sm as _sm_reference
 from ..multigraph import PairAffinities, run_lockstep
 from ..parallel import map_chunks, split_chunks
 from ..permutations import solve_lap
-from ._checks import (check_adjacency, check_feature_list, check_int_array, check_node_labels,
-                      check_sequence)
+from ._checks import (SIGMA2_MIN, check_adjacency, check_feature_list, check_int_array,
+                      check_node_labels, check_sequence, check_width, squared_distances)
 
 __all__ = ["DUMMY_AFFINITY", "LABEL_MISMATCH", "PAIRWISE_MATCHERS",
            "default_sigma2", "match_pairs"]
@@ -185,12 +185,16 @@ def default_sigma2(features, *, rng=None) -> float:
     if len(H) < 2:
         return 1.0
     u, v = np.triu_indices(len(H), 1)
-    d2 = ((H[u] - H[v]) ** 2).sum(1)
+    d2 = squared_distances(H[u], H[v], "features")
     med = float(np.median(d2))
-    if med > 0:
-        return med
-    pos = d2[d2 > 0]
-    return float(pos.mean()) if pos.size else 1.0
+    if med <= 0:
+        pos = d2[d2 > 0]
+        med = float(pos.mean()) if pos.size else 1.0
+    if med < SIGMA2_MIN:
+        raise ValueError(f"`features` are too close: their median squared distance {med:.3g} "
+                         f"is below {SIGMA2_MIN:g} (a Gaussian width whose inverse overflows "
+                         f"float64); rescale the node features")
+    return med
 
 
 # --------------------------------------------------------------------------- chunk work
@@ -203,7 +207,8 @@ def _node_affinity(feat, sizes, labels, pl, sigma2, dummy):
     sq_i, sq_j = (Hi * Hi).sum(2), (Hj * Hj).sum(2)
     D = sq_i[:, :, None] + sq_j[:, None, :] - 2.0 * np.matmul(Hi, np.swapaxes(Hj, 1, 2))
     np.maximum(D, 0.0, out=D)
-    N = np.exp(D * (-1.0 / sigma2), out=D)
+    with np.errstate(over="ignore", under="ignore"):            # far nodes: exactly 0
+        N = np.exp(D * (-1.0 / sigma2), out=D)
     if labels is not None:
         same = labels[pl[:, 0]][:, :, None] == labels[pl[:, 1]][:, None, :]
         N *= np.where(same, 1.0, LABEL_MISMATCH)
@@ -402,7 +407,7 @@ def match_pairs(features, adjacencies, pairs, *, n, matcher="rrwm", sigma2=None,
     if sigma2 is None:
         sigma2 = default_sigma2(feats, rng=rng)
     else:
-        sigma2 = check_positive(sigma2, "sigma2")
+        sigma2 = check_width(sigma2, "sigma2")
         if rng is not None:
             as_generator(rng)
     dummy = DUMMY_AFFINITY if dummy_affinity is None else check_positive(

@@ -27,7 +27,8 @@ import numpy as np
 from .._validation import check_array, check_choice, check_int, check_positive
 from ..permutations import solve_lap
 from ..synchronization import synchronize_permutations
-from ._checks import check_feature_list, check_int_array, check_node_labels
+from ._checks import (check_feature_list, check_int_array, check_node_labels,
+                      check_width, squared_distances)
 from ._evaluate import cosine_normalize
 
 __all__ = [
@@ -840,19 +841,26 @@ def median_gamma(aligned, *, rng=0) -> float:
         gen = np.random.default_rng(rng)
         i = gen.integers(0, N, _GAMMA_SAMPLE_PAIRS)
         j = (i + gen.integers(1, N, _GAMMA_SAMPLE_PAIRS)) % N
-    return _inverse_median(X[i], X[j])
+    return _inverse_median(X[i], X[j], "aligned")
 
 
-def _inverse_median(Xi: np.ndarray, Xj: np.ndarray) -> float:
+def _inverse_median(Xi: np.ndarray, Xj: np.ndarray, name: str) -> float:
     """``1 / median`` of ``||Xi[p, u] - Xj[p, u]||^2`` over rows real in both (last column);
     the mean of the positive ones when the median is 0; 1.0 when none is positive."""
     both = (Xi[..., -1] > 0) & (Xj[..., -1] > 0)
-    d2 = ((Xi - Xj) ** 2).sum(-1)[both]
+    d2 = squared_distances(Xi[both], Xj[both], name)
     med = float(np.median(d2)) if d2.size else 0.0
     if med <= 0:
         pos = d2[d2 > 0]
         med = float(pos.mean()) if pos.size else 0.0
-    return 1.0 / med if med > 0 else 1.0
+    if med <= 0:
+        return 1.0
+    with np.errstate(over="ignore"):
+        gamma = 1.0 / med
+    if not np.isfinite(gamma):
+        raise ValueError(f"`{name}` are too close: their median squared distance {med:.3g} "
+                         f"has no finite inverse (Gaussian width); rescale the node features")
+    return gamma
 
 
 def _gaussian_gram(X: np.ndarray, Y: np.ndarray, gamma: float) -> np.ndarray:
@@ -938,8 +946,9 @@ def assignment_kernel(aligned, other=None, *, kernel: str = "linear", gamma=None
     if not isinstance(normalize, (bool, np.bool_)):
         raise TypeError(f"`normalize` must be a bool, got {type(normalize).__name__}")
     if kernel == "gaussian":
-        gamma = median_gamma(X) if gamma is None else check_positive(gamma, "gamma")
-        K = _gaussian_gram(X, Y, gamma)
+        gamma = median_gamma(X) if gamma is None else check_width(gamma, "gamma", inverse=True)
+        with np.errstate(over="ignore", invalid="ignore"):
+            K = _gaussian_gram(X, Y, gamma)
         dx = (X[..., -1] ** 2).sum(1)
         dy = dx if other is None else (Y[..., -1] ** 2).sum(1)
     else:
@@ -948,14 +957,23 @@ def assignment_kernel(aligned, other=None, *, kernel: str = "linear", gamma=None
                              f"with kernel={kernel!r}")
         Xf = X.reshape(X.shape[0], -1)
         Yf = Xf if other is None else Y.reshape(Y.shape[0], -1)
-        K = Xf @ Yf.T
-        dx = np.einsum("ij,ij->i", Xf, Xf)
-        dy = dx if other is None else np.einsum("ij,ij->i", Yf, Yf)
+        with np.errstate(over="ignore", invalid="ignore"):
+            K = Xf @ Yf.T
+            dx = np.einsum("ij,ij->i", Xf, Xf)
+            dy = dx if other is None else np.einsum("ij,ij->i", Yf, Yf)
+    _check_overflow(K, dx, dy, "aligned")
     if other is not None:
         return cosine_normalize(K, dx, dy) if normalize else K
     if normalize:
         K = cosine_normalize(K)
     return 0.5 * (K + K.T)                                   # exactly symmetric
+
+
+def _check_overflow(K: np.ndarray, dx: np.ndarray, dy: np.ndarray, name: str) -> None:
+    """A ``ValueError`` naming ``name`` when the kernel overflowed float64 (huge features)."""
+    if not (np.isfinite(K).all() and np.isfinite(dx).all() and np.isfinite(dy).all()):
+        raise ValueError(f"`{name}` are too large: the kernel overflows float64; rescale the "
+                         f"node features")
 
 
 def _matched_pairs(pairs, N: int) -> tuple[np.ndarray, np.ndarray]:
@@ -1072,22 +1090,24 @@ def pairwise_assignment_kernel(features, assignments, pairs, *, kernel: str = "l
     X = _padded_features(feats, n)                          # own node order, real first
     if kernel == "gaussian":
         gamma = (_pairwise_median_gamma(X, i, j, A) if gamma is None
-                 else check_positive(gamma, "gamma"))
+                 else check_width(gamma, "gamma", inverse=True))
     elif gamma is not None:
         raise ValueError(f"`gamma` applies to kernel='gaussian' only, got gamma={gamma!r}")
     K = np.zeros((N, N))
     step = max(1, _SLOT_BLOCK_ELEMENTS // (n * X.shape[2]))
-    for s in range(0, A.shape[0], step):                    # blocks of pairs in lock-step
-        e = slice(s, s + step)
-        Xi, Xj = X[i[e]], X[j[e][:, None], A[e]]
-        if kernel == "linear":
-            vals = np.einsum("puf,puf->p", Xi, Xj)
-        else:
-            d2 = ((Xi - Xj) ** 2).sum(-1)
-            vals = (Xi[..., -1] * Xj[..., -1] * np.exp(-gamma * d2)).sum(1)
-        K[i[e], j[e]] = vals
-        K[j[e], i[e]] = vals
-    diag = (np.einsum("guf,guf->g", X, X) if kernel == "linear" else X[..., -1].sum(1))
+    with np.errstate(over="ignore", invalid="ignore"):
+        for s in range(0, A.shape[0], step):                # blocks of pairs in lock-step
+            e = slice(s, s + step)
+            Xi, Xj = X[i[e]], X[j[e][:, None], A[e]]
+            if kernel == "linear":
+                vals = np.einsum("puf,puf->p", Xi, Xj)
+            else:
+                d2 = ((Xi - Xj) ** 2).sum(-1)
+                vals = (Xi[..., -1] * Xj[..., -1] * np.exp(-gamma * d2)).sum(1)
+            K[i[e], j[e]] = vals
+            K[j[e], i[e]] = vals
+        diag = (np.einsum("guf,guf->g", X, X) if kernel == "linear" else X[..., -1].sum(1))
+    _check_overflow(K, diag, diag, "features")
     K[np.diag_indices(N)] = diag
     if normalize:
         K = cosine_normalize(K)
@@ -1102,7 +1122,7 @@ def _pairwise_median_gamma(X: np.ndarray, i: np.ndarray, j: np.ndarray, A: np.nd
     if P > _GAMMA_SAMPLE_PAIRS:
         pick = np.sort(np.random.default_rng(0).choice(P, _GAMMA_SAMPLE_PAIRS, replace=False))
         i, j, A = i[pick], j[pick], A[pick]
-    return _inverse_median(X[i], X[j[:, None], A])
+    return _inverse_median(X[i], X[j[:, None], A], "features")
 
 
 # --------------------------------------------------------------------------------------------

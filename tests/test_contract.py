@@ -1219,6 +1219,51 @@ def test_heat_kernel_signature(adj, times):
           f"heat_kernel_signature: shape {H.shape} for an adjacency of shape {np.shape(adj)}")
 
 
+@st.composite
+def small_graphs(draw, labelled=None):
+    """An undirected graph of 0..5 nodes (isolated nodes and components allowed), labelled or
+    not."""
+    from transync.graphs import Graph
+
+    n = draw(st.sampled_from([1, 2, 3, 4, 5] * 3 + [0]))
+    upper = draw(hnp.arrays(np.bool_, (n, n)))
+    A = np.triu(upper, 1)
+    A = (A | A.T).astype(float)
+    labelled = draw(st.booleans()) if labelled is None else labelled
+    labels = draw(hnp.arrays(np.int64, n, elements=st.integers(0, 2))) if labelled else None
+    return Graph(A, node_labels=labels) if n else A
+
+
+@COSTLY
+@given(st.booleans().flatmap(lambda lab: st.tuples(
+           st.lists(small_graphs(labelled=lab), min_size=0, max_size=5),
+           st.lists(small_graphs(), min_size=0, max_size=2))),
+       st.sampled_from(["node", "sm", "rrwm"]), st.sampled_from(["orthogonal", "spectral"]),
+       st.sampled_from(["linear", "gaussian", "relaxed"]),
+       st.sampled_from([None, None, 1, 3]))
+def test_transitive_assignment_kernel_estimator(collections, matcher, sync, kernel, k):
+    """fit_transform on any small graphs: a finite, symmetric, PSD Gram matrix with unit
+    diagonal; transform of new graphs: finite rows in [-1, 1]; or a named refusal (empty
+    collections, graphs without nodes, graphs larger than the fitted universe)."""
+    from transync.kernels import TransitiveAssignmentKernel
+
+    graphs, new = collections
+    est = TransitiveAssignmentKernel(matcher=matcher, sync=sync, kernel=kernel, n_neighbors=k,
+                                     random_state=0)
+    K = call(est.fit_transform, graphs)
+    if K is REFUSED:
+        return
+    N = len(graphs)
+    _check_kernel_matrix(K, N, "TransitiveAssignmentKernel.fit_transform", psd=True)
+    check(bool(np.allclose(np.diag(K), 1.0)), f"fit_transform: diagonal {np.diag(K)}")
+    T = call(est.transform, new)
+    if T is REFUSED:
+        return
+    check_finite_array(T, "TransitiveAssignmentKernel.transform")
+    check(T.shape == (len(new), N), f"transform: shape {T.shape}, expected ({len(new)}, {N})")
+    check(bool(np.all(np.abs(T) <= 1 + 1e-9)), "transform: normalized entries outside [-1, 1]")
+
+
 def test_harness_flags_low_level_errors():
     """The harness itself: documented errors pass, low-level ones are violations."""
     def named():

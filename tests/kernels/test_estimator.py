@@ -664,3 +664,17 @@ def test_place_graphs_with_fitted_subset_equals_full_votes():
         place_graphs(full[:, :2], labels[:, :4], fitted=sub)
     with pytest.raises(ValueError, match="`fitted` must hold fitted-graph indices"):
         place_graphs(full[:, :2], labels, fitted=sub + 6)
+
+
+@pytest.mark.parametrize("sync", ["orthogonal", "spectral"])
+def test_relaxed_kernel_of_a_graph_no_match_reaches(sync):
+    """Nodes whose every match is dropped (labels differ from all others') still get a relaxed
+    feature: unit diagonal, not a zero row (found by the property-based contract test)."""
+    path = np.array([[0.0, 1.0], [1.0, 0.0]])
+    for graphs in ([Graph(np.zeros((1, 1)), node_labels=np.array([k])) for k in (0, 1)],
+                   [Graph(np.zeros((1, 1)), node_labels=np.array([1])),
+                    Graph(path, node_labels=np.array([0, 0]))]):
+        K = TransitiveAssignmentKernel(matcher="node", sync=sync, kernel="relaxed",
+                                       random_state=0).fit_transform(graphs)
+        np.testing.assert_allclose(np.diag(K), 1.0)
+        assert min_eigenvalue_ratio(K) >= -1e-9

@@ -373,6 +373,8 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
     method : {"orthogonal", "spectral"}, default="orthogonal"
     keep_embedding : bool, default=False
         Keep the relaxed solution as ``Alignment.embedding`` (needed by the relaxed kernel).
+        With ``sizes``, a real node that no kept correspondence reaches (``"spectral"`` gives
+        it a zero row) gets the direction of its rounded slot at the median row norm.
     max_iter, tol : int, float
         Polar sweeps of ``"orthogonal"`` and their relative tolerance, passed on to
         ``synchronize_permutations``.
@@ -486,9 +488,26 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
         labels = _fill_dummies(res.labels, n)
         if emb is not None:
             full = np.zeros((N, n, emb.shape[1]))
-            full[np.arange(n)[None, :] < real[:, None]] = emb      # real rows, graph order
-            emb = full
+            is_real = np.arange(n)[None, :] < real[:, None]
+            full[is_real] = emb                                 # real rows, graph order
+            emb = _fill_unreached_rows(full, labels, is_real)
     return Alignment(labels=labels, embedding=emb, objective=float(res.objective), info=info)
+
+
+def _fill_unreached_rows(emb: np.ndarray, labels: np.ndarray, is_real: np.ndarray):
+    """Real nodes that no kept correspondence reached (all their matches dropped, e.g. as label
+    mismatches) have a zero row in the spectral embedding, which would give their graph a zero
+    relaxed feature (self-similarity 0): they get the direction of their rounded slot instead,
+    at the median norm of the reached rows."""
+    norms = np.linalg.norm(emb, axis=2)
+    empty = is_real & (norms == 0)
+    if not empty.any() or emb.shape[2] <= labels.max():
+        return emb
+    reached = norms[is_real & (norms > 0)]
+    scale = float(np.median(reached)) if reached.size else 1.0
+    g, u = np.nonzero(empty)
+    emb[g, u, labels[g, u]] = scale
+    return emb
 
 
 def _degrees(A: np.ndarray, pr: np.ndarray, N: int, n: int, real) -> np.ndarray:

@@ -119,6 +119,9 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
     matcher : {"rrwm", "sm", "node"}, default="rrwm"
         Pairwise matcher (:func:`transync.kernels.match_pairs`): reweighted random walks or
         spectral matching on the HKS + structure affinity, or the node-only assignment (fast).
+        In the ``kernels`` experiment (docs/kernels.md) ``matcher="node"`` with
+        ``kernel="gaussian"`` was the most accurate variant on every set but PTC_MR and 2-3.5x
+        faster than RRWM; the defaults are the thesis's pipeline.
     sync : {"orthogonal", "spectral"}, default="orthogonal"
         Synchronization (:func:`transync.kernels.synchronize_alignments`).
     kernel : {"linear", "gaussian", "relaxed"}, default="linear"

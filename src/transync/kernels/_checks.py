@@ -227,6 +227,6 @@ def squared_distances(X, Y, name: str) -> np.ndarray:
     with np.errstate(over="ignore", invalid="ignore"):
         d2 = ((X - Y) ** 2).sum(-1)
     if d2.size and not np.isfinite(d2).all():
-        raise ValueError(f"`{name}` are too large: squared distances between node features "
-                         f"overflow float64; rescale them")
+        raise ValueError(f"the node features in `{name}` are too large: their squared "
+                         f"distances overflow float64; rescale them")
     return d2

@@ -191,9 +191,9 @@ def default_sigma2(features, *, rng=None) -> float:
         pos = d2[d2 > 0]
         med = float(pos.mean()) if pos.size else 1.0
     if med < SIGMA2_MIN:
-        raise ValueError(f"`features` are too close: their median squared distance {med:.3g} "
-                         f"is below {SIGMA2_MIN:g} (a Gaussian width whose inverse overflows "
-                         f"float64); rescale the node features")
+        raise ValueError(f"the node features in `features` are too close: their median "
+                         f"squared distance {med:.3g} is below {SIGMA2_MIN:g} (a Gaussian width "
+                         f"whose inverse overflows float64); rescale them")
     return med
 
 

@@ -877,8 +877,9 @@ def _inverse_median(Xi: np.ndarray, Xj: np.ndarray, name: str) -> float:
     with np.errstate(over="ignore"):
         gamma = 1.0 / med
     if not np.isfinite(gamma):
-        raise ValueError(f"`{name}` are too close: their median squared distance {med:.3g} "
-                         f"has no finite inverse (Gaussian width); rescale the node features")
+        raise ValueError(f"the node features in `{name}` are too close: their median squared "
+                         f"distance {med:.3g} has no finite inverse (Gaussian width); rescale "
+                         f"them")
     return gamma
 
 
@@ -991,8 +992,8 @@ def assignment_kernel(aligned, other=None, *, kernel: str = "linear", gamma=None
 def _check_overflow(K: np.ndarray, dx: np.ndarray, dy: np.ndarray, name: str) -> None:
     """A ``ValueError`` naming ``name`` when the kernel overflowed float64 (huge features)."""
     if not (np.isfinite(K).all() and np.isfinite(dx).all() and np.isfinite(dy).all()):
-        raise ValueError(f"`{name}` are too large: the kernel overflows float64; rescale the "
-                         f"node features")
+        raise ValueError(f"the values of `{name}` are too large: the kernel overflows float64; "
+                         f"rescale the node features")
 
 
 def _matched_pairs(pairs, N: int) -> tuple[np.ndarray, np.ndarray]:
@@ -1009,7 +1010,7 @@ def _matched_pairs(pairs, N: int) -> tuple[np.ndarray, np.ndarray]:
                          f"{pr[self_pairs[0]].tolist()}")
     lo, hi = pr.min(axis=1), pr.max(axis=1)
     code = lo * N + hi
-    uniq, first, count = np.unique(code, return_index=True, return_counts=True)
+    uniq, count = np.unique(code, return_counts=True)
     if (count > 1).any():
         k = np.flatnonzero(code == uniq[np.argmax(count > 1)])
         raise ValueError(f"`pairs` must give each pair of graphs once, got "

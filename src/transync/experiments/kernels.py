@@ -125,8 +125,8 @@ EXTRA_KERNELS = {"ENZYMES": VIEW_KERNELS, "PPI": VIEW_KERNELS, "NCI1": VIEW_KERN
 #: NCI1 (3911 graphs kept, 7.6 million pairs) every all-pairs TAK variant, their
 #: non-transitive counterparts and the random walk, GraKeL's WL-OA (its Gram matrix did not
 #: finish in 30 CPU-min, 4.1 GB, on this machine), and SP, graphlet-3 and TAK-gauss-k10 (not
-#: among the issue's comparisons; one nested 10-fold CV repetition costs about 3-5 min per
-#: kernel there on this machine); on PPI the random walk, whose lambda = 0.01 is above
+#: among the issue's comparisons; one nested 10-fold CV repetition costs 0.6-4 min per kernel
+#: there on this machine); on PPI the random walk, whose lambda = 0.01 is above
 #: 1 / rho_max^2 = 6.6e-4 there (the walk series diverges)
 SKIP = {"NCI1": ("RW", "TAK-lin", "TAK-gauss", "TAK-relax", "TAK-spec", "TAK-node",
                  "TAK-node-gauss", "NT-lin", "NT-gauss", "WL-OA", "SP", "graphlet-3",

@@ -221,6 +221,34 @@ def check_int_array(x, name: str, ndim: int | None = None,
     return _check_int_array(x, name, ndim=ndim, finite=True, keep_dtype=keep_dtype)
 
 
+def check_pair_indices(pairs, n_graphs: int) -> np.ndarray:
+    """``(P, 2)`` int64 graph index pairs within ``[0, n_graphs)`` (an empty input: no pairs)."""
+    arr = check_int_array(pairs, "pairs")
+    if arr.size == 0:
+        return np.zeros((0, 2), np.int64)
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(f"`pairs` must have shape (P, 2), got shape {arr.shape}")
+    if arr.min() < 0 or arr.max() >= n_graphs:
+        raise ValueError(f"`pairs` must hold graph indices in [0, {n_graphs}), got range "
+                         f"[{arr.min()}, {arr.max()}]")
+    return arr
+
+
+def median_width(d2: np.ndarray, name: str) -> float:
+    """The kernels' default Gaussian width from squared distances ``d2``: their median, the mean
+    of the positive ones when the median is 0, 1.0 when none is positive; a width below
+    :data:`SIGMA2_MIN` (no finite inverse) is refused, naming ``name``."""
+    med = float(np.median(d2)) if d2.size else 0.0
+    if med <= 0:
+        pos = d2[d2 > 0]
+        med = float(pos.mean()) if pos.size else 1.0
+    if med < SIGMA2_MIN:
+        raise ValueError(f"the node features in `{name}` are too close: their median squared "
+                         f"distance {med:.3g} is below {SIGMA2_MIN:g} (a Gaussian width whose "
+                         f"inverse overflows float64); rescale them")
+    return med
+
+
 def squared_distances(X, Y, name: str) -> np.ndarray:
     """``((X - Y) ** 2).sum(-1)``, refusing features too large for float64 (a ``ValueError``
     naming ``name``) instead of returning infinite distances and a zero or NaN kernel width."""

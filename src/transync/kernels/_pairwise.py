@@ -85,8 +85,8 @@ from ..matching import sm as _sm_reference
 from ..multigraph import PairAffinities, run_lockstep
 from ..parallel import map_chunks, split_chunks
 from ..permutations import solve_lap
-from ._checks import (SIGMA2_MIN, check_adjacency, check_feature_list, check_int_array,
-                      check_node_labels, check_sequence, check_width, squared_distances)
+from ._checks import (check_adjacency, check_feature_list, check_node_labels, check_pair_indices,
+                      check_sequence, check_width, median_width, squared_distances)
 
 __all__ = ["DUMMY_AFFINITY", "LABEL_MISMATCH", "PAIRWISE_MATCHERS",
            "default_sigma2", "match_pairs"]
@@ -133,18 +133,6 @@ def _check_inputs(features, adjacencies, node_labels):
     return feats, adjs, labels
 
 
-def _check_pair_indices(pairs, n_graphs):
-    arr = check_int_array(pairs, "pairs")
-    if arr.size == 0:
-        return np.zeros((0, 2), np.int64)
-    if arr.ndim != 2 or arr.shape[1] != 2:
-        raise ValueError(f"`pairs` must have shape (P, 2), got shape {arr.shape}")
-    if arr.min() < 0 or arr.max() >= n_graphs:
-        raise ValueError(f"`pairs` must hold graph indices in [0, {n_graphs}), got range "
-                         f"[{arr.min()}, {arr.max()}]")
-    return arr
-
-
 # --------------------------------------------------------------------------- sigma2
 
 
@@ -185,16 +173,7 @@ def default_sigma2(features, *, rng=None) -> float:
     if len(H) < 2:
         return 1.0
     u, v = np.triu_indices(len(H), 1)
-    d2 = squared_distances(H[u], H[v], "features")
-    med = float(np.median(d2))
-    if med <= 0:
-        pos = d2[d2 > 0]
-        med = float(pos.mean()) if pos.size else 1.0
-    if med < SIGMA2_MIN:
-        raise ValueError(f"the node features in `features` are too close: their median "
-                         f"squared distance {med:.3g} is below {SIGMA2_MIN:g} (a Gaussian width "
-                         f"whose inverse overflows float64); rescale them")
-    return med
+    return median_width(squared_distances(H[u], H[v], "features"), "features")
 
 
 # --------------------------------------------------------------------------- chunk work
@@ -396,7 +375,7 @@ def match_pairs(features, adjacencies, pairs, *, n, matcher="rrwm", sigma2=None,
     """
     feats, adjs, labels = _check_inputs(features, adjacencies, node_labels)
     N = len(feats)
-    pairs = _check_pair_indices(pairs, N)
+    pairs = check_pair_indices(pairs, N)
     sizes = np.array([len(h) for h in feats], dtype=np.int64)
     n = check_int(n, "n", minimum=1)
     if sizes.max() > n:

@@ -28,7 +28,7 @@ from .._validation import check_array, check_choice, check_int, check_positive
 from ..permutations import solve_lap
 from ..synchronization import synchronize_permutations
 from ._checks import (check_feature_list, check_int_array, check_node_labels,
-                      check_width, squared_distances)
+                      check_pair_indices, check_width, median_width, squared_distances)
 from ._evaluate import cosine_normalize
 
 __all__ = [
@@ -864,23 +864,10 @@ def median_gamma(aligned, *, rng=0) -> float:
 
 
 def _inverse_median(Xi: np.ndarray, Xj: np.ndarray, name: str) -> float:
-    """``1 / median`` of ``||Xi[p, u] - Xj[p, u]||^2`` over rows real in both (last column);
-    the mean of the positive ones when the median is 0; 1.0 when none is positive."""
+    """``1 / median_width`` of ``||Xi[p, u] - Xj[p, u]||^2`` over rows real in both (last
+    column)."""
     both = (Xi[..., -1] > 0) & (Xj[..., -1] > 0)
-    d2 = squared_distances(Xi[both], Xj[both], name)
-    med = float(np.median(d2)) if d2.size else 0.0
-    if med <= 0:
-        pos = d2[d2 > 0]
-        med = float(pos.mean()) if pos.size else 0.0
-    if med <= 0:
-        return 1.0
-    with np.errstate(over="ignore"):
-        gamma = 1.0 / med
-    if not np.isfinite(gamma):
-        raise ValueError(f"the node features in `{name}` are too close: their median squared "
-                         f"distance {med:.3g} has no finite inverse (Gaussian width); rescale "
-                         f"them")
-    return gamma
+    return 1.0 / median_width(squared_distances(Xi[both], Xj[both], name), name)
 
 
 def _gaussian_gram(X: np.ndarray, Y: np.ndarray, gamma: float) -> np.ndarray:
@@ -998,12 +985,7 @@ def _check_overflow(K: np.ndarray, dx: np.ndarray, dy: np.ndarray, name: str) ->
 
 def _matched_pairs(pairs, N: int) -> tuple[np.ndarray, np.ndarray]:
     """Rows ``(i, j)`` of ``pairs`` checked to cover every unordered pair of ``N`` graphs once."""
-    pr = check_int_array(pairs, "pairs", 2)
-    if pr.shape[1:] != (2,):
-        raise ValueError(f"`pairs` must have shape (P, 2), got shape {pr.shape}")
-    if pr.size and (pr.min() < 0 or pr.max() >= N):
-        raise ValueError(f"`pairs` must index the {N} graphs of `features` (0..{N - 1}), got "
-                         f"values in [{pr.min()}, {pr.max()}]")
+    pr = check_pair_indices(pairs, N)
     self_pairs = np.flatnonzero(pr[:, 0] == pr[:, 1])
     if self_pairs.size:
         raise ValueError(f"`pairs` must pair distinct graphs, got pairs[{self_pairs[0]}] = "

@@ -294,3 +294,14 @@ def test_random_walk_kernel_psd_invariant_and_validation():
         random_walk_kernel([np.ones((4, 4)) - np.eye(4)], lamda=0.2)     # rho = 3
     with pytest.warns(ConvergenceWarning, match="max_iter=1"):
         random_walk_kernel(graphs[:2], max_iter=1)
+
+
+def test_hks_mean_kernel_of_tiny_embeddings_is_the_cosine():
+    """Mean embeddings near the smallest float64 (self-similarities subnormal): the normalized
+    kernel is still the cosine, PSD (found by the property-based contract test)."""
+    from transync.kernels import hks_mean_kernel
+
+    F = [np.array([[0.0]]), np.array([[1.0]]), np.array([[5.2914389e-160]])]
+    K = hks_mean_kernel(F)
+    np.testing.assert_array_equal(K, [[0.0, 0.0, 0.0], [0.0, 1.0, 1.0], [0.0, 1.0, 1.0]])
+    assert min_eigenvalue_ratio(K) >= -1e-9

@@ -303,6 +303,9 @@ def hks_mean_kernel(features, *, kernel: str = "linear", gamma: float | None = N
             Phi = np.zeros((N, uniq.shape[0], X.shape[1]))
             np.add.at(Phi, (owner, code), X)
             Phi = Phi.reshape(N, -1) / sizes[:, None]
+        if normalize:       # the cosine ignores row scales: bring each row to max |.| = 1 first,
+            top = np.abs(Phi).max(1, keepdims=True)      # so tiny embeddings keep their digits
+            Phi = Phi / np.where(top > 0, top, 1.0)
         K = Phi @ Phi.T
     else:
         g = (1.0 / default_sigma2(feats) if gamma is None

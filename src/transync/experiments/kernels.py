@@ -490,8 +490,10 @@ def _gram(prepared: PreparedSet, params: dict, cache: Path, *, executor, progres
     graphs = list(prepared.graphs)
     labels = [g.node_labels for g in graphs] if prepared.has_node_labels else None
     family = params["family"]
-    if family in ("tak", "pairwise"):
+    if family == "tak":
         return _tak_gram(prepared, params, cache, executor=executor, progress=progress)
+    if family == "pairwise":
+        return _pairwise_gram(prepared, params, cache, executor=executor, progress=progress)
     if family in ("hks-oa", "hks-mean"):
         feats = kx.hks_features(graphs, _times(params["scales"]))
         if family == "hks-oa":
@@ -520,14 +522,9 @@ def _tak_gram(prepared: PreparedSet, params: dict, cache: Path, *, executor, pro
     (``fit(..., assignments=...)``)."""
     from .. import kernels as kx
 
-    if params["family"] == "pairwise":        # the TAK-lin alignment's pairwise maps
-        params = dict(params, sync="orthogonal")
     al = _alignment(prepared, params, cache, executor=executor, progress=progress)
     t0, c0 = time.perf_counter(), time.process_time()
-    offsets = al["offsets"]
-    feats = [al["features"][offsets[k]:offsets[k + 1]] for k in range(len(offsets) - 1)]
-    if params["family"] == "pairwise":
-        return _pairwise_gram(prepared, params, cache, feats, t0, c0)
+    feats = _kernel_features(al)
     if params["kernel"] == "relaxed":
         aligned = kx.relaxed_features(feats, al["embedding"])
     else:
@@ -538,16 +535,27 @@ def _tak_gram(prepared: PreparedSet, params: dict, cache: Path, *, executor, pro
     return K, float(al["seconds"]) + time.perf_counter() - t0, peak, cpu
 
 
-def _pairwise_gram(prepared: PreparedSet, params: dict, cache: Path, feats, t0, c0):
+def _kernel_features(al: dict) -> list:
+    """The per-graph node features (HKS and label one-hots) stored with an alignment."""
+    offsets = al["offsets"]
+    return [al["features"][offsets[k]:offsets[k + 1]] for k in range(len(offsets) - 1)]
+
+
+def _pairwise_gram(prepared: PreparedSet, params: dict, cache: Path, *, executor, progress):
     """A non-transitive kernel (:func:`transync.kernels.pairwise_assignment_kernel`) on the
-    stored pairwise maps of the alignment of ``params``, all pairs in ``triu_indices`` order
+    stored pairwise maps of the orthogonal alignment of ``params`` (TAK-lin's, whose node
+    features it also uses), all pairs in ``triu_indices`` order
     (:func:`transync.kernels.view_graph`'s); its time and memory are the pairwise stage's plus
     its own -- not the synchronization's, which it does not use."""
     from .. import kernels as kx
 
     if params.get("neighbors") is not None:
         raise ValueError("non-transitive kernels need the maps of all pairs, not a view graph")
-    pw_path, _, n = _cache_paths(prepared, params, cache)
+    params = dict(params, sync="orthogonal")
+    al = _alignment(prepared, params, cache, executor=executor, progress=progress)
+    t0, c0 = time.perf_counter(), time.process_time()
+    feats = _kernel_features(al)
+    pw_path = _cache_paths(prepared, params, cache)[0]
     pw = _load_npz(pw_path)
     if pw is None:                                           # pragma: no cover - a race
         raise RuntimeError(f"the pairwise maps {pw_path} vanished from the cache")

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .._validation import check_array, check_int_array as _check_int_array
+from .._validation import check_array, check_int_array as _check_int_array, check_positive
 from ..graphs import Graph
 
 __all__ = [
@@ -69,8 +69,6 @@ SIGMA2_MIN = 1e-300
 def check_width(value, name: str, *, inverse: bool = False) -> float:
     """A Gaussian width ``sigma2`` (>= :data:`SIGMA2_MIN`) or, with ``inverse``, a ``gamma``
     (<= 1 / :data:`SIGMA2_MIN`): positive, finite and with a finite inverse."""
-    from .._validation import check_positive
-
     v = check_positive(value, name)
     if (v > 1.0 / SIGMA2_MIN) if inverse else (v < SIGMA2_MIN):
         bound = f"at most {1.0 / SIGMA2_MIN:g}" if inverse else f"at least {SIGMA2_MIN:g}"

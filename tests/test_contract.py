@@ -1264,6 +1264,398 @@ def test_transitive_assignment_kernel_estimator(collections, matcher, sync, kern
     check(bool(np.all(np.abs(T) <= 1 + 1e-9)), "transform: normalized entries outside [-1, 1]")
 
 
+# ----------------------------------------------------------------------------------- multigraph
+
+PAIR_SOLVERS = ["rrwm", "ga", "pf", "sm", "ipfp", "cao", "cao-pc"]
+
+
+@st.composite
+def point_collections(draw):
+    """(graphs, sizes): up to 4 graphs of 1..5 nodes on points, sizes equal or not, coordinates
+    sometimes nasty; sometimes a junk entry instead of a graph."""
+    from transync.graphs import Graph
+
+    N = draw(st.sampled_from([2, 3, 3, 4, 4] * 3 + [0, 1]))
+    equal = draw(st.booleans())
+    n0 = draw(st.integers(1, 5))
+    graphs, sizes = [], []
+    for _ in range(N):
+        n = n0 if equal else draw(st.integers(1, 5))
+        elems = st.floats(-1, 1, width=64) if draw(st.integers(0, 15)) else nasty_floats
+        pts = draw(float_arrays((n, 2), elements=elems))
+        kind = draw(st.sampled_from(["full"] * 14 + ["delaunay", "delaunay", "junk", "adj",
+                                                     "adj"]))
+        if kind == "adj":
+            A = draw(float_arrays((n, n), elements=st.sampled_from([0.0, 0.0, 1.0, 0.3, 2.0])))
+            sym = draw(st.booleans())
+            graphs.append(call(Graph, np.maximum(A, A.T) if sym else A))
+            if graphs[-1] is REFUSED:
+                graphs[-1] = Graph(np.ones((n, n)) - np.eye(n))
+        elif kind == "junk":
+            graphs.append(draw(st.sampled_from([None, pts, "g", np.zeros((0, 0))])))
+        else:
+            graphs.append(call(Graph.from_points, pts, edges=kind))
+            if graphs[-1] is REFUSED:
+                graphs[-1] = Graph(np.ones((n, n)) - np.eye(n))
+        sizes.append(n)
+    return graphs, sizes
+
+
+@st.composite
+def view_graphs(draw, N):
+    kind = draw(st.sampled_from([None] * 12 + ["path", "path", "subset", "junk", "self", "range"]))
+    all_p = [(i, j) for i in range(N) for j in range(i + 1, N)]
+    if kind is None:
+        return None
+    if kind == "path":
+        return [(i, i + 1) for i in range(N - 1)]
+    if kind == "subset":
+        return draw(st.lists(st.sampled_from(all_p), unique=True)) if all_p else []
+    if kind == "self":
+        return [(0, 0)] + all_p
+    if kind == "range":
+        return all_p + [(0, N + 3)]
+    return draw(any_arrays(max_dims=2))
+
+
+@st.composite
+def affinities_for(draw, graphs):
+    import functools
+
+    from transync.matching import gaussian_edge_affinity
+
+    kind = draw(st.sampled_from(["default"] * 8 + ["sigma", "blocks", "blocks", "bad_blocks",
+                                                   "junk"]))
+    if kind == "default":
+        return None
+    if kind == "sigma":
+        s = draw(st.sampled_from([0.05, 0.05, 1e-300, 1e300, 1e-9]))
+        return functools.partial(gaussian_edge_affinity, sigma2=s)
+    if kind == "junk":
+        return draw(st.one_of(any_arrays(max_dims=4), st.just("aff"), st.just({(0, 1): 3})))
+    sizes = [getattr(g, "n_nodes", 0) for g in graphs]
+    out = {}
+    for i in range(len(graphs)):
+        for j in range(i + 1, len(graphs)):
+            m = sizes[i] * sizes[j]
+            if kind == "bad_blocks" and draw(st.booleans()):
+                out[(i, j)] = draw(float_arrays((m, max(m - 1, 0))))
+            else:
+                B = draw(float_arrays((m, m), elements=tame_floats))
+                out[(i, j)] = (B + B.T) / 2
+    return out
+
+
+def _check_result(res, sizes, synced, what="match_collection"):
+    N = len(sizes)
+    check(list(np.asarray(res.sizes)) == sizes, f"{what}: sizes {res.sizes} != {sizes}")
+    for p, (i, j) in enumerate(np.asarray(res.pairs).tolist()):
+        a = np.asarray(res.pairwise(i, j))
+        check_assignment(a, sizes[i], sizes[j], f"{what}: pairwise({i}, {j})")
+    check_finite_array(res.scores, f"{what}: scores")
+    check_finite_scalar(res.total_score, f"{what}: total_score")
+    for name in ("consistency", "input_consistency"):
+        v = getattr(res, name)
+        if v is not None:
+            check_finite_scalar(v, f"{what}: {name}")
+            check(0 <= v <= 1, f"{what}: {name} {v} outside [0, 1]")
+    if synced:
+        check(res.matching is not None, f"{what}: synchronized but no matching")
+        _check_labels(res.matching.labels, sizes, res.matching.n_universe,
+                      f"{what}: matching")
+        for i in range(N):
+            for j in range(N):
+                if i != j:
+                    check(bool(np.array_equal(res.pairwise(i, j), res.matching.pairwise(i, j))),
+                          f"{what}: pairwise({i}, {j}) disagrees with the universe labels")
+    M = res.to_matrix()
+    check(M.shape == (sum(sizes), sum(sizes)), f"{what}: to_matrix shape {M.shape}")
+
+
+@COSTLY
+@given(point_collections(), st.data(),
+       st.sampled_from(PAIR_SOLVERS),
+       st.sampled_from(["auto", "auto", "birkhoff", "spectral", "orthogonal", None, "x"]),
+       st.sampled_from(["online", "online", "offline", "x"]),
+       st.sampled_from(["universe", "universe", "dummies", "x"]),
+       N_UNIVERSE)
+def test_match_collection(gs, data, solver, sync, mode, partial, n_universe):
+    """Any small collection, any method, view graph, affinity and universe: a valid result
+    (cycle-consistent where synchronized) or a named refusal."""
+    from transync import match_collection
+
+    graphs, sizes = gs
+    pairs = data.draw(view_graphs(len(graphs)))
+    affinity = data.draw(affinities_for(graphs))
+    extra = data.draw(st.sampled_from([{}] * 8 + [
+        {"sync_every": 1}, {"sync_every": 0}, {"sync_every": 2.5}, {"damping": 0.5},
+        {"damping": 0.0}, {"damping": np.nan}, {"refine": False}, {"refine": 1},
+        {"options": {"max_iter": 1}}, {"options": {"bogus": 1}}, {"options": 3},
+        {"executor": "serial"}, {"rng": -1}, {"progress": "no"}]))
+    if affinity is None and data.draw(st.integers(0, 9)) == 0 and len(set(sizes)) == 1:
+        m = sizes[0] ** 2
+        affinity = np.abs(data.draw(float_arrays((len(sizes), len(sizes), m, m))))
+    kwargs = dict(solver=solver, sync=sync, mode=mode, pairs=pairs, affinity=affinity,
+                  n_universe=n_universe, partial=partial, progress=False, rng=0)
+    kwargs.update(extra)
+    res = call(match_collection, graphs, **kwargs)
+    if res is REFUSED:
+        return
+    synced = sync is not None and not (sync == "auto" and solver.startswith("cao"))
+    _check_result(res, sizes, synced)
+    if n_universe is not None and synced:
+        check(res.n_universe == n_universe, f"n_universe {res.n_universe} != {n_universe}")
+
+
+@MEDIUM
+@given(st.integers(1, 4), st.integers(1, 4), st.data())
+def test_multimatching_metrics(N, d, data):
+    """multimatching_accuracy / _precision_recall on any labels, dicts and pairs."""
+    from transync.permutations import MultiMatching
+
+    sizes = [data.draw(st.integers(0, d)) for _ in range(N)]
+
+    def labels(n_obj, sizes=sizes):
+        out = []
+        for g in range(n_obj):
+            n = sizes[g] if g < len(sizes) else 1
+            perm = np.array(data.draw(st.permutations(list(range(d)))), dtype=np.int64)[:n]
+            if data.draw(st.booleans()):
+                perm[data.draw(hnp.arrays(np.bool_, n))] = -1
+            out.append(perm)
+        return out
+
+    truth = labels(N) if data.draw(st.integers(0, 6)) else data.draw(any_arrays(max_dims=2))
+    kind = data.draw(st.sampled_from(["labels"] * 4 + ["dict", "dict", "junk"]))
+    if kind == "labels":
+        pred = labels(data.draw(st.sampled_from([N] * 6 + [N + 1])))
+    elif kind == "dict":
+        pred = {}
+        for i in range(N):
+            for j in range(N):
+                if i != j and data.draw(st.booleans()):
+                    valid = data.draw(st.integers(0, 5)) > 0
+                    pred[(i, j)] = data.draw(assignments(n1=sizes[i], n2=sizes[j],
+                                                         valid=valid))[0]
+    else:
+        pred = data.draw(any_arrays(max_dims=2))
+    pairs = data.draw(st.one_of(st.none(), st.none(), st.none(), any_arrays(max_dims=2),
+                                st.just([(0, N - 1)]), st.just([(0, 0)])))
+    acc = call(metrics.multimatching_accuracy, pred, truth, pairs=pairs)
+    if acc is not REFUSED:
+        check_finite_scalar(acc, "multimatching_accuracy")
+        check(0 <= acc <= 1, f"multimatching_accuracy {acc}")
+    pr = call(metrics.multimatching_precision_recall, pred, truth, pairs=pairs)
+    if pr is not REFUSED:
+        for k, v in pr.items():
+            check_finite_scalar(v, f"multimatching_precision_recall[{k}]")
+            check(0 <= v <= 1, f"multimatching_precision_recall[{k}] = {v}")
+    if isinstance(truth, list) and kind:
+        mm = call(MultiMatching, truth)
+        if mm is not REFUSED:
+            _check_labels(mm.labels, [len(t) for t in truth], mm.n_universe, "MultiMatching")
+
+
+@MEDIUM
+@given(pw_sizes=pairwise_dicts(soft=False), soft=st.booleans(),
+       max_triples=st.sampled_from([10**6] * 6 + [0, 1, -1, 2.5]),
+       tol=st.sampled_from([1e-9] * 6 + [0.0, -1.0, np.nan]), pass_sizes=st.booleans())
+def test_constraint_violations(pw_sizes, soft, max_triples, tol, pass_sizes):
+    pw, sizes = pw_sizes
+    if soft:
+        pw = {k: (v * 0.7 if np.ndim(v) == 2 and np.asarray(v).dtype.kind == "f" else v)
+              for k, v in pw.items()}
+    out = call(metrics.constraint_violations, pw, sizes=sizes if pass_sizes else None,
+               max_triples=max_triples, tol=tol, rng=0)
+    if out is REFUSED:
+        return
+    for name in ("capacity", "transitivity"):
+        st_ = getattr(out, name)
+        for k in ("cvr", "cvvr", "acvv"):
+            v = getattr(st_, k)
+            check_finite_scalar(v, f"constraint_violations.{name}.{k}")
+            check(v >= 0, f"{name}.{k} = {v} < 0")
+        check(st_.cvr <= 1, f"{name}.cvr {st_.cvr} > 1")
+
+
+@MEDIUM
+@given(n_graphs=BAD_INTS, n_universe=BAD_INTS,
+       p_keep=st.sampled_from([(0.6, 1.0)] * 6 + [0.5, 1.0, 0.0, -0.1, 1.5, np.nan, (0.8, 0.5),
+                                                    (0.0, 0.5), (0.5,), "x", (0.5, np.inf)]),
+       n_outliers=st.sampled_from([0] * 6 + [1, -1, 2.5, None]),
+       deformation=BAD_FRACTIONS, density=BAD_FRACTIONS, flip=BAD_FRACTIONS)
+def test_make_subgraph_collection(n_graphs, n_universe, p_keep, n_outliers, deformation,
+                                  density, flip):
+    from transync.datasets import make_subgraph_collection
+
+    if n_universe == 10**9:
+        n_universe = 6
+    c = call(make_subgraph_collection, n_graphs, n_universe, p_keep, n_outliers, deformation,
+             density, flip, rng=0)
+    if c is REFUSED:
+        return
+    check(len(c.graphs) == n_graphs, "number of graphs")
+    sizes = [g.n_nodes for g in c.graphs]
+    check(min(sizes) >= 1, f"a graph without nodes: sizes {sizes}")
+    for g in c.graphs:
+        check_finite_array(g.adjacency, "adjacency")
+    truth = c.ground_truth
+    _check_labels(truth.labels, sizes, truth.n_universe, "ground truth")
+
+
+@MEDIUM
+@given(pw_sizes=pairwise_dicts(), pass_sizes=st.booleans(),
+       weights=st.one_of(st.none(), st.none(), float_arrays((3, 3)), any_arrays(max_dims=2)))
+def test_estimate_universe(pw_sizes, pass_sizes, weights):
+    from transync.synchronization import estimate_universe
+
+    pw, sizes = pw_sizes
+    est = call(estimate_universe, pw, sizes=sizes if pass_sizes else None, weights=weights)
+    if est is REFUSED:
+        return
+    d = est.n_universe
+    check(isinstance(d, (int, np.integer)), f"estimate_universe: n_universe {d!r}")
+    seen = [len(v) if np.ndim(v) == 1 else np.shape(v)[0] for v in pw.values()]
+    check(d >= max(seen + [0]), f"estimate_universe: {d} below the largest object")
+
+
+@st.composite
+def block_collections(draw):
+    """(K, N, n): an (N, N, n*n, n*n) array of symmetric non-negative blocks times a nasty scale
+    (sometimes raw junk)."""
+    N, n = draw(st.integers(2, 4)), draw(st.integers(1, 3))
+    m = n * n
+    if draw(st.integers(0, 5)) == 0:
+        return draw(float_arrays((N, N, m, m))), N, n
+    B = draw(float_arrays((N, N, m, m), elements=tame_floats))
+    K = (B + np.swapaxes(B, 2, 3)) / 2
+    with np.errstate(all="ignore"):
+        K = K * draw(SCALES)
+    return K, N, n
+
+
+@COSTLY
+@given(block_collections(), st.sampled_from(["rrwm", "ga", "pf", "sm", "x"]),
+       st.sampled_from([{}] * 6 + [{"sync_every": 1}, {"sync_every": 0}, {"damping": 0.5},
+                                   {"damping": 2.0}, {"options": {"max_iter": 0}},
+                                   {"options": {"bogus": 1}}, {"sync": 3}]),
+       st.booleans())
+def test_run_lockstep(Kn, solver, extra, with_sync):
+    """PairAffinities.from_blocks -> run_lockstep on any blocks: valid assignments, finite
+    soft iterates and scores, or a named refusal."""
+    from transync.multigraph import PairAffinities, run_lockstep
+
+    K, N, n = Kn
+    aff = call(PairAffinities.from_blocks, K, n=n)
+    if aff is REFUSED:
+        return
+    kw = dict(extra)
+    if with_sync and "sync" not in kw:
+        kw["sync"] = lambda X: np.broadcast_to(X.mean(0), X.shape).copy()
+    out = call(run_lockstep, aff, solver=solver, **kw)
+    if out is REFUSED:
+        return
+    P = len(aff)
+    A = np.asarray(out.assignments)
+    check(A.shape == (P, n), f"run_lockstep: assignments shape {A.shape}")
+    for p in range(P):
+        check_assignment(A[p], n, n, f"run_lockstep: assignments[{p}]")
+    check_finite_array(out.soft, "run_lockstep: soft")
+    check_finite_array(out.scores, "run_lockstep: scores")
+
+
+@COSTLY
+@given(block_collections(), st.data(),
+       st.sampled_from(["cao-pc", "cao", "cao-c", "cao-uc", "x"]),
+       st.sampled_from([{}] * 6 + [{"lambda_init": -0.1}, {"lambda_init": np.nan},
+                                   {"lambda_step": 0.5}, {"lambda_max": 2.0},
+                                   {"max_iter": 0}, {"max_iter": -1}, {"immune_iter": 10},
+                                   {"update": "sequential"}, {"update": "x"}]))
+def test_cao(Kn, data, variant, extra):
+    """cao on any blocks and any initial maps: permutation maps and finite scores, or a named
+    refusal (non-permutation initial maps, missing pairs, bad parameters)."""
+    from transync.multigraph import PairAffinities, cao
+
+    K, N, n = Kn
+    aff = call(PairAffinities.from_blocks, np.abs(np.nan_to_num(K)), n=n)
+    if aff is REFUSED:
+        return
+    pairs = np.asarray(aff.pairs)
+    kind = data.draw(st.sampled_from(["perm"] * 6 + ["junk", "drop", "nan_score"]))
+    if kind == "junk":
+        initial = data.draw(hnp.arrays(np.int64, (len(pairs), n), elements=st.integers(-1, n)))
+    else:
+        initial = np.array([data.draw(st.permutations(list(range(n)))) for _ in pairs],
+                           dtype=np.int64).reshape(len(pairs), n)
+    if kind == "drop":
+        pairs, initial = pairs[1:], initial[1:]
+    def nan_score(p_idx, a):
+        return np.full(len(p_idx), np.nan)
+
+    score = nan_score if kind == "nan_score" else aff.score_assignments
+    out = call(cao, initial, pairs, N, score, variant=variant, **extra)
+    if out is REFUSED:
+        return
+    A = np.asarray(out.assignments)
+    check(A.shape == initial.shape, f"cao: assignments shape {A.shape}")
+    for p in range(len(A)):
+        check(sorted(A[p].tolist()) == list(range(n)), f"cao: row {p} not a permutation")
+    check_finite_array(out.scores, "cao: scores")
+
+
+@MEDIUM
+@given(n_items=st.sampled_from([0, 1, 3, 10, 100, -1, 2.5, None, "3"]),
+       executor=st.sampled_from([None, "serial", 1, 2, 0, -1, "x", 2.5, object()]),
+       min_chunk=st.sampled_from([8, 1, 0, -1, 2.5]),
+       chunks_per_worker=st.sampled_from([4, 1, 0, -1]))
+def test_split_chunks(n_items, executor, min_chunk, chunks_per_worker):
+    from transync.parallel import split_chunks
+
+    out = call(split_chunks, n_items, executor, min_chunk=min_chunk,
+               chunks_per_worker=chunks_per_worker)
+    if out is REFUSED:
+        return
+    flat = np.concatenate(out) if out else np.zeros(0, np.int64)
+    check(sorted(flat.tolist()) == list(range(n_items)), "split_chunks: not a partition")
+
+
+def test_hunted_cases():
+    """Inputs that contract hunts (derandomize=False, hundreds of examples) found breaking the
+    contract; each failed on the code before its fix."""
+    from transync import match_collection
+    from transync.graphs import Graph
+    from transync.matching import ga, pf, rrwm, sm
+    from transync.multigraph import PairAffinities, cao, run_lockstep
+    from transync.permutations import MultiMatching
+
+    # a 1-d `pairs` of odd length: a reshape error that named nothing
+    m = MultiMatching([np.array([0, 1]), np.array([1, 0])])
+    check(call(m.check_pairs, np.array([0.0])) is REFUSED, "odd 1-d pairs accepted")
+    # an assignment into a node the other block does not have: the message named no argument
+    check(call(metrics.constraint_violations, {(0, 1): np.array([0]), (1, 0): np.array([1])})
+          is REFUSED, "inconsistent sizes accepted")
+    # CAO with unequal sizes, sm online: the messages named `partial` / `mode` without quotes
+    pts = np.random.default_rng(0).random((3, 2))
+    g2, g3 = Graph.from_points(pts[:2]), Graph.from_points(pts)
+    check(call(match_collection, [g2, g3], solver="cao", progress=False) is REFUSED, "cao sizes")
+    check(call(match_collection, [g3, g3], solver="sm", progress=False) is REFUSED, "sm online")
+    # a negative seed: numpy's "expected non-negative integer" named nothing
+    check(call(match_collection, [g3, g3], rng=-1, progress=False) is REFUSED, "rng=-1")
+    # subnormal affinities: NaN and RuntimeWarnings inside every scaled solver
+    for solver in (rrwm, ga, pf, sm):
+        check(call(solver, np.full((4, 4), 1e-310), n1=2, n2=2) is REFUSED,
+              f"{solver.__name__} on a subnormal K")
+    tiny = PairAffinities.from_blocks(np.full((2, 2, 1, 1), 5e-324), n=1)
+    for solver in ("rrwm", "ga", "pf"):
+        check(call(run_lockstep, tiny, solver=solver) is REFUSED, f"lock-step {solver}, tiny K")
+    # scores near the float64 limit: CAO's mean score overflowed (RuntimeWarning, inf history)
+    huge = PairAffinities.from_blocks(np.full((3, 3, 1, 1), 1.7976931348623157e308), n=1)
+    out = call(cao, np.zeros((3, 1), np.int64), np.asarray(huge.pairs), 3,
+               huge.score_assignments)
+    check(out is not REFUSED and bool(np.isfinite(out.history["score"]).all()),
+          "cao history not finite")
+
+
 def test_harness_flags_low_level_errors():
     """The harness itself: documented errors pass, low-level ones are violations."""
     def named():

@@ -30,6 +30,9 @@ def as_generator(rng) -> np.random.Generator:
     """Return a ``numpy.random.Generator`` from ``None``, an int seed or a Generator (SPEC 7)."""
     if isinstance(rng, np.random.Generator):
         return rng
+    if isinstance(rng, numbers.Integral) and not isinstance(rng, bool) and rng < 0:
+        raise ValueError(f"`rng` must be None, a non-negative int seed or a "
+                         f"numpy.random.Generator, got {rng}")
     if rng is None or isinstance(rng, (numbers.Integral, np.random.SeedSequence)):
         return np.random.default_rng(rng)
     if isinstance(rng, np.random.RandomState):
@@ -248,6 +251,113 @@ def check_int_array(x, name: str, *, ndim: int | Sequence[int] | None = None,
     if keep_dtype and kind == "i":
         return arr.copy() if copy else arr
     return arr.astype(np.int64, copy=copy)
+
+
+def check_index_pairs(pairs, n: int, name: str = "pairs", *, what: str = "object indices",
+                      distinct: bool = False, ordered: bool = False, unique: bool = False,
+                      nonempty: bool = False) -> np.ndarray:
+    """Check that ``pairs`` is a list of index pairs into ``n`` objects; return ``(P, 2)`` int64.
+
+    The one "pairs of indices" check of the package (view graphs, the pairs a result is asked
+    for, the pairs a kernel compares). Integral floats pass (``2.0``); a 1-d input of two
+    entries is one pair; an empty input is no pair.
+
+    Parameters
+    ----------
+    pairs : array_like of shape (P, 2)
+        The pairs ``(i, j)``.
+    n : int
+        Number of objects: every index must lie in ``[0, n)``.
+    name : str, default="pairs"
+        The argument's name, for the messages.
+    what : str, default="object indices"
+        What the entries are, as the messages say it (``"graph indices"``).
+    distinct : bool, default=False
+        Refuse a pair ``(i, i)``.
+    ordered : bool, default=False
+        Every row must be ``(i, j)`` with ``i < j`` (implies ``distinct``).
+    unique : bool, default=False
+        Refuse a pair given twice, in either orientation.
+    nonempty : bool, default=False
+        Refuse an input without pairs.
+
+    Returns
+    -------
+    ndarray of int64, shape (P, 2)
+
+    Raises
+    ------
+    TypeError
+        Entries that are not integers (the message names the first).
+    ValueError
+        Any other shape than ``(P, 2)``, indices outside ``[0, n)``, and what the flags refuse.
+
+    Examples
+    --------
+    >>> check_index_pairs([[0, 1], [2.0, 1]], 3)
+    array([[0, 1],
+           [2, 1]])
+    >>> check_index_pairs([0, 3], 3, what="graph indices")
+    Traceback (most recent call last):
+        ...
+    ValueError: `pairs` must hold graph indices in [0, 3), got range [0, 3]
+    >>> check_index_pairs([[0, 1], [1, 0]], 3, unique=True)
+    Traceback (most recent call last):
+        ...
+    ValueError: `pairs` must not repeat a pair, got (1, 0) at row 1 after (0, 1)
+    """
+    arr = check_int_array(pairs, name, integral_floats=True, what=f"integer {what}")
+    if arr.ndim == 1 and arr.size in (0, 2):
+        arr = arr.reshape(-1, 2)
+    elif arr.ndim == 2 and arr.shape[0] == 0:
+        arr = arr.reshape(0, 2)
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(f"`{name}` must have shape (P, 2), got shape {np.shape(pairs)}")
+    if not len(arr):
+        if nonempty:
+            raise ValueError(f"`{name}` must hold at least one pair, got none")
+        return arr
+    lo, hi = int(arr.min()), int(arr.max())
+    if lo < 0 or hi >= n:
+        raise ValueError(f"`{name}` must hold {what} in [0, {n}), got range [{lo}, {hi}]")
+    bad = np.flatnonzero(arr[:, 0] >= arr[:, 1] if ordered else
+                         (arr[:, 0] == arr[:, 1] if distinct else np.zeros(len(arr), bool)))
+    if bad.size:
+        row = tuple(arr[bad[0]].tolist())
+        rule = "(i, j) with i < j" if ordered else "(i, j) with i != j"
+        raise ValueError(f"`{name}` rows must be {rule}, got {row} at row {int(bad[0])}")
+    if unique:
+        key = np.sort(arr, axis=1)
+        _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        rep = np.flatnonzero(first[inverse] != np.arange(len(arr)))
+        if rep.size:
+            k = int(rep[0])
+            raise ValueError(f"`{name}` must not repeat a pair, got {tuple(arr[k].tolist())} at "
+                             f"row {k} after {tuple(arr[first[inverse[k]]].tolist())}")
+    return arr
+
+
+#: smallest positive scale (largest column sum of ``K``) an affinity may have: below it the
+#: solvers' products run among subnormal floats, lose their digits and end in NaN
+MIN_AFFINITY_SCALE = 1e-300
+
+
+def check_affinity_scale(top, name: str = "K") -> None:
+    """Refuse an affinity whose largest column sum ``top`` (a scalar, or one per pair) is
+    positive but below :data:`MIN_AFFINITY_SCALE`; an all-zero affinity (``top == 0``) passes.
+
+    >>> check_affinity_scale(1e-310)
+    Traceback (most recent call last):
+        ...
+    ValueError: `K` is too small to match on: its largest column sum 1e-310 is below 1e-300 ...
+    """
+    top = np.asarray(top, dtype=float)
+    small = (top > 0) & (top < MIN_AFFINITY_SCALE)
+    if small.any():
+        raise ValueError(f"`{name}` is too small to match on: its largest column sum "
+                         f"{float(top[small].min()):.3g} is below {MIN_AFFINITY_SCALE:g} (its "
+                         f"products lose their digits); rescale the affinity")
 
 
 def _first(arr: np.ndarray, bad: np.ndarray) -> str:

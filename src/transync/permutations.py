@@ -32,7 +32,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from ._validation import as_generator, check_array, check_int, check_int_array
+from ._validation import (
+    as_generator,
+    check_array,
+    check_index_pairs,
+    check_int,
+    check_int_array,
+)
 
 __all__ = [
     "MAX_NODES",
@@ -767,16 +773,7 @@ class MultiMatching:
         ``i < j``."""
         if pairs is None:
             return np.column_stack(np.triu_indices(self.n_objects, 1)).astype(np.int64)
-        arr = check_array(pairs, "pairs", ndim=(1, 2))
-        arr = arr.reshape(-1, 2) if arr.size else np.zeros((0, 2))
-        if arr.shape[1] != 2 or not np.all(arr == np.round(arr)):
-            raise ValueError(f"`pairs` must be a (P, 2) array of object indices, got shape "
-                             f"{np.shape(pairs)}")
-        arr = arr.astype(np.int64)
-        if arr.size and (arr.min() < 0 or arr.max() >= self.n_objects):
-            raise ValueError(f"`pairs` must hold object indices in [0, {self.n_objects}), got "
-                             f"{int(arr.min())} .. {int(arr.max())}")
-        return arr
+        return check_index_pairs(pairs, self.n_objects)
 
     def pairwise_array(self, pairs=None) -> np.ndarray:
         """Maps of many pairs at once: ``(P, n_max)`` int, row ``p`` the map ``i -> j`` of

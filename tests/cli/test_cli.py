@@ -154,7 +154,7 @@ def bad_inputs(tmp_path):
     (["collection", "{d}/p2.txt", "{d}/near.txt", "--n-universe", "3"],
      r"`n_universe` must be >= the largest graph's size 5"),
     (["collection", "{d}/p2.txt", "{d}/near.txt", "--solver", "cao", "--sync", "none"],
-     r"CAO composes full permutations; .* need partial='dummies'"),
+     r"`partial` must be 'dummies' .* CAO composes full permutations"),
     (["collection", "{d}/p3.txt", "{d}/p3.txt", "--affinity", "length+angle", "--edges",
       "full"],
      r"length\+angle needs 2-d points"),

@@ -182,7 +182,7 @@ def _graphs(sizes, rng=0):
 
 
 @pytest.mark.parametrize("graphs, kwargs, exc, match", [
-    (_graphs([5, 5, 6]), {"solver": "cao"}, ValueError, "partial='dummies'"),
+    (_graphs([5, 5, 6]), {"solver": "cao"}, ValueError, "`partial` must be 'dummies'"),
     (_graphs([5, 5, 6]), {"n_universe": 5}, ValueError, "`n_universe` must be >= .* 6"),
     (_graphs([5, 5, 6]), {"n_universe": 17}, ValueError, "`n_universe` must be <= .* 16"),
     (_graphs([5, 5, 6]), {"n_universe": 7.5}, TypeError, "n_universe"),
@@ -201,7 +201,7 @@ def _graphs(sizes, rng=0):
     (_graphs([4, 4, 4]), {"pairs": [(0, 0), (1, 2)]}, ValueError, "itself"),
     (_graphs([4, 4, 4]), {"pairs": [(0, 1), (1, 0)]}, ValueError, "repeat a pair"),
     (_graphs([4, 4, 4]), {"pairs": [(0, 3)]}, ValueError, r"\[0, 3\)"),
-    (_graphs([4, 4, 4]), {"pairs": [0, 1]}, ValueError, r"\(P, 2\)"),
+    (_graphs([4, 4, 4]), {"pairs": [[0, 1, 2]]}, ValueError, r"\(P, 2\)"),
     (_graphs([4, 4, 4, 4]), {"pairs": [(0, 1), (2, 3)]}, ValueError, "disconnected"),
     (_graphs([4, 4, 4]), {"solver": "cao", "pairs": [(0, 1), (1, 2)]}, ValueError, "all 3"),
     (_graphs([4, 4, 4]), {"executor": "processes"}, ValueError, "executor"),

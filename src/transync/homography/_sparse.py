@@ -10,7 +10,13 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .._validation import as_generator, check_choice, check_int, check_positive
+from .._validation import (
+    as_generator,
+    check_choice,
+    check_index_pairs,
+    check_int,
+    check_positive,
+)
 from ..geometry import transfer_points, translation
 
 __all__ = [
@@ -289,18 +295,8 @@ def _all_pairs(n):
 def _check_pairs(pairs, n) -> list:
     if pairs is None:
         return _all_pairs(n)
-    checked = []
-    for p in pairs:
-        try:
-            i, j = (int(v) for v in p)
-        except (TypeError, ValueError):
-            raise ValueError(f"`pairs` must hold pairs (i, j) of view indices, "
-                             f"got {p!r}") from None
-        if i == j or not (0 <= i < n and 0 <= j < n):
-            raise ValueError(f"`pairs` must hold pairs of distinct view indices in [0, {n}), "
-                             f"got {tuple(p)!r}")
-        checked.append((i, j))
-    return checked
+    return [tuple(p) for p in check_index_pairs(pairs, n, what="view indices",
+                                                 distinct=True).tolist()]
 
 
 def _pair_seeds(rng, n_pairs) -> list:

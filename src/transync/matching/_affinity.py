@@ -43,7 +43,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._blas import blas_limit
-from .._validation import check_array, check_choice, check_int, check_int_array, check_positive
+from .._validation import (
+    check_array,
+    check_choice,
+    check_index_pairs,
+    check_int,
+    check_int_array,
+    check_positive,
+)
 from ..exceptions import DegenerateInputError
 from ..graphs import Graph
 
@@ -977,11 +984,7 @@ def gaussian_edge_factors(graphs, *, sigma2: float = DEFAULT_SIGMA2, attribute: 
     if pairs is None:
         pairs = np.stack(np.triu_indices(N, 1), axis=1)
     else:
-        pairs = check_array(pairs, "pairs", ndim=2, dtype=np.int64)
-        if pairs.shape[1:] != (2,) or (pairs.size and (pairs.min() < 0 or pairs.max() >= N)):
-            raise ValueError(f"`pairs` must be (P, 2) graph indices in [0, {N}), got shape "
-                             f"{pairs.shape}, range [{pairs.min(initial=0)}, "
-                             f"{pairs.max(initial=0)}]")
+        pairs = check_index_pairs(pairs, N, what="graph indices")
     nonempty = [v for v in vals if v.size]
     E = np.stack([np.where(m, a, 0.0) for a, m in zip(attrs, masks)])
     M = np.stack(masks)

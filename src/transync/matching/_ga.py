@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import check_int, check_positive
+from .._validation import check_affinity_scale, check_int, check_positive
 from ._affinity import as_affinity
 from ._result import MatchingResult
 from ._sinkhorn import sinkhorn_normalize
@@ -111,6 +111,7 @@ class GAStepper(_BaseStepper):
         self.sinkhorn_tol = check_positive(sinkhorn_tol, "sinkhorn_tol")
         K = _symmetric(aff)
         top = K.max_column_sum()
+        check_affinity_scale(top)
         # gradient at the uniform matrix at most 1: beta's schedule then acts on an O(1) scale
         self.scale = max(self.n1, self.n2) / top if top > 0 else 1.0
         self._K = K

@@ -26,7 +26,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import check_choice, check_int, check_positive, check_probability
+from .._validation import (
+    check_affinity_scale,
+    check_choice,
+    check_int,
+    check_positive,
+    check_probability,
+)
 from ..permutations import solve_lap
 from ._affinity import as_affinity
 from ._result import MatchingResult
@@ -202,6 +208,7 @@ class _OriginalRRWMStepper(RRWMStepper):
             "sinkhorn_tol")
         self._walk = aff.drop_conflicts()
         self.max_degree = self._walk.max_column_sum()
+        check_affinity_scale(self.max_degree)
         self._scale = 1.0 / self.max_degree if self.max_degree > 0 else 0.0
         size = self.n1 * self.n2
         self._x = np.full((self.n1, self.n2), 1.0 / size)       # prev_score

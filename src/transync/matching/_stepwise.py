@@ -32,7 +32,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from .._blas import blas_limit
-from .._validation import check_array
+from .._validation import check_affinity_scale, check_array
 from ..exceptions import ConvergenceWarning
 from ..permutations import assignment_to_matrix, solve_lap
 from ._affinity import Affinity
@@ -219,6 +219,7 @@ def _moderate(affinity: Affinity, *, limit: float = 1e100) -> Affinity:
     """
     with np.errstate(over="ignore"):
         top = affinity.max_column_sum()
+    check_affinity_scale(top)
     if top == 0 or 1.0 / limit <= top <= limit:
         return affinity
     if np.isfinite(top):

@@ -232,8 +232,8 @@ def _parse_pairwise(X: Mapping, sizes) -> _Pairs:
             size_arr[g] = n
         for g, n in known.items():
             if n < lower.get(g, 0):
-                raise ValueError(f"an assignment into object {g} uses node {lower[g] - 1}, "
-                                 f"but object {g} has {n} nodes")
+                raise ValueError(f"`X`: an assignment into object {g} uses node "
+                                 f"{lower[g] - 1}, but object {g} has {n} nodes")
             size_arr[g] = n
     canon: dict[tuple[int, int], tuple[np.ndarray, bool]] = {}
     for (i, j), v in values.items():

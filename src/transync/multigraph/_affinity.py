@@ -49,7 +49,13 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.sparse as sp
 
-from .._validation import check_array, check_int, check_int_array, check_positive
+from .._validation import (
+    check_array,
+    check_index_pairs,
+    check_int,
+    check_int_array,
+    check_positive,
+)
 from ..graphs import Graph
 from ..matching import (
     DEFAULT_SIGMA2,
@@ -88,22 +94,8 @@ def check_pairs(pairs, n_graphs: int, name: str = "pairs") -> np.ndarray:
     """
     if pairs is None:
         return all_pairs(n_graphs)
-    arr = check_array(pairs, name, dtype=None)
-    if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] == 0:
-        raise ValueError(f"`{name}` must have shape (P, 2) with P >= 1, got shape {arr.shape}")
-    arr = check_int_array(arr, name, integral_floats=True, what="integer graph indices",
-                          copy=True)
-    if arr.min() < 0 or arr.max() >= n_graphs:
-        raise ValueError(f"`{name}` must hold graph indices in [0, {n_graphs}), got range "
-                         f"[{arr.min()}, {arr.max()}]")
-    bad = np.flatnonzero(arr[:, 0] >= arr[:, 1])
-    if bad.size:
-        row = tuple(arr[bad[0]].tolist())
-        raise ValueError(f"`{name}` rows must be (i, j) with i < j, got {row} at "
-                         f"row {bad[0]}")
-    if len(np.unique(arr, axis=0)) != len(arr):
-        raise ValueError(f"`{name}` must not repeat a pair")
-    return arr
+    return check_index_pairs(pairs, n_graphs, name, what="graph indices", ordered=True,
+                             unique=True, nonempty=True)
 
 
 def _vec_batch(X: np.ndarray) -> np.ndarray:

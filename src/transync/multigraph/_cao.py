@@ -51,6 +51,12 @@ CAO_UPDATES = ("jacobi", "sequential")
 _CHUNK_ENTRIES = 1 << 22
 
 
+def _finite_mean(s: np.ndarray) -> float:
+    """The mean of finite scores without overflow (scores near the float64 limit stay finite)."""
+    top = float(np.max(np.abs(s))) if s.size else 0.0
+    return float(np.mean(s / top) * top) if top > 0 else 0.0
+
+
 @dataclass(frozen=True, slots=True)
 class CAOOutcome:
     """Result of :func:`cao`.
@@ -234,7 +240,7 @@ def cao(initial, pairs, n_graphs: int, score: Callable, *, variant: str = "cao-p
     state = _State(X, pairs, N, score)
     schedule = _schedule(variant, max_iter, immune_iter, lambda_init, lambda_step, lambda_max)
     pc = state.pair_consistency()
-    hist_score = [float(np.mean(state.scores))]
+    hist_score = [_finite_mean(state.scores)]
     hist_cons = [float(np.mean(pc))]
     weights, changes = [], []
     converged = False
@@ -257,7 +263,7 @@ def cao(initial, pairs, n_graphs: int, score: Callable, *, variant: str = "cao-p
             converged = changed == 0
             weights.append(0.0 if weight is None else weight)
             changes.append(changed)
-            hist_score.append(float(np.mean(state.scores)))
+            hist_score.append(_finite_mean(state.scores))
             pc = state.pair_consistency()
             hist_cons.append(float(np.mean(pc)))
             bar.update(1)

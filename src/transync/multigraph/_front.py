@@ -403,8 +403,9 @@ def _check_layout(graphs, n_universe, partial, solver, affinity) -> _Layout:
     what = (f"graphs of different sizes {sizes.tolist()[:12]}" if not equal
             else f"n_universe={n_universe} > n={n_max}")
     if lay.kind == "universe" and solver in CAO_VARIANTS:
-        raise ValueError(f"CAO composes full permutations; {what} need partial='dummies' "
-                         f"(the dummy-node padding) with solver={solver!r}")
+        raise ValueError(f"`partial` must be 'dummies' with solver={solver!r}: CAO composes "
+                         f"full permutations; {what} need the dummy-node padding, got "
+                         f"partial={partial!r}")
     if isinstance(affinity, np.ndarray) and affinity.dtype != object:
         raise ValueError(f"`affinity` as one (N, N, n*n, n*n) array holds graphs of one size n; "
                          f"{what} need a dict {{(i, j): K_ij}} of (n_i n_j, n_i n_j) blocks or "
@@ -426,8 +427,9 @@ def _check_method(solver, sync, mode):
                              f"None, got {sync!r}")
     if (sync is not None and mode == "online" and solver not in ONLINE_SOLVERS
             and solver not in CAO_VARIANTS):
-        raise ValueError(f"mode='online' synchronizes inside the solvers {ONLINE_SOLVERS}; "
-                         f"solver={solver!r} runs offline only: pass mode='offline'")
+        raise ValueError(f"`mode` must be 'offline' with solver={solver!r}, which runs "
+                         f"offline only (mode='online' synchronizes inside the solvers "
+                         f"{ONLINE_SOLVERS}), got mode='online'")
     return solver, sync, mode
 
 

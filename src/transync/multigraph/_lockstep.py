@@ -42,7 +42,13 @@ from scipy.optimize import linear_sum_assignment
 
 from .._blas import blas_limit
 from .._progress import progress_bar
-from .._validation import check_array, check_choice, check_int, check_positive
+from .._validation import (
+    check_affinity_scale,
+    check_array,
+    check_choice,
+    check_int,
+    check_positive,
+)
 from ..matching import (
     GAStepper,
     PFStepper,
@@ -154,6 +160,7 @@ class _RRWMOriginal(_Batch):
         self.warm = o["warm_start"]
         self.walk = aff.drop_conflicts()
         deg = self.walk.column_sums().max((1, 2))
+        check_affinity_scale(deg)
         self.scale = np.where(deg > 0, 1.0 / np.where(deg > 0, deg, 1.0), 0.0)
         size = self.n1 * self.n2
         self.x = np.full((self.P, self.n1, self.n2), 1.0 / size)
@@ -298,6 +305,7 @@ class _GA(_Batch):
         self.sk_max, self.sk_tol = o["sinkhorn_max_iter"], o["sinkhorn_tol"]
         self.K = _SymOps(aff)
         top = self.K(np.ones((self.P, self.n1, self.n2))).max((1, 2))   # column sums
+        check_affinity_scale(top)
         self.scale = np.where(top > 0, max(self.n1, self.n2) / np.where(top > 0, top, 1.0), 1.0)
         self.beta = self.beta0
         self.M = np.ones((self.P, self.n1 + 1, self.n2 + 1))
@@ -366,6 +374,7 @@ class _PF(_Batch):
         P, n1, n2 = self.P, self.n1, self.n2
         with np.errstate(over="ignore"):
             top = K(np.ones((P, n1, n2))).max((1, 2))
+        check_affinity_scale(top)
         factor = np.ones(P)
         bad = (top != 0) & ((top < 1e-100) | (top > 1e100))
         if bad.any():       # _moderate: rescale affinities whose scale would overflow

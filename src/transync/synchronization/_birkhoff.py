@@ -33,7 +33,14 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 from scipy.optimize import linear_sum_assignment
 
-from .._validation import as_generator, check_array, check_choice, check_int, check_positive
+from .._validation import (
+    as_generator,
+    check_array,
+    check_choice,
+    check_index_pairs,
+    check_int,
+    check_positive,
+)
 from ..exceptions import ConvergenceWarning
 from ..permutations import MultiMatching
 from . import _spectral as spec
@@ -234,17 +241,7 @@ class BirkhoffSyncResult(CarriesMatching):
         >>> Y.shape, bool(np.allclose(Y[0], X[(0, 1)])), bool(np.allclose(Y[2], I))
         ((3, 3, 3), True, True)
         """
-        arr = check_array(pairs, "pairs", ndim=(1, 2))
-        if arr.ndim == 1 and arr.size in (0, 2):
-            arr = arr.reshape(-1, 2)
-        N = self.n_objects
-        if arr.ndim != 2 or arr.shape[1] != 2 or not np.all(arr == np.round(arr)):
-            raise ValueError(f"`pairs` must be a (P, 2) array of object indices, got shape "
-                             f"{np.shape(pairs)}")
-        arr = arr.astype(np.int64)
-        if arr.size and (arr.min() < 0 or arr.max() >= N):
-            raise ValueError(f"`pairs` must hold object indices in [0, {N}), got "
-                             f"{int(arr.min())} .. {int(arr.max())}")
+        arr = check_index_pairs(pairs, self.n_objects)
         return _stack_atoms(self.atoms, np.asarray(self.weights, dtype=float), arr,
                             self.n_universe)
 

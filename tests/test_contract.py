@@ -1656,6 +1656,310 @@ def test_hunted_cases():
           "cao history not finite")
 
 
+# ----------------------------------------------------------------------------------- homography
+
+@st.composite
+def images(draw, min_side=0, max_side=24):
+    """An image of any small shape (gray, 1/3/4/2 channels, or junk dims) and dtype."""
+    h = draw(st.integers(min_side, max_side))
+    w = draw(st.integers(min_side, max_side))
+    shape = draw(st.sampled_from([(h, w)] * 4 + [(h, w, 3)] * 3
+                                 + [(h, w, 1), (h, w, 4), (h, w, 2), (h,), (2, h, w, 3)]))
+    kind = draw(st.sampled_from(["u8"] * 5 + ["f"] * 3 + ["fnasty", "b", "i16", "c", "U"]))
+    if kind == "u8":
+        return draw(hnp.arrays(np.uint8, shape))
+    if kind == "f":
+        return draw(hnp.arrays(np.float64, shape, elements=tame_floats))
+    if kind == "fnasty":
+        return draw(float_arrays(shape))
+    if kind == "b":
+        return draw(hnp.arrays(np.bool_, shape))
+    if kind == "i16":
+        return draw(hnp.arrays(np.int16, shape))
+    if kind == "c":
+        return draw(hnp.arrays(np.complex128, shape,
+                               elements=st.complex_numbers(max_magnitude=5, allow_nan=False)))
+    return draw(hnp.arrays(np.dtype("U3"), shape, elements=st.text("ab", max_size=2)))
+
+
+def textured(rng, h=64, w=64):
+    """A random blocky texture (SIFT finds features on it)."""
+    small = rng.integers(0, 256, (h // 8, w // 8)).astype(np.uint8)
+    return np.kron(small, np.ones((8, 8), np.uint8))
+
+
+HOMOGRAPHIES = st.one_of(
+    st.sampled_from([np.eye(3), np.diag([2.0, 2.0, 1.0]), np.array([[1, 0, 3], [0, 1, -2],
+                                                                   [0, 0, 1.0]]),
+                     np.zeros((3, 3)), np.full((3, 3), np.nan), np.eye(3)[:2],
+                     np.array([[1, 0, 0], [0, 1, 0], [1e-300, 0, 1e-300]]),
+                     np.array([[1e300, 0, 0], [0, 1e300, 0], [0, 0, 1.0]])]),
+    float_arrays((3, 3)), any_arrays(max_dims=2))
+
+
+@MEDIUM
+@given(images())
+def test_to_gray_and_sift(image):
+    from transync import homography as hg
+
+    g = call(hg.to_gray, image)
+    if g is REFUSED:
+        return
+    g = np.asarray(g)
+    check(g.ndim == 2 and g.shape == np.shape(image)[:2], f"to_gray: shape {g.shape}")
+    check_finite_array(g, "to_gray")
+    out = call(hg.sift_features, g, n_features=50)
+    if out is REFUSED:
+        return
+    kp, desc = out
+    check_finite_array(kp, "sift_features: keypoints")
+    check(len(kp) == len(desc), "sift_features: keypoints and descriptors differ in number")
+
+
+@MEDIUM
+@given(images(), HOMOGRAPHIES,
+       st.sampled_from([(16, 16), (1, 1), (0, 5), (-1, 4), (2.5, 3), (10**6, 10**6), "x"]),
+       st.sampled_from([(0, 0), (3, -2), (np.nan, 0), "x"]),
+       st.sampled_from([1, 0, 3, 99]))
+def test_warp_to_reference(image, H, size, offset, interpolation):
+    from transync import homography as hg
+
+    if isinstance(size, tuple) and size == (10**6, 10**6):
+        size = (10**6, 1)
+    out = call(hg.warp_to_reference, image, H, size, offset=offset, interpolation=interpolation)
+    if out is REFUSED:
+        return
+    out = np.asarray(out)
+    check_finite_array(out, "warp_to_reference")
+    check(out.shape[:2] == (size[1], size[0]) or out.shape[:2] == tuple(size),
+          f"warp_to_reference: shape {out.shape} for size {size}")
+
+
+@COSTLY
+@given(st.lists(images(min_side=1), min_size=0, max_size=3), st.data(),
+       st.sampled_from([(16, 12), (0, 3), (3.5, 2), None]), st.booleans())
+def test_mean_warped_image(imgs, data, size, normalize):
+    from transync import homography as hg
+
+    Hs = [data.draw(HOMOGRAPHIES) for _ in imgs]
+    if data.draw(st.booleans()):
+        Hs = np.stack([np.eye(3)] * len(imgs)) if imgs else np.zeros((0, 3, 3))
+    out = call(hg.mean_warped_image, imgs, Hs, size=size, normalize=normalize)
+    if out is REFUSED:
+        return
+    mean, count = out
+    check_finite_array(count, "mean_warped_image: count")
+    check(np.shape(mean) == np.shape(count), "mean_warped_image: mean and count differ")
+    check_finite_array(np.asarray(mean)[np.asarray(count) > 0], "mean_warped_image: mean")
+    check(bool(np.all(np.isnan(np.asarray(mean)[np.asarray(count) == 0]))),
+          "mean_warped_image: a value where no view contributes")
+
+
+@COSTLY
+@given(st.integers(0, 2**16), HOMOGRAPHIES, st.sampled_from([1, 2, 3, 0, -1]),
+       st.sampled_from([60, 1, 0, -1]), st.sampled_from([1e-5, 0.0, -1.0, np.nan]),
+       st.sampled_from([3, 1, 0, 4, -3]), st.booleans())
+def test_refine_homography_ecc(seed, H, levels, max_iter, eps, gauss_size, junk_image):
+    from transync import homography as hg
+
+    rng = np.random.default_rng(seed)
+    t = textured(rng, 32, 32)
+    img = t if not junk_image else rng.random((32, 32)) * np.nan
+    out = call(hg.refine_homography_ecc, t, img, H, levels=levels, max_iter=max_iter, eps=eps,
+               gauss_size=gauss_size)
+    if out is REFUSED:
+        return
+    H_out, ok = out
+    check_finite_array(H_out, "refine_homography_ecc")
+    check(np.shape(H_out) == (3, 3), f"refine_homography_ecc: shape {np.shape(H_out)}")
+
+
+@MEDIUM
+@given(st.integers(0, 40), st.data(), st.sampled_from([5.0, 0.0, -1.0, np.nan, 1e300]),
+       st.sampled_from([10, 4, 3, 0, -1, 2.5]), st.sampled_from([None, 1, 0, -1, 5]),
+       st.sampled_from(["ransac", "magsac", "lmeds", "x"]))
+def test_extract_planes(n, data, threshold, min_inliers, max_planes, method):
+    from transync import homography as hg
+
+    x1 = data.draw(float_arrays((n, 2), elements=st.floats(0, 100, width=64)))
+    if data.draw(st.booleans()):
+        x2 = x1 + data.draw(st.sampled_from([0.0, 1.0, 50.0]))
+    else:
+        x2 = data.draw(st.one_of(float_arrays((n, 2)), any_arrays(max_dims=2)))
+    out = call(hg.extract_planes, x1, x2, threshold=threshold, min_inliers=min_inliers,
+               max_planes=max_planes, method=method, max_iter=200, rng=0)
+    if out is REFUSED:
+        return
+    for H in out.homographies:
+        check_finite_array(H, "extract_planes: homography")
+    lab = np.asarray(out.labels)
+    check(lab.shape == (n,), f"extract_planes: labels shape {lab.shape}")
+    check(bool(np.all((lab >= 0) & (lab <= len(out.homographies)))),
+          f"extract_planes: labels outside [0, {len(out.homographies)}]")
+
+
+@MEDIUM
+@given(st.one_of(any_arrays(max_dims=2), hnp.arrays(np.int64, 6, elements=st.integers(-1, 2))),
+       st.one_of(any_arrays(max_dims=2), hnp.arrays(np.int64, 6, elements=st.integers(-1, 2))))
+def test_misclassification_error(pred, truth):
+    from transync import homography as hg
+
+    e = call(hg.misclassification_error, pred, truth)
+    if e is REFUSED:
+        return
+    check_finite_scalar(e, "misclassification_error")
+    check(0 <= e <= 1, f"misclassification_error {e}")
+
+
+@MEDIUM
+@given(st.integers(1, 4), st.data(),
+       st.sampled_from([(64, 48), (0, 48), (1, 1), (np.nan, 3), "x"]),
+       st.sampled_from([0.05, 0.0, 1.0, -0.1, np.nan]))
+def test_pairwise_corner_error(N, data, size, min_overlap):
+    from transync import homography as hg
+
+    Ht = np.stack([data.draw(st.sampled_from([np.eye(3), np.diag([1.1, 0.9, 1.0]),
+                                              np.array([[1, 0, 5], [0, 1, 0], [0, 0, 1.0]])]))
+                   for _ in range(N)])
+    He = Ht.copy() if data.draw(st.booleans()) else data.draw(
+        st.one_of(float_arrays((N, 3, 3)), any_arrays(max_dims=3)))
+    E = call(hg.pairwise_corner_error, He, Ht, image_size=size, min_overlap=min_overlap)
+    if E is REFUSED:
+        return
+    E = np.asarray(E, dtype=float)
+    check(E.ndim == 1 and len(E) <= N * (N - 1), f"pairwise_corner_error: shape {E.shape}")
+    check(bool(np.all(E >= 0)), f"pairwise_corner_error: negative or NaN errors {E}")
+
+
+@MEDIUM
+@given(st.integers(0, 5), st.data(), st.sampled_from([0, 1, -1, 7, 2.5]),
+       st.sampled_from([3, 1, 0, -1, 100]))
+def test_view_graph_pairs(N, data, reference, k):
+    from transync import homography as hg
+
+    H = np.stack([np.array([[1, 0, 10.0 * g], [0, 1, 0], [0, 0, 1]]) for g in range(N)]) \
+        if N else np.zeros((0, 3, 3))
+    if data.draw(st.integers(0, 4)) == 0:
+        H = data.draw(st.one_of(float_arrays((N, 3, 3)), any_arrays(max_dims=3)))
+    sizes = data.draw(st.sampled_from([[(40, 30)] * N, (40, 30), [(0, 30)] * N, "x",
+                                       [(40, 30)] * (N + 1)]))
+    out = call(hg.view_graph_pairs, H, sizes, reference=reference, k=k)
+    if out is REFUSED:
+        return
+    for p in out:
+        i, j = p
+        check(0 <= i < N and 0 <= j < N and i != j, f"view_graph_pairs: pair {p}")
+
+
+@COSTLY
+@given(st.integers(0, 2**16), st.sampled_from([2, 3, 1, 0]), st.data())
+def test_estimate_pairwise_homographies(seed, n_views, data):
+    """On tiny textures (few or no features) and junk: pairwise maps finite or absent, never a
+    cv2.error."""
+    from transync import homography as hg
+
+    rng = np.random.default_rng(seed)
+    imgs = [textured(rng, 48, 48) for _ in range(n_views)]
+    if imgs and data.draw(st.booleans()):
+        imgs[-1] = data.draw(images())
+    kw = data.draw(st.sampled_from([{}, {"min_inliers": 4}, {"ratio": 1.5},
+                                    {"threshold": -1.0}, {"method": "x"}, {"pairs": [(0, 0)]},
+                                    {"max_iter": 0}, {"confidence": 1.5}, {"refine": False}]))
+    out = call(hg.estimate_pairwise_homographies, imgs, n_features=200, rng=0, **kw)
+    if out is REFUSED:
+        return
+    H, mask = np.asarray(out.H), np.asarray(out.mask)
+    check(H.shape == (n_views, n_views, 3, 3), f"estimate_pairwise_homographies: H {H.shape}")
+    check_finite_array(H[mask], "estimate_pairwise_homographies: H of successful pairs")
+    check(bool(np.array_equal(mask, mask.T)), "estimate_pairwise_homographies: mask asymmetric")
+
+
+@COSTLY
+@given(st.integers(0, 2**16), st.sampled_from([1, 2, 3]), st.data())
+def test_segment_plane_evidence(seed, n_views, data):
+    from transync import homography as hg
+
+    rng = np.random.default_rng(seed)
+    side = data.draw(st.sampled_from([24, 24, 9, 7]))
+    imgs = [textured(rng, 32, 32)[:side, :side].astype(np.float32) for _ in range(n_views)]
+    H = np.stack([np.array([[1, 0, data.draw(st.sampled_from([0.0, 1.0, 3.0]))], [0, 1, 0],
+                            [0, 0, 1.0]]) for _ in range(n_views)])
+    if data.draw(st.integers(0, 4)) == 0:
+        H = data.draw(st.one_of(HOMOGRAPHIES, float_arrays((n_views, 3, 3))))
+    if data.draw(st.integers(0, 4)) == 0:
+        imgs[0] = data.draw(images())
+    kw = data.draw(st.sampled_from([{}, {"window": 3}, {"window": 0}, {"margin": 3.0},
+                                    {"smooth": 0.0}, {"min_views": 5}, {"threshold": 1.5},
+                                    {"reference": n_views}, {"window": 2}]))
+    out = call(hg.segment_plane_evidence, imgs, H, rng=0, **kw)
+    if out is REFUSED:
+        return
+    check(len(out.masks) == n_views, "segment_plane_evidence: one mask per view")
+    for k, m in enumerate(out.masks):
+        check(np.shape(m) == np.shape(imgs[k]), f"segment_plane_evidence: masks[{k}] shape")
+        check(np.asarray(m).dtype == bool, f"segment_plane_evidence: masks[{k}] not boolean")
+
+
+@COSTLY
+@given(st.integers(0, 2**16), st.sampled_from([2, 3]), st.data())
+def test_to_reference_and_chained_homographies(seed, n_views, data):
+    """Tiny views (few features): finite homographies, NaN for views without an estimate, or a
+    named refusal."""
+    from transync import homography as hg
+
+    rng = np.random.default_rng(seed)
+    base = textured(rng, 64, 64)
+    imgs = [base] + [np.roll(base, (2 * k, 3 * k), axis=(0, 1)) for k in range(1, n_views)]
+    if data.draw(st.integers(0, 3)) == 0:
+        imgs[-1] = textured(rng, 64, 64)
+    ref = data.draw(st.sampled_from([0, 0, 1, -1, n_views]))
+    for fn in (hg.to_reference_homographies, hg.chained_homographies):
+        H = call(fn, imgs, reference=ref, n_features=200)
+        if H is REFUSED:
+            continue
+        H = np.asarray(H)
+        check(H.shape == (n_views, 3, 3), f"{fn.__name__}: shape {H.shape}")
+        ok = np.isfinite(H).all(axis=(1, 2))
+        check(bool(np.all(ok | np.isnan(H).all(axis=(1, 2)))),
+              f"{fn.__name__}: a homography partly NaN or infinite")
+
+
+def test_hunted_homography_cases():
+    """Inputs that contract hunts found breaking the contract in the homography layer; each
+    failed on the code before its fix."""
+    from transync import homography as hg
+
+    H = np.array([[-1e300, -2.65, 4.31], [-2.65, -2.65, 5e-324], [-2.65, -2.65, -2.65]])
+    # a 4-d array as an image: OpenCV's warpPerspective crashed the interpreter (SIGSEGV)
+    check(call(hg.mean_warped_image, [np.zeros((2, 18, 3, 3), np.float32)], H[None],
+               size=(3, 2)) is REFUSED, "a 4-d image accepted")
+    check(call(hg.warp_to_reference, np.zeros((2, 18, 3, 3), np.float32), H, (3, 2))
+          is REFUSED, "a 4-d image accepted")
+    # colour images in mean_warped_image: a numpy broadcasting error that named nothing
+    check(call(hg.mean_warped_image, [np.zeros((5, 5, 3))], np.eye(3)[None], size=(8, 8))
+          is REFUSED, "a colour image accepted by mean_warped_image")
+    # empty and float images: cv2.error from to_gray and sift_features
+    check(call(hg.to_gray, np.zeros((0, 5), np.uint8)) is REFUSED, "an empty image")
+    check(call(hg.sift_features, np.zeros((20, 20))) is REFUSED, "a float image for SIFT")
+    # huge floats: float32 overflow warnings in to_gray and extract_planes
+    g = call(hg.to_gray, np.array([[0.0, 1e300], [3.0, 4.0]]))
+    check(g is not REFUSED and np.asarray(g).dtype == np.uint8, "to_gray on huge floats")
+    check(call(hg.extract_planes, np.full((6, 2), 1e300), np.ones((6, 2))) is REFUSED,
+          "extract_planes on coordinates beyond float32")
+    # an initial warp whose inverse has a zero [2, 2] entry: divide by zero, then NaN
+    t = textured(np.random.default_rng(0), 32, 32)
+    check(call(hg.refine_homography_ecc, t, t, np.eye(3)[[1, 2, 0]], levels=1) is REFUSED,
+          "ECC from a warp sending the origin to infinity")
+    # view_graph_pairs on junk: IndexError / unpacking errors
+    for sizes in ((40, 30), [(40, 30)], "x"):
+        check(call(hg.view_graph_pairs, np.stack([np.eye(3)] * 2), sizes, reference=0)
+              is REFUSED, f"view_graph_pairs accepted sizes={sizes!r}")
+    # pairwise_corner_error on NaN estimates: RuntimeWarning from the matrix product
+    E = call(hg.pairwise_corner_error, np.full((2, 3, 3), np.nan), np.stack([np.eye(3)] * 2),
+             image_size=(64, 48))
+    check(E is not REFUSED and bool(np.all(np.isinf(E))), "NaN estimates: infinite errors")
+
+
 def test_harness_flags_low_level_errors():
     """The harness itself: documented errors pass, low-level ones are violations."""
     def named():

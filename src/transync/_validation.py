@@ -338,6 +338,31 @@ def check_index_pairs(pairs, n: int, name: str = "pairs", *, what: str = "object
     return arr
 
 
+def check_homographies(H, name: str, ndim: int | Sequence[int] = (2, 3)) -> np.ndarray:
+    """A finite homography ``(3, 3)`` or stack ``(N, 3, 3)`` (as ``ndim`` allows) of invertible
+    matrices (smallest singular value above ``1e-14`` times the largest); returns it as float.
+
+    >>> check_homographies(np.zeros((3, 3)), "H")
+    Traceback (most recent call last):
+        ...
+    ValueError: `H` must hold invertible homographies, got a singular matrix at index 0
+    """
+    H = check_array(H, name, ndim=ndim)
+    H3 = H[None] if H.ndim == 2 else H
+    if H3.shape[1:] != (3, 3):
+        want = " or ".join({2: "(3, 3)", 3: "(N, 3, 3)"}[d] for d in
+                           ((ndim,) if isinstance(ndim, int) else ndim))
+        raise ValueError(f"`{name}` must have shape {want}, got shape {H.shape}")
+    if len(H3):
+        with np.errstate(all="ignore"):
+            sv = np.linalg.svd(H3, compute_uv=False)
+        singular = np.flatnonzero(~(sv[:, -1] > 1e-14 * sv[:, 0]))
+        if singular.size:
+            raise ValueError(f"`{name}` must hold invertible homographies, got a singular matrix "
+                             f"at index {int(singular[0])}")
+    return H
+
+
 #: smallest positive scale (largest column sum of ``K``) an affinity may have: below it the
 #: solvers' products run among subnormal floats, lose their digits and end in NaN
 MIN_AFFINITY_SCALE = 1e-300

@@ -5,8 +5,33 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .._validation import check_array, check_int, check_positive
+from .._validation import check_array, check_homographies, check_int, check_positive
 from ..geometry import normalize_determinant, translation
+from ._sparse import check_image
+
+#: OpenCV's largest warp canvas side (``SHRT_MAX``: its remap tables hold short coordinates)
+MAX_CANVAS = 32767
+#: OpenCV interpolation flags ``warp_to_reference`` takes (nearest, linear, cubic, area, Lanczos)
+_INTERPOLATIONS = (cv2.INTER_NEAREST, cv2.INTER_LINEAR, cv2.INTER_CUBIC, cv2.INTER_AREA,
+                   cv2.INTER_LANCZOS4)
+
+
+def _canvas(size, offset) -> tuple[tuple[int, int], tuple[float, float]]:
+    """``size`` as (width, height) integers in ``[1, MAX_CANVAS]`` and ``offset`` as two
+    finite floats."""
+    if size is None or isinstance(size, (str, bytes)):
+        raise TypeError(f"`size` must be (width, height), got {type(size).__name__} {size!r}")
+    s = check_array(size, "size", finite=False)
+    if (s.shape != (2,) or not np.all(np.isfinite(s)) or np.any(s != np.round(s))
+            or np.any(s < 1) or np.any(s > MAX_CANVAS)):
+        raise ValueError(f"`size` must be (width, height), integers in [1, {MAX_CANVAS}], got "
+                         f"{np.asarray(size).tolist()!r}")
+    if offset is None or isinstance(offset, (str, bytes)):
+        raise TypeError(f"`offset` must be (x, y), got {type(offset).__name__} {offset!r}")
+    o = check_array(offset, "offset")
+    if o.shape != (2,):
+        raise ValueError(f"`offset` must be (x, y), got shape {o.shape}")
+    return (int(s[0]), int(s[1])), (float(o[0]), float(o[1]))
 
 __all__ = ["mean_warped_image", "refine_homography_ecc", "warp_to_reference"]
 
@@ -74,11 +99,9 @@ def refine_homography_ecc(template, image, H_init, *, mask=None, template_mask=N
     >>> ok, np.round(H[:2, 2] / H[2, 2], 1).tolist()     # back to the true shift (-4, -2)
     (True, [-4.0, -2.1])
     """
-    tpl = check_array(template, "template", ndim=2, dtype=np.float32)
-    img = check_array(image, "image", ndim=2, dtype=np.float32)
-    H_init = check_array(H_init, "H_init", ndim=2)
-    if H_init.shape != (3, 3):
-        raise ValueError(f"`H_init` must have shape (3, 3), got {H_init.shape}")
+    tpl = check_image(template, "template", min_size=1, grey=True).astype(np.float32)
+    img = check_image(image, "image", min_size=1, grey=True).astype(np.float32)
+    H_init = check_homographies(H_init, "H_init", ndim=2)
     levels = check_int(levels, "levels", minimum=1, maximum=8)
     max_iter = check_int(max_iter, "max_iter", minimum=1)
     eps = check_positive(eps, "eps")
@@ -95,6 +118,10 @@ def refine_homography_ecc(template, image, H_init, *, mask=None, template_mask=N
                              f"got {tm.shape}")
     # ECC warp: template coordinates -> image coordinates = inv(H)
     W = np.linalg.inv(H_init)
+    if not abs(W[2, 2]) > 1e-12 * np.abs(W).max():
+        raise ValueError("`H_init` must map the image's origin to a finite point of the template "
+                         "(ECC keeps the [2, 2] entry of the inverse warp at 1), got an inverse "
+                         f"whose [2, 2] entry is {W[2, 2]:.3g}")
     W = W / W[2, 2]
     pyr_t, pyr_i, pyr_m, pyr_tm = [tpl], [img], [m], [tm]
     for _ in range(levels - 1):
@@ -159,8 +186,21 @@ def warp_to_reference(image, H, size, *, offset=(0, 0),
     >>> bool(np.allclose(back[10:-10, 10:-10], base[10:-10, 10:-10], atol=1e-5))
     True
     """
-    T = translation(*offset)
-    return cv2.warpPerspective(image, T @ H, tuple(int(v) for v in size), flags=interpolation,
+    image = check_image(image, "image", min_size=1)
+    H = check_homographies(H, "H", ndim=2)
+    size, offset = _canvas(size, offset)
+    if interpolation not in _INTERPOLATIONS or isinstance(interpolation, bool):
+        raise ValueError(f"`interpolation` must be one of OpenCV's INTER_NEAREST, INTER_LINEAR, "
+                         f"INTER_CUBIC, INTER_AREA, INTER_LANCZOS4 {_INTERPOLATIONS}, got "
+                         f"{interpolation!r}")
+    if image.dtype not in (np.uint8, np.uint16, np.int16, np.float32, np.float64):
+        image = image.astype(np.float64)           # the types OpenCV warps
+    return _warp(image, translation(*offset) @ H, size, interpolation)
+
+
+def _warp(image, H, size, interpolation=cv2.INTER_LINEAR) -> np.ndarray:
+    """``cv2.warpPerspective`` of checked arguments (a canvas of ``size`` = (w, h))."""
+    return cv2.warpPerspective(image, H, size, flags=interpolation,
                                borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
 
@@ -206,20 +246,42 @@ def mean_warped_image(images, homographies, *, size, masks=None, offset=(0, 0),
     >>> int(count.max()), bool(np.allclose(mean[10:-10, 10:-10], base[10:-10, 10:-10], atol=1e-4))
     (2, True)
     """
-    w, h = (int(v) for v in size)
+    if isinstance(images, np.ndarray) and images.ndim == 2:
+        raise TypeError("`images` must be a list of (h, w) grey images, got one 2-D array")
+    if images is None or isinstance(images, (str, bytes)):
+        raise TypeError(f"`images` must be a list of (h, w) grey images, got "
+                        f"{type(images).__name__}")
+    imgs = [check_image(im, f"images[{k}]", min_size=1, grey=True).astype(np.float32)
+            for k, im in enumerate(images)]
+    N = len(imgs)
+    if N < 1:
+        raise ValueError("`images` must hold at least one image, got 0")
+    Hs = check_homographies(homographies, "homographies", ndim=3)
+    if len(Hs) != N:
+        raise ValueError(f"`homographies` must hold one homography per image ({N}), got "
+                         f"{len(Hs)}")
+    if masks is not None:
+        if len(masks) != N:
+            raise ValueError(f"`masks` must hold one mask per image ({N}), got {len(masks)}")
+        masks = [check_array(m, f"masks[{k}]", dtype=bool) for k, m in enumerate(masks)]
+        for k, (m, im) in enumerate(zip(masks, imgs)):
+            if m.shape != im.shape:
+                raise ValueError(f"`masks[{k}]` must have the shape of `images[{k}]` "
+                                 f"{im.shape}, got {m.shape}")
+    (w, h), offset = _canvas(size, offset)
+    if not isinstance(normalize, (bool, np.bool_)):
+        raise TypeError(f"`normalize` must be True or False, got {normalize!r}")
+    reference = check_int(reference, "reference", minimum=0, maximum=N - 1)
+    T = translation(*offset)
     acc = np.zeros((h, w), np.float64)
     cnt = np.zeros((h, w), np.float64)
-    order = [reference] + [k for k in range(len(images)) if k != reference]
+    order = [reference] + [k for k in range(N) if k != reference]
     for k in order:
-        im = np.asarray(images[k], dtype=np.float32)
-        H = homographies[k]
-        src_mask = np.ones(im.shape[:2], np.uint8) if masks is None else \
-            np.asarray(masks[k], dtype=np.uint8)
-        wi = warp_to_reference(im, H, (w, h), offset=offset)
-        vi = warp_to_reference(src_mask, H, (w, h), offset=offset,
-                               interpolation=cv2.INTER_NEAREST) > 0
-        vi &= warp_to_reference(np.ones(im.shape[:2], np.uint8), H, (w, h), offset=offset,
-                                interpolation=cv2.INTER_NEAREST) > 0
+        im, H = imgs[k], T @ Hs[k]
+        src_mask = np.ones(im.shape, np.uint8) if masks is None else masks[k].astype(np.uint8)
+        wi = _warp(im, H, (w, h))
+        vi = _warp(src_mask, H, (w, h), cv2.INTER_NEAREST) > 0
+        vi &= _warp(np.ones(im.shape, np.uint8), H, (w, h), cv2.INTER_NEAREST) > 0
         both = vi & (cnt > 0)
         if normalize and both.sum() > 100:
             # photometric gain/bias of this view against the running mean: least squares on

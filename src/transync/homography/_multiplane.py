@@ -21,6 +21,9 @@ from ._sparse import _METHODS, _robust_fit
 
 __all__ = ["MultiPlaneResult", "extract_planes", "misclassification_error"]
 
+#: largest point coordinate (pixels) a plane fit takes: OpenCV's float32 arithmetic squares it
+MAX_COORDINATE = 1e12
+
 
 @dataclass(frozen=True)
 class MultiPlaneResult:
@@ -103,6 +106,10 @@ def extract_planes(x1, x2, *, threshold=5.0, min_inliers=10, max_planes=None, me
     if x1.ndim != 2 or x1.shape[1] != 2 or x1.shape != x2.shape:
         raise ValueError(f"`x1` and `x2` must both have shape (n, 2), got {x1.shape} and "
                          f"{x2.shape}")
+    for name, x in (("x1", x1), ("x2", x2)):
+        if x.size and np.abs(x).max() > MAX_COORDINATE:
+            raise ValueError(f"`{name}` must hold pixel coordinates within +-{MAX_COORDINATE:g} "
+                             f"(OpenCV fits homographies in float32), got {np.abs(x).max():.3g}")
     min_inliers = check_int(min_inliers, "min_inliers", minimum=4)
     if threshold is None:
         span = float(np.ptp(np.vstack([x1, x2]), axis=0).max()) if len(x1) else 0.0

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_generator, check_choice, check_int, check_positive
+from .._validation import as_generator, check_array, check_choice, check_int, check_positive
 from ..exceptions import DegenerateInputError, UnlinkedViewsWarning
 from ..geometry import image_corners, normalize_determinant, transfer_points, translation
 from ..synchronization import synchronize_homographies
@@ -316,7 +316,19 @@ def view_graph_pairs(H_to_ref, sizes, *, reference, k=3) -> list[tuple[int, int]
     >>> view_graph_pairs(H, [(100, 100)] * 4, reference=0, k=1)
     [(1, 2), (2, 3)]
     """
+    H_to_ref = check_array(H_to_ref, "H_to_ref", ndim=3, finite=False)
     n = len(H_to_ref)
+    if H_to_ref.shape[1:] != (3, 3) or n < 1:
+        raise ValueError(f"`H_to_ref` must have shape (N, 3, 3) with N >= 1, got shape "
+                         f"{H_to_ref.shape}")
+    if sizes is None or isinstance(sizes, (str, bytes)):
+        raise TypeError(f"`sizes` must be a sequence of (width, height), got {sizes!r}")
+    sizes = check_array(sizes, "sizes")
+    if sizes.shape != (n, 2) or np.any(sizes <= 0):
+        raise ValueError(f"`sizes` must hold one positive (width, height) per view, shape "
+                         f"({n}, 2), got {sizes.tolist() if sizes.size < 20 else sizes.shape}")
+    reference = check_int(reference, "reference", minimum=0, maximum=n - 1)
+    k = check_int(k, "k", minimum=1)
     centers = np.full((n, 2), np.nan)
     for i in range(n):
         if np.all(np.isfinite(H_to_ref[i])):

@@ -84,23 +84,33 @@ class PairwiseHomographies:
 _MIN_SIZE = 16
 
 
-def _check_image(arr, k) -> np.ndarray:
-    """One image array: (H, W) or (H, W, C), real numeric, finite, at least 16 x 16 pixels."""
+def check_image(image, name: str, *, min_size: int = _MIN_SIZE, grey: bool = False
+                ) -> np.ndarray:
+    """One image array: (H, W) or (H, W, C) with C in (1, 3, 4) (``grey``: (H, W) only), real
+    numeric pixels (no float16), finite and non-negative, at least ``min_size`` pixels a side."""
+    if image is None or isinstance(image, (str, bytes)) or np.iscomplexobj(image):
+        raise TypeError(f"`{name}` must be an image array, got {type(image).__name__}")
+    try:
+        arr = np.asarray(image)
+    except (TypeError, ValueError) as exc:          # ragged nesting
+        raise TypeError(f"`{name}` must be an image array: {exc}") from None
     if arr.dtype.kind not in "uif" or arr.dtype == np.float16:
-        raise TypeError(f"`images[{k}]` must be an unsigned/integer or float image, "
+        raise TypeError(f"`{name}` must be an unsigned/integer or float image, "
                         f"got dtype {arr.dtype}")
+    if grey and arr.ndim != 2:
+        raise ValueError(f"`{name}` must be a (H, W) grey image, got shape {arr.shape}")
     if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (1, 3, 4)):
-        raise ValueError(f"`images[{k}]` must be a (H, W) or (H, W, C) image with C in "
+        raise ValueError(f"`{name}` must be a (H, W) or (H, W, C) image with C in "
                          f"(1, 3, 4), got shape {arr.shape}")
     if arr.size == 0:
-        raise ValueError(f"`images[{k}]` is empty (shape {arr.shape})")
-    if min(arr.shape[:2]) < _MIN_SIZE:
-        raise ValueError(f"`images[{k}]` must be at least {_MIN_SIZE} x {_MIN_SIZE} pixels, "
+        raise ValueError(f"`{name}` is empty (shape {arr.shape})")
+    if min(arr.shape[:2]) < min_size:
+        raise ValueError(f"`{name}` must be at least {min_size} x {min_size} pixels, "
                          f"got shape {arr.shape}")
     if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
-        raise ValueError(f"`images[{k}]` must be finite, got NaN or infinite pixels")
+        raise ValueError(f"`{name}` must be finite, got NaN or infinite pixels")
     if arr.dtype.kind == "i" and arr.min() < 0:
-        raise ValueError(f"`images[{k}]` must be non-negative, got minimum {int(arr.min())}")
+        raise ValueError(f"`{name}` must be non-negative, got minimum {int(arr.min())}")
     return arr
 
 
@@ -159,7 +169,7 @@ def load_images(images) -> list:
                 raise TypeError(f"`images[{k}]` must be an image array or a path, "
                                 f"got {type(im).__name__}")
             arr = np.asarray(im)
-        out.append(_check_image(arr, k))
+        out.append(check_image(arr, f"images[{k}]"))
     return out
 
 
@@ -186,13 +196,13 @@ def to_gray(image) -> np.ndarray:
     >>> to_gray(np.full((2, 2, 3), 0.5)).tolist()
     [[128, 128], [128, 128]]
     """
-    image = arr = np.asarray(image)
+    image = arr = check_image(image, "image", min_size=1)
     if arr.dtype == np.uint8:
         if arr.ndim == 3:
             arr = arr[..., 0] if arr.shape[2] == 1 else cv2.cvtColor(
                 np.ascontiguousarray(arr[..., :3]), cv2.COLOR_RGB2GRAY)
         return np.ascontiguousarray(arr)
-    arr = arr.astype(np.float32)
+    arr = arr.astype(np.float64)             # float32 only once scaled to [0, 255]
     top = float(arr.max()) if arr.size else 0.0
     if image.dtype == np.uint16:
         arr /= 257.0
@@ -200,6 +210,7 @@ def to_gray(image) -> np.ndarray:
         arr *= 255.0
     elif top > 255.0:
         arr *= 255.0 / top
+    arr = np.clip(arr, 0.0, 255.0).astype(np.float32)
     if arr.ndim == 3:
         arr = arr[..., 0] if arr.shape[2] == 1 else cv2.cvtColor(
             np.ascontiguousarray(arr[..., :3]), cv2.COLOR_RGB2GRAY)
@@ -231,7 +242,11 @@ def sift_features(gray, *, n_features=4000) -> tuple[np.ndarray, np.ndarray]:
     >>> pts.shape[1], desc.shape[1], len(pts) <= 51
     (2, 128, True)
     """
-    sift = cv2.SIFT_create(nfeatures=int(n_features))
+    gray = check_image(gray, "gray", min_size=1, grey=True)
+    if gray.dtype != np.uint8:
+        raise TypeError(f"`gray` must be a uint8 image (see to_gray), got dtype {gray.dtype}")
+    n_features = check_int(n_features, "n_features", minimum=0)
+    sift = cv2.SIFT_create(nfeatures=n_features)
     kp, desc = sift.detectAndCompute(gray, None)
     if desc is None or not kp:
         return np.zeros((0, 2), np.float32), np.zeros((0, 128), np.float32)

@@ -7,7 +7,7 @@ import contextlib
 
 import numpy as np
 
-from .._validation import check_array
+from .._validation import check_array, check_homographies, check_probability
 from ..geometry import image_corners as _corners
 from ..geometry import transfer_points as _transfer
 
@@ -31,22 +31,6 @@ def _sizes(image_size, n):
         raise ValueError(f"`image_size` must be (width, height) or of shape ({n}, 2), with finite "
                          f"entries >= 1, got {np.asarray(image_size).tolist()!r}")
     return arr
-
-
-def _homographies(H, name, ndim):
-    """A finite stack of invertible homographies (condition number <= 1e14)."""
-    H = check_array(H, name, ndim=ndim)
-    H3 = H[None] if H.ndim == 2 else H
-    if H3.shape[1:] != (3, 3):
-        raise ValueError(f"`{name}` must have shape (3, 3) or (N, 3, 3), got shape {H.shape}")
-    if len(H3):
-        with np.errstate(all="ignore"):
-            sv = np.linalg.svd(H3, compute_uv=False)
-        singular = np.flatnonzero(~(sv[:, -1] > 1e-14 * sv[:, 0]))
-        if singular.size:
-            raise ValueError(f"`{name}` must hold invertible homographies, got a singular matrix "
-                             f"at index {int(singular[0])}")
-    return H
 
 
 def corner_error(H_est, H_true, *, image_size) -> np.ndarray:
@@ -78,7 +62,7 @@ def corner_error(H_est, H_true, *, image_size) -> np.ndarray:
     0.5
     """
     He = check_array(H_est, "H_est", ndim=(2, 3), finite=False)  # a failed estimate: inf error
-    Ht = _homographies(H_true, "H_true", (2, 3))
+    Ht = check_homographies(H_true, "H_true", (2, 3))
     single = He.ndim == 2
     if single:
         He = He[None]
@@ -175,12 +159,13 @@ def pairwise_corner_error(H_est, H_true, *, image_size, min_overlap=0.05) -> np.
     import cv2
 
     He = check_array(H_est, "H_est", ndim=3, finite=False)      # a failed estimate: inf error
-    Ht = _homographies(H_true, "H_true", 3)
+    Ht = check_homographies(H_true, "H_true", 3)
     if He.shape != Ht.shape:
         raise ValueError(f"`H_est` and `H_true` must both have shape (N, 3, 3), got "
                          f"{He.shape} and {Ht.shape}")
     n = len(He)
     sizes = _sizes(image_size, n)
+    min_overlap = check_probability(min_overlap, "min_overlap")
     inv_t = np.linalg.inv(Ht)
     inv_e = np.full_like(He, np.nan)
     for k, Hk in enumerate(He):            # singular or non-finite estimates stay NaN
@@ -197,8 +182,8 @@ def pairwise_corner_error(H_est, H_true, *, image_size, min_overlap=0.05) -> np.
             if i == j:
                 continue
             cj = _corners(sizes[j])
-            Pt = inv_t[i] @ Ht[j]
             with np.errstate(over="ignore", invalid="ignore"):    # far footprints: inf
+                Pt = inv_t[i] @ Ht[j]
                 foot = (_transfer(Pt, cj) / unit).astype(np.float32)
             try:
                 inter, _ = cv2.intersectConvexConvex(ci, foot)
@@ -206,8 +191,8 @@ def pairwise_corner_error(H_est, H_true, *, image_size, min_overlap=0.05) -> np.
                 inter = 0.0
             if not inter >= min_overlap:
                 continue
-            Pe = inv_e[i] @ He[j]
             with np.errstate(all="ignore"):
+                Pe = inv_e[i] @ He[j]
                 e = np.linalg.norm(_transfer(Pe, cj) - _transfer(Pt, cj), axis=1).mean()
             out.append(e if np.isfinite(e) else np.inf)
     return np.asarray(out, dtype=float)

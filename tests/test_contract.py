@@ -1264,6 +1264,621 @@ def test_transitive_assignment_kernel_estimator(collections, matcher, sync, kern
     check(bool(np.all(np.abs(T) <= 1 + 1e-9)), "transform: normalized entries outside [-1, 1]")
 
 
+INT_ARGS = [0, -1, 1, 2, 3, 10**9, 1.5, True, np.int64(2), None, "2"]
+
+
+def _check_permutation_rows(a, n, what):
+    a = np.asarray(a)
+    check(a.dtype.kind in "iu", f"{what}: dtype {a.dtype}, expected integers")
+    check(a.shape[-1:] == (n,), f"{what}: shape {a.shape}, rows of length {n} expected")
+    check(bool(np.all(np.sort(a.reshape(-1, n), axis=1) == np.arange(n))),
+          f"{what}: a row is not a permutation of range({n})")
+
+
+def _is_connected(pairs, N):
+    if N <= 1:
+        return True
+    parent = list(range(N))
+
+    def find(x):
+        while parent[x] != x:
+            x = parent[x]
+        return x
+
+    for i, j in np.asarray(pairs).reshape(-1, 2):
+        parent[find(int(i))] = find(int(j))
+    return len({find(v) for v in range(N)}) == 1
+
+
+# ----------------------------------------------------------------------------------- view graph
+
+descriptor_arrays = st.one_of(
+    any_arrays(max_dims=2, max_side=5),
+    st.tuples(st.integers(1, 6), st.integers(1, 3)).flatmap(
+        lambda s: float_arrays(s, elements=st.one_of(
+            st.floats(-2, 2, width=64), st.sampled_from([0.0, 1e300, -1e300, 5e-324, 1e-300]))))
+)
+
+
+@MEDIUM
+@given(descriptor_arrays, st.data(), st.sampled_from(INT_ARGS))
+@example(np.array([[0.0], [1e300], [-1e300]]), np.array([[1e300]]), 1)
+def test_nearest_graphs_and_view_graph(descriptors, queries, k):
+    """nearest_graphs: (M, min(k, N)) distinct in-range indices, nearest first; view_graph:
+    sorted unique pairs i < j that connect all graphs; or a named refusal."""
+    from transync import kernels as tk
+
+    if not isinstance(queries, np.ndarray):            # drawn: usually the same columns
+        d = np.shape(descriptors)[-1] if np.ndim(descriptors) == 2 else 1
+        queries = queries.draw(st.one_of(
+            float_arrays(st.tuples(st.integers(0, 3), st.just(d)), elements=st.one_of(
+                st.floats(-2, 2, width=64), st.sampled_from([1e300, -1e300, 5e-324]))),
+            float_arrays(st.tuples(st.integers(0, 3), st.just(d))),
+            any_arrays(max_dims=2, max_side=3)))
+    P = call(tk.view_graph, descriptors, k)
+    if P is not REFUSED:
+        N = np.shape(descriptors)[0]
+        P = np.asarray(P)
+        check(P.dtype == np.int64 and P.ndim == 2 and P.shape[1] == 2,
+              f"view_graph: shape {P.shape}, dtype {P.dtype}")
+        check(bool(np.all((P[:, 0] < P[:, 1]) & (P[:, 0] >= 0) & (P[:, 1] < N))),
+              f"view_graph: pairs outside 0 <= i < j < {N}: {P.tolist()}")
+        check(len(np.unique(P, axis=0)) == len(P), "view_graph: repeated pairs")
+        check(_is_connected(P, N), f"view_graph: pairs do not connect the {N} graphs")
+        if k is None:
+            check(len(P) == N * (N - 1) // 2, "view_graph: n_neighbors=None, not all pairs")
+    nn = call(tk.nearest_graphs, descriptors, queries, k)
+    if nn is REFUSED:
+        return
+    D = np.asarray(descriptors, dtype=float)
+    Q = np.asarray(queries, dtype=float)
+    kk = min(int(k), D.shape[0])
+    check(nn.shape == (Q.shape[0], kk) and nn.dtype.kind == "i",
+          f"nearest_graphs: shape {nn.shape} dtype {nn.dtype}, expected ({Q.shape[0]}, {kk})")
+    check(bool(np.all((nn >= 0) & (nn < D.shape[0]))), "nearest_graphs: indices out of range")
+    for row in nn:
+        check(len(set(row.tolist())) == len(row), f"nearest_graphs: repeated index {row}")
+
+
+@MEDIUM
+@given(node_feature_lists(), st.data(),
+       st.sampled_from([None, [0, 1, 2], [0, 1, 2], [2], [1, 0], [], [[0, 1]], [0.0, 1.0],
+                        [0, np.nan], ["a", "b"], [None, 1], [1j, 2], [0, 2**40]]))
+@example(([np.ones((2, 1))], 2), None, [0, np.nan])
+@example(([np.ones((2, 1))], 2), None, [None, 1])
+def test_graph_descriptors(feats_n, data, label_values):
+    """(N, f + B): finite mean features, then label shares in [0, 1] summing to at most 1."""
+    from transync import kernels as tk
+
+    feats, _ = feats_n
+    labels = None
+    if data is None or data.draw(st.booleans()):
+        labels = [np.arange(len(F)) % 3 for F in feats]
+    elif data.draw(st.booleans()):
+        labels = [data.draw(any_arrays(max_dims=1, max_side=3)) for _ in feats]
+    D = call(tk.graph_descriptors, feats, labels, label_values)
+    if D is REFUSED:
+        return
+    check_finite_array(D, "graph_descriptors")
+    f = np.asarray(feats[0]).reshape(len(feats[0]), -1).shape[1]
+    B = 0 if labels is None else len(label_values)
+    check(D.shape == (len(feats), f + B), f"graph_descriptors: shape {D.shape}")
+    if B:
+        check(np.asarray(label_values).dtype.kind in "iu",
+              f"graph_descriptors: accepted non-integer label_values {label_values!r}")
+        H = D[:, f:]
+        check(bool(np.all((H >= 0) & (H <= 1)) and np.all(H.sum(1) <= 1 + 1e-12)),
+              "graph_descriptors: label shares outside [0, 1] or summing above 1")
+
+
+# ----------------------------------------------------------------------------------- pruning
+
+@MEDIUM
+@given(st.one_of(any_arrays(max_dims=2, max_side=5),
+                 hnp.arrays(np.int64, st.integers(1, 6), elements=st.integers(1, 9)),
+                 hnp.arrays(np.int64, st.integers(1, 6), elements=st.integers(1, 9))),
+       st.data(),
+       st.sampled_from([0.95, None, 1.0, 0.5, 0.0, -0.1, 1.5, np.nan, 5e-324, "0.5"]),
+       st.sampled_from([None, None, 3, 1, 0, -1, 10**30, 2.5]),
+       st.sampled_from([0, 1, 2, 10, 0, 1, -1, 1.0, 10**30]))
+@example(np.array([1, 2]), [None, None], None, None, 0)
+@example(np.array([1, 2]), np.array([1, "a"], dtype=object), None, None, 0)
+@example(np.array([1]), [0], None, 10**30, 0)
+def test_prune_by_size(sizes, data, quantile, max_nodes, min_class_size):
+    """keep: sorted distinct indices whose sizes respect the caps; rule: a str."""
+    from transync import kernels as tk
+
+    if isinstance(data, (list, np.ndarray)):
+        y = data
+    else:
+        m = np.shape(sizes)[0] if np.ndim(sizes) else 0
+        y = data.draw(st.one_of(hnp.arrays(np.int64, m, elements=st.integers(0, 2)),
+                                hnp.arrays(np.int64, m, elements=st.integers(0, 2)),
+                                hnp.arrays(np.dtype("U2"), m, elements=st.sampled_from(["a",
+                                                                                       "b"])),
+                                hnp.arrays(np.float64, m, elements=nasty_floats),
+                                any_arrays(max_dims=2, max_side=4)))
+    out = call(tk.prune_by_size, sizes, y, quantile=quantile, max_nodes=max_nodes,
+               min_class_size=min_class_size)
+    if out is REFUSED:
+        return
+    keep, rule = out
+    s = np.asarray(sizes)
+    check(isinstance(rule, str), "prune_by_size: rule not a str")
+    check(keep.dtype == np.int64 and keep.ndim == 1 and keep.size >= 1,
+          f"prune_by_size: keep {keep!r}")
+    check(bool(np.all(np.diff(keep) > 0) and keep[0] >= 0 and keep[-1] < s.shape[0]),
+          "prune_by_size: keep not sorted distinct indices in range")
+    if max_nodes is not None:
+        check(bool(np.all(s[keep] <= max_nodes)), "prune_by_size: kept a graph above max_nodes")
+
+
+# ------------------------------------------------------------------------------- synchronization
+
+@st.composite
+def alignment_problems(draw):
+    """(assignments, pairs, N, n, sizes, node_labels, kind) for synchronize_alignments."""
+    N = draw(st.sampled_from([1, 2, 3, 4, 2, 3]))
+    n = draw(st.sampled_from([1, 2, 3, 3, 4]))
+    pairs, A, kind = draw(slot_maps(N, n))
+    if kind == "junk" and not (A.size and np.any(np.sort(A, axis=1) != np.arange(n))):
+        kind = "random"          # a dropped or repeated pair: junk for the kernel, not here
+    if draw(st.integers(0, 3)) == 0 and len(pairs) > 1:          # a sparser view graph
+        keep = draw(st.lists(st.integers(0, len(pairs) - 1), min_size=1, unique=True))
+        pairs, A = pairs[sorted(keep)], A[sorted(keep)]
+        kind = "sparse" if kind != "junk" else kind
+    sizes = labels = None
+    if draw(st.booleans()):
+        sizes = np.array([draw(st.integers(1, n)) for _ in range(N)], dtype=np.int64)
+        if draw(st.integers(0, 4)) == 0:
+            sizes = draw(any_arrays(max_dims=1, max_side=4))
+            kind = "junk-sizes"
+        elif draw(st.booleans()):
+            labels = [np.array([draw(st.integers(0, 1)) for _ in range(s)]) for s in sizes]
+    return A, pairs, N, n, sizes, labels, kind
+
+
+@COSTLY
+@given(alignment_problems(), st.sampled_from(["orthogonal", "spectral"]), st.booleans(),
+       st.sampled_from([None, None, 0, 2, -1]),
+       st.sampled_from([(None, None), (None, None), ("n", 0), ("n", -2), ("n", 2.0),
+                        ("n_graphs", 0), ("n_graphs", True), ("max_iter", 0), ("tol", np.nan),
+                        ("assignments", np.zeros((1, 3), np.float64))]))
+def test_synchronize_alignments(problem, method, keep, refine, spoil):
+    """Alignment: (N, n) permutation rows, a finite objective and embedding; consistent maps
+    come back exactly; or a named refusal."""
+    from transync import kernels as tk
+
+    A, pairs, N, n, sizes, labels, kind = problem
+    args = dict(assignments=A, pairs=pairs, n_graphs=N, n=n)
+    if spoil[0] is not None:
+        args[spoil[0]] = spoil[1]
+    al = call(tk.synchronize_alignments, args.pop("assignments"), args.pop("pairs"),
+              args.pop("n_graphs"), sizes=sizes, node_labels=labels, method=method,
+              keep_embedding=keep, refine=refine, **args)
+    if al is REFUSED:
+        return
+    check(kind != "junk", f"synchronize_alignments: accepted junk maps ({spoil})")
+    _check_permutation_rows(al.labels, n, "Alignment.labels")
+    check(al.labels.shape == (N, n), f"Alignment.labels: shape {al.labels.shape}")
+    check_finite_scalar(al.objective, "Alignment.objective")
+    if keep:
+        check(al.embedding is not None and al.embedding.shape[:2] == (N, n),
+              "Alignment.embedding: missing or wrong shape")
+        check_finite_array(al.embedding, "Alignment.embedding")
+    else:
+        check(al.embedding is None, "Alignment.embedding kept without keep_embedding")
+    if kind == "transitive" and sizes is None and spoil[0] is None:
+        for (i, j), a in zip(pairs, A):
+            check(bool(np.array_equal(al.pairwise(int(i), int(j)), a)),
+                  "synchronize_alignments: consistent maps not recovered")
+
+
+@st.composite
+def placement_problems(draw):
+    N = draw(st.integers(0, 3))
+    n = draw(st.sampled_from([1, 2, 3, 3, 0]))
+    M = draw(st.integers(0, 2))
+    m = max(n, 0)
+    lab = np.array([draw(st.permutations(list(range(m)))) for _ in range(N)],
+                   dtype=np.int64).reshape(N, m)
+    K = N
+    fitted = None
+    if N and draw(st.booleans()):
+        K = draw(st.integers(0, N))
+        fitted = np.array([draw(st.permutations(list(range(N))))[:K] for _ in range(M)],
+                          dtype=np.int64).reshape(M, K)
+        if draw(st.integers(0, 4)) == 0:
+            fitted = draw(hnp.arrays(np.int64, (M, K), elements=st.integers(-1, N)))
+    A = np.array([draw(st.permutations(list(range(m)))) for _ in range(M * K)],
+                 dtype=draw(st.sampled_from([np.int64, np.int32]))).reshape(M, K, m)
+    if draw(st.integers(0, 4)) == 0:
+        A = draw(st.one_of(any_arrays(max_dims=3, max_side=3),
+                           hnp.arrays(np.int64, (M, K, m), elements=st.integers(-1, m))))
+    return A, lab, fitted, N, n, M
+
+
+@COSTLY
+@given(placement_problems(), st.data(), st.sampled_from(["orthogonal", "spectral"]))
+@example((np.array([[[0, 1], [0, 1]]]), np.array([[0, 1], [1, 0]]), None, 2, 2, 1), None,
+         "orthogonal")
+@example((np.zeros((1, 1, 0), np.int64), np.zeros((1, 0), np.int64), None, 1, 0, 1), None,
+         "orthogonal")
+@example((np.array([[[0, 1], [0, 1]]]), np.array([[0, 1], [1, 0]]), None, 2, 2, 1), "spectral",
+         "spectral")
+@example((np.zeros((0, 0, 1), np.int64), np.zeros((0, 1), np.int64), None, 0, 1, 0), "sizes",
+         "orthogonal")
+def test_place_graphs(problem, data, method):
+    """(M, n) permutation rows and a finite (M, n, d) relaxed embedding (zero rows on the
+    dummies with sizes), or a named refusal."""
+    from transync import kernels as tk
+
+    A, lab, fitted, N, n, M = problem
+    m = max(n, 0)
+    kw = {}
+    if data is None:                                   # explicit examples: huge embeddings, ...
+        kw = dict(embedding=np.full((N, m, 2), 1e308))
+    elif data == "spectral":
+        kw = dict(embedding=np.full((N, m, 2), 1e300), degrees=np.full((N, m), 1e-300),
+                  eigenvalues=[1e-11, 1.0])
+    elif data == "sizes":                              # ... no new and no fitted graph
+        kw = dict(sizes=np.zeros(0, np.int64), fitted_sizes=np.zeros(0, np.int64))
+    else:
+        if data.draw(st.booleans()):
+            d = data.draw(st.integers(0, 3))
+            kw["embedding"] = data.draw(float_arrays((N, m, d)) if data.draw(st.booleans())
+                                        else any_arrays(max_dims=3, max_side=3))
+            if method == "spectral" and data.draw(st.integers(0, 4)):
+                kw["degrees"] = data.draw(float_arrays((N, m)))
+                kw["eigenvalues"] = data.draw(float_arrays(d + data.draw(st.integers(-1, 1))
+                                                           if d else 0))
+        if data.draw(st.booleans()):
+            kw["sizes"] = np.array([data.draw(st.integers(0, m)) for _ in range(M)], np.int64)
+            kw["fitted_sizes"] = np.array([data.draw(st.integers(1, max(m, 1)))
+                                           for _ in range(N)], np.int64)
+            if data.draw(st.booleans()):
+                kw["node_labels"] = [np.arange(k) % 2 for k in kw["sizes"]]
+                kw["fitted_node_labels"] = [np.arange(k) % 2 for k in kw["fitted_sizes"]]
+    out = call(tk.place_graphs, A, lab, method=method, fitted=fitted, **kw)
+    if out is REFUSED:
+        return
+    labels, Q = out
+    M, _, m = np.shape(A)                              # junk assignments: their own shape
+    check(labels.shape == (M, m), f"place_graphs: labels shape {labels.shape}")
+    _check_permutation_rows(labels, m, "place_graphs labels")
+    if "embedding" not in kw:
+        check(Q is None, "place_graphs: an embedding without `embedding`")
+        return
+    d = np.shape(kw["embedding"])[-1]
+    check(Q.shape == (M, m, d), f"place_graphs: embedding shape {Q.shape}")
+    check_finite_array(Q, "place_graphs embedding")
+    if "sizes" in kw:
+        dummy = np.arange(m)[None, :] >= kw["sizes"][:, None]
+        check(bool(np.all(Q[dummy] == 0)), "place_graphs: dummies with non-zero rows")
+
+
+# ----------------------------------------------------------------------------------- matching
+
+@st.composite
+def matching_problems(draw):
+    """(features, adjacencies, pairs, node_labels, nmax) for match_pairs; some junk."""
+    from transync.kernels import hks_features
+
+    graphs = draw(st.lists(small_graphs(), min_size=0, max_size=4))
+    adjs = [getattr(g, "adjacency", g) for g in graphs]
+    sizes = [np.shape(a)[0] for a in adjs]
+    if draw(st.booleans()) and all(sizes):
+        feats = hks_features(adjs, times=[0.5, 2.0])
+    else:
+        feats = [draw(float_arrays((k, draw(st.integers(1, 2))) if draw(st.integers(0, 5))
+                                   else (k,), elements=nasty_floats
+                                   if draw(st.integers(0, 3)) == 0 else
+                                   st.floats(-2, 2, width=64)))
+                 for k in sizes]
+    N = len(adjs)
+    if draw(st.integers(0, 4)):
+        pairs = np.array(draw(st.lists(st.tuples(st.integers(0, max(N - 1, 0)),
+                                                 st.integers(0, max(N - 1, 0))),
+                                       min_size=0, max_size=5)), dtype=np.int64).reshape(-1, 2)
+    else:
+        pairs = draw(any_arrays(max_dims=2, max_side=3))
+    labels = None
+    if draw(st.booleans()):
+        labels = [np.arange(k) % 2 for k in sizes]
+    return feats, adjs, pairs, labels, max(sizes, default=0)
+
+
+@COSTLY
+@given(matching_problems(), st.sampled_from(["node", "sm", "rrwm"]),
+       st.sampled_from([0, 0, 0, 1, -1, "n0", "n-1", 2.0, 5000]),
+       st.sampled_from([None, None, 1.0, 0.0, -1.0, np.nan, 1e-300, 1e300]),
+       st.sampled_from([None, None, 0.0, 1.0, -1.0, 1e200, 1e300, np.inf]),
+       st.sampled_from([None, None, 1, 0, 2.5]))
+@example(([np.ones((2, 1)), np.ones((1, 1))], [np.array([[0, 1], [1, 0.]]), np.zeros((1, 1))],
+          np.array([[0, 1]]), None, 2), "sm", 1, None, 1e300, None)
+@example(([np.ones((2, 1)), np.ones((1, 1))], [np.array([[0, 1], [1, 0.]]), np.zeros((1, 1))],
+          np.array([[0, 1], [1, 0]]), None, 2), "rrwm", 5000, None, None, None)
+def test_match_pairs(problem, matcher, n_off, sigma2, dummy, chunk_size):
+    """(P, n) int rows, each a permutation of range(n); or a named refusal."""
+    from transync import kernels as tk
+
+    feats, adjs, pairs, labels, nmax = problem
+    n = {"n0": 0, "n-1": -1}.get(n_off, n_off) if isinstance(n_off, str) else (
+        n_off if isinstance(n_off, float) else nmax + n_off)
+    out = call(tk.match_pairs, feats, adjs, pairs, n=n, matcher=matcher, sigma2=sigma2,
+               node_labels=labels, dummy_affinity=dummy, chunk_size=chunk_size)
+    if out is REFUSED:
+        return
+    P = np.asarray(pairs).reshape(-1, 2).shape[0]
+    check(out.shape == (P, n), f"match_pairs: shape {out.shape}, expected ({P}, {n})")
+    _check_permutation_rows(out, n, "match_pairs")
+
+
+# ----------------------------------------------------------------------------------- baselines
+
+graph_lists = st.one_of(
+    st.lists(small_graphs(), min_size=0, max_size=4),
+    st.lists(any_arrays(max_dims=2, max_side=3), min_size=1, max_size=2),
+    st.lists(hnp.arrays(np.float64, st.integers(1, 4).map(lambda m: (m, m)),
+                        elements=st.sampled_from([0.0, 1.0, 2.0, 1e300, 5e-324, 1e308])
+                        ).map(lambda a: np.triu(a, 1) + np.triu(a, 1).T),
+             min_size=1, max_size=3),
+    any_arrays(max_dims=3, max_side=3))
+
+
+@MEDIUM
+@given(graph_lists)
+def test_graphlet3_counts(graphs):
+    """(N, 4) non-negative integer counts summing to C(n_g, 3)."""
+    from math import comb
+
+    from transync import kernels as tk
+
+    C = call(tk.graphlet3_counts, graphs)
+    if C is REFUSED:
+        return
+    check_finite_array(C, "graphlet3_counts")
+    check(C.shape == (len(graphs), 4), f"graphlet3_counts: shape {C.shape}")
+    check(bool(np.all(C >= 0) and np.all(C == np.rint(C))),
+          "graphlet3_counts: negative or non-integer counts")
+    for g, c in zip(graphs, C):
+        k = np.shape(getattr(g, "adjacency", g))[0]
+        check(c.sum() == comb(k, 3), f"graphlet3_counts: {c} does not sum to C({k}, 3)")
+
+
+@MEDIUM
+@given(graph_lists, st.sampled_from([1e-2, 1e-2, 0.1, 0.3, 0.0, -1.0, np.nan, 5e-324, 1e300]),
+       st.sampled_from([(1e-12, 500), (1e-12, 500), (1e300, 1), (5e-324, 20), (0.0, 5),
+                        (1e-12, 0), (1e-12, 2.0)]),
+       st.sampled_from([None, None, "alt", "junk"]), st.booleans())
+def test_random_walk_kernel(graphs, lamda, tol_iter, labels, normalize):
+    """A finite, exactly symmetric, PSD (to rounding) kernel; or a named refusal."""
+    from transync import kernels as tk
+
+    tol, max_iter = tol_iter
+    sizes = [np.shape(getattr(g, "adjacency", g))[0] if np.ndim(getattr(g, "adjacency", g))
+             else 0 for g in (graphs if isinstance(graphs, list) else [])]
+    node_labels = {None: None, "alt": [np.arange(k) % 2 for k in sizes],
+                   "junk": [np.full(k, 0.5) for k in sizes]}[labels]
+    K = call(tk.random_walk_kernel, graphs, lamda=lamda, node_labels=node_labels,
+             normalize=normalize, tol=tol, max_iter=max_iter)
+    if K is REFUSED:
+        return
+    _check_kernel_matrix(K, len(graphs), "random_walk_kernel", psd=True)
+
+
+# ----------------------------------------------------------------------------------- evaluation
+
+@st.composite
+def kernel_matrices(draw):
+    """Square matrices: PSD Grams times a nasty scale, symmetric junk, or any array."""
+    kind = draw(st.sampled_from(["psd", "psd", "sym", "any"]))
+    if kind == "any":
+        return draw(any_arrays(max_dims=3, max_side=4))
+    n = draw(st.integers(0, 4))
+    if kind == "psd":
+        X = draw(float_arrays((n, draw(st.integers(1, 3))), elements=st.floats(-2, 2,
+                                                                               width=64)))
+        K = X @ X.T
+    else:
+        B = draw(float_arrays((n, n)))
+        with np.errstate(all="ignore"):
+            K = np.triu(B) + np.triu(B, 1).T
+    with np.errstate(all="ignore"):
+        return K * draw(st.sampled_from([1.0, 1.0, 1e-300, 5e-324, 1e300, 1e308, -1.0, 0.0]))
+
+
+@MEDIUM
+@given(kernel_matrices())
+@example(np.full((2, 2), 1e308))
+@example(np.diag([-1.0, 1e-320]))
+def test_spectrum_and_min_eigenvalue_ratio(K):
+    """spectrum: n finite ascending eigenvalues; min_eigenvalue_ratio: a finite number <= 1."""
+    from transync import kernels as tk
+
+    w = call(tk.spectrum, K)
+    if w is not REFUSED:
+        check_finite_array(w, "spectrum")
+        check(w.shape == (np.shape(K)[0],), f"spectrum: shape {w.shape}")
+        check(bool(np.all(np.diff(w) >= 0)), "spectrum: not ascending")
+    r = call(tk.min_eigenvalue_ratio, K)
+    if r is REFUSED:
+        return
+    check_finite_scalar(r, "min_eigenvalue_ratio")
+    check(r <= 1 + 1e-12, f"min_eigenvalue_ratio: {r} > 1")
+
+
+@MEDIUM
+@given(kernel_matrices(), st.sampled_from(["none", "none", "own", "rect", "junk"]), st.data())
+def test_cosine_normalize(K, diags, data):
+    """Same shape, finite; a symmetric K stays exactly symmetric; a PSD K gets entries in
+    [-1, 1] and a diagonal of ones (zero for a zero self-similarity)."""
+    from transync import kernels as tk
+
+    kw = {}
+    if diags == "own" and np.ndim(K) == 2 and np.shape(K)[0] == np.shape(K)[1] \
+            and np.asarray(K).dtype.kind in "biuf":
+        d = np.diag(np.asarray(K, dtype=float))
+        kw = dict(diag_rows=d, diag_cols=d)
+    elif diags == "rect":
+        K = data.draw(float_arrays(st.tuples(st.integers(0, 3), st.integers(0, 3))))
+        kw = dict(diag_rows=data.draw(float_arrays(K.shape[0])),
+                  diag_cols=data.draw(float_arrays(K.shape[1])))
+    elif diags == "junk":
+        kw = dict(diag_rows=data.draw(any_arrays(max_dims=2)))
+        if data.draw(st.booleans()):
+            kw["diag_cols"] = data.draw(any_arrays(max_dims=2))
+    out = call(tk.cosine_normalize, K, **kw)
+    if out is REFUSED:
+        return
+    check_finite_array(out, "cosine_normalize")
+    K = np.asarray(K, dtype=float)
+    check(out.shape == K.shape, f"cosine_normalize: shape {out.shape} for {K.shape}")
+    if not kw and K.size:
+        if np.array_equal(K, K.T):
+            check(bool(np.array_equal(out, out.T)), "cosine_normalize: lost symmetry")
+        # Cauchy-Schwarz, in logs (no under- or overflow): where |K_ij| <= sqrt(K_ii K_jj),
+        # the normalized entry is at most 1
+        d = np.diag(K)
+        with np.errstate(divide="ignore"):
+            la, ld = np.log(np.abs(K)), np.log(np.where(d > 0, d, 0.0))
+        cs = (K != 0) & (2 * la <= ld[:, None] + ld[None, :] - 1e-9)
+        check(bool(np.all(np.abs(out[cs]) <= 1 + 1e-9)),
+              "cosine_normalize: |entry| > 1 where |K_ij| <= sqrt(K_ii K_jj)")
+
+
+@MEDIUM
+@given(node_feature_lists(), st.data(), st.sampled_from([1.0, 1.0, 1e300, 1e-300, 0.0]))
+@example(([np.full((2, 1), 1e100)], 2), np.full((1, 2, 2), 1.0), 1e300)
+def test_relaxed_features(feats_n, E, scale):
+    """(N, d, f + 1) finite relaxed features, or a named refusal."""
+    from transync import kernels as tk
+
+    feats, n = feats_n
+    if not isinstance(E, np.ndarray):                  # drawn: usually (N, n, d) that fits
+        E = E.draw(st.one_of(
+            st.tuples(st.just(len(feats)), st.just(max(n, 0)), st.integers(0, 3)).flatmap(
+                lambda sh: float_arrays(sh, elements=st.floats(-1, 1, width=64))),
+            st.tuples(st.just(len(feats)), st.just(max(n, 0)), st.integers(0, 3)).flatmap(
+                float_arrays),
+            st.tuples(st.integers(0, 4), st.integers(0, 4), st.integers(0, 3)).flatmap(
+                float_arrays),
+            any_arrays()))
+    with np.errstate(all="ignore"):
+        E = np.asarray(E) * scale if np.asarray(E).dtype.kind == "f" else E
+    R = call(tk.relaxed_features, feats, E)
+    if R is REFUSED:
+        return
+    check_finite_array(R, "relaxed_features")
+    f = np.asarray(feats[0]).shape[1]
+    check(R.shape == (len(feats), np.shape(E)[2], f + 1), f"relaxed_features: shape {R.shape}")
+
+
+@MEDIUM
+@given(graph_lists, st.sampled_from([None, None, [0.1, 1.0], [1.0], [], [0.0], [-1.0],
+                                     [np.nan], [1e300], [5e-324], [[1.0]]]))
+@example([np.array([[0, 1e308, 1e308], [1e308, 0, 0], [1e308, 0, 0]])], None)
+def test_hks_features(graphs, times):
+    """One (n_g, T) array per graph with values in [0, 1]; or a named refusal."""
+    from transync import kernels as tk
+
+    H = call(tk.hks_features, graphs, times)
+    if H is REFUSED:
+        return
+    T = 10 if times is None else len(times)
+    check(isinstance(H, list) and len(H) == len(graphs), "hks_features: not one entry per graph")
+    for g, h in zip(graphs, H):
+        check_finite_array(h, "hks_features")
+        k = np.shape(getattr(g, "adjacency", g))[0]
+        check(h.shape == (k, T), f"hks_features: shape {h.shape}, expected ({k}, {T})")
+        check(bool(np.all((h >= 0) & (h <= 1 + 1e-9))), "hks_features: values outside [0, 1]")
+
+
+_CV_CACHE: dict = {}
+
+
+def _cv_results():
+    """Three repeated_cv results on the same folds (tiny PSD Grams) and one on other folds."""
+    if not _CV_CACHE:
+        from transync.kernels import repeated_cv
+
+        rng = np.random.default_rng(0)
+        y = np.repeat([0, 1], 4)
+        out = []
+        for shift in (0.0, 1.0, 3.0):
+            X = rng.normal(size=(8, 2)) + shift * y[:, None]
+            out.append(repeated_cv(X @ X.T, y, n_splits=2, n_repeats=2, C_grid=[1.0],
+                                   inner_splits=2))
+        out.append(repeated_cv(X @ X.T, y, n_splits=2, n_repeats=2, C_grid=[1.0],
+                               inner_splits=2, random_state=1))
+        _CV_CACHE["r"] = out
+    return _CV_CACHE["r"]
+
+
+@st.composite
+def cv_results(draw):
+    """A CVResult from repeated_cv, one built by hand (any accuracies), or not a CVResult."""
+    from dataclasses import replace
+
+    kind = draw(st.sampled_from(["cv", "cv", "cv", "hand", "hand", "other"]))
+    res = _cv_results()
+    if kind == "cv":
+        return res[draw(st.integers(0, len(res) - 1))]
+    if kind == "other":
+        return draw(st.sampled_from([None, 1.0, "cv", res[0].accuracies]))
+    base = res[0]
+    shape = draw(st.sampled_from([base.accuracies.shape] * 3 + [(2, 1), (1, 2), (3, 2), (4,)]))
+    acc = draw(st.one_of(float_arrays(shape, elements=st.sampled_from([0.0, 0.5, 1.0, 0.75])),
+                         float_arrays(shape),
+                         st.just(np.full(shape, 0.5) + 1e-11 * np.arange(np.prod(shape))
+                                 .reshape(shape))))
+    with np.errstate(all="ignore"):
+        per_repeat = acc.mean(axis=-1) if acc.ndim == 2 else acc
+    return replace(base, accuracies=acc, per_repeat=per_repeat)
+
+
+@MEDIUM
+@given(cv_results(), cv_results(), st.sampled_from(["corrected", "repeats", "folds", "x", None]))
+def test_paired_ttest(a, b, over):
+    """(t, p): p in [0, 1], t finite or +-inf with p = 0; or a named refusal."""
+    from transync import kernels as tk
+
+    out = call(tk.paired_ttest, a, b, over=over)
+    if out is REFUSED:
+        return
+    t, p = out
+    check_finite_scalar(p, "paired_ttest p")
+    check(0.0 <= p <= 1.0, f"paired_ttest: p = {p} outside [0, 1]")
+    check(isinstance(t, float) and not np.isnan(t), f"paired_ttest: t = {t!r}")
+    check(np.isfinite(t) or p == 0.0, f"paired_ttest: t = {t} with p = {p}")
+
+
+def test_paired_ttest_hand_built_results():
+    """Regression: hand-built CVResults with one pair, one split, mismatched shapes or NaN
+    accuracies used to raise unnamed ValueErrors or ZeroDivisionError."""
+    from dataclasses import replace
+
+    from transync import kernels as tk
+
+    base = _cv_results()[0]
+    for acc, over in ((np.full((2, 1), 0.5), "corrected"), (np.full((1, 2), 0.5), "repeats"),
+                      (np.full((3, 2), 0.5), "folds"), (np.full((2, 2), np.nan), "folds"),
+                      (np.full((2, 2), 2.0), "folds")):
+        with np.errstate(all="ignore"):
+            b = replace(base, accuracies=acc, per_repeat=acc.mean(1))
+        check(call(tk.paired_ttest, b, base if acc.shape[0] == 3 else b, over=over)
+              is REFUSED, f"paired_ttest: accepted accuracies of shape {acc.shape} ({over})")
+
+
+def test_match_pairs_checks_rng():
+    """Regression: a junk ``rng`` was accepted silently unless ``sigma2`` was given."""
+    from transync import kernels as tk
+
+    A = np.array([[0, 1], [1, 0.0]])
+    check(call(tk.match_pairs, [np.ones((2, 1))] * 2, [A, A], [[0, 1]], n=2, rng="x")
+          is REFUSED, "match_pairs: accepted rng='x'")
+
+
 # ----------------------------------------------------------------------------------- multigraph
 
 PAIR_SOLVERS = ["rrwm", "ga", "pf", "sm", "ipfp", "cao", "cao-pc"]
@@ -1648,6 +2263,12 @@ def test_hunted_cases():
     tiny = PairAffinities.from_blocks(np.full((2, 2, 1, 1), 5e-324), n=1)
     for solver in ("rrwm", "ga", "pf"):
         check(call(run_lockstep, tiny, solver=solver) is REFUSED, f"lock-step {solver}, tiny K")
+    # a million graphs of which three are observed: the components of the observation graph
+    # were gathered one comparison pass per component (quadratic: a hang)
+    from transync.kernels import synchronize_alignments
+    check(call(synchronize_alignments, np.array([[1, 0, 2], [1, 2, 0], [2, 1, 0]]),
+               np.array([[0, 1], [0, 2], [1, 2]]), 10**6, n=3) is REFUSED,
+          "disconnected alignments accepted")
     # scores near the float64 limit: CAO's mean score overflowed (RuntimeWarning, inf history)
     huge = PairAffinities.from_blocks(np.full((3, 3, 1, 1), 1.7976931348623157e308), n=1)
     out = call(cao, np.zeros((3, 1), np.int64), np.asarray(huge.pairs), 3,
@@ -1922,6 +2543,57 @@ def test_to_reference_and_chained_homographies(seed, n_views, data):
         ok = np.isfinite(H).all(axis=(1, 2))
         check(bool(np.all(ok | np.isnan(H).all(axis=(1, 2)))),
               f"{fn.__name__}: a homography partly NaN or infinite")
+
+
+@COSTLY
+@given(st.integers(0, 2**16), st.sampled_from([2, 3]), st.data())
+def test_estimate_plane_homographies(seed, n_views, data):
+    """The pipeline on small views (often too few features) and junk options: homographies
+    finite or NaN per view, boolean masks of the views' shapes, or a named refusal."""
+    from transync import homography as hg
+
+    rng = np.random.default_rng(seed)
+    base = textured(rng, 96, 96)
+    shifts = [(0, 0)] + [(2 * k, 3 * k) for k in range(1, n_views)]
+    imgs = [np.roll(base, s, axis=(0, 1)) for s in shifts]
+    if data.draw(st.integers(0, 3)) == 0:
+        imgs[-1] = data.draw(st.one_of(images(), st.just(textured(rng, 96, 96))))
+    kw = data.draw(st.sampled_from([{}, {}, {"dense": False}, {"segment": False},
+                                    {"rectify": False}, {"robust": False},
+                                    {"pairs": [(0, 1)]}, {"pairs": "all"}, {"pairs": "x"},
+                                    {"pairs": [(0, 0)]}, {"reference": n_views},
+                                    {"threshold": -1.0}, {"n_neighbors": 0},
+                                    {"max_iter": 0}, {"tol": np.nan}, {"bogus": 1},
+                                    {"dense": "yes"}, {"callback": 3}]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UnlinkedViewsWarning)
+        res = call(hg.estimate_plane_homographies, imgs, **{"n_features": 300, "max_iter": 1,
+                                                            "rng": 0, **kw})
+    if res is REFUSED:
+        return
+    H = np.asarray(res.homographies)
+    check(H.shape == (n_views, 3, 3), f"estimate_plane_homographies: shape {H.shape}")
+    ok = np.isfinite(H).all(axis=(1, 2))
+    check(bool(np.all(ok | np.isnan(H).all(axis=(1, 2)))),
+          "estimate_plane_homographies: a homography partly NaN")
+    check(bool(ok[kw.get("reference", 0)]), "the reference view has no homography")
+    for k, m in enumerate(res.masks):
+        check(np.shape(m) == np.shape(imgs[k])[:2] and np.asarray(m).dtype == bool,
+              f"estimate_plane_homographies: masks[{k}]")
+
+
+@MEDIUM
+@given(st.lists(st.one_of(images(min_side=14, max_side=20), st.just("nofile.png"),
+                          st.none(), st.integers()), min_size=0, max_size=3))
+def test_load_images(items):
+    from transync import homography as hg
+
+    out = call(hg.load_images, items)
+    if out is REFUSED:
+        return
+    check(len(out) == len(items), "load_images: one image per item")
+    for im in out:
+        check_finite_array(im, "load_images")
 
 
 def test_hunted_homography_cases():

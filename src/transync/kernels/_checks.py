@@ -26,6 +26,7 @@ __all__ = [
     "check_label_array",
     "check_node_labels",
     "check_sequence",
+    "class_labels",
 ]
 
 
@@ -219,17 +220,14 @@ def check_int_array(x, name: str, ndim: int | None = None,
     return _check_int_array(x, name, ndim=ndim, finite=True, keep_dtype=keep_dtype)
 
 
-def check_pair_indices(pairs, n_graphs: int) -> np.ndarray:
-    """``(P, 2)`` int64 graph index pairs within ``[0, n_graphs)`` (an empty input: no pairs)."""
-    arr = check_int_array(pairs, "pairs")
-    if arr.size == 0:
-        return np.zeros((0, 2), np.int64)
-    if arr.ndim != 2 or arr.shape[1] != 2:
-        raise ValueError(f"`pairs` must have shape (P, 2), got shape {arr.shape}")
-    if arr.min() < 0 or arr.max() >= n_graphs:
-        raise ValueError(f"`pairs` must hold graph indices in [0, {n_graphs}), got range "
-                         f"[{arr.min()}, {arr.max()}]")
-    return arr
+def class_labels(y: np.ndarray, name: str = "y") -> tuple[np.ndarray, np.ndarray]:
+    """``numpy.unique(y, return_inverse=True)`` of 1-d class labels, refusing labels that do
+    not sort (``None``, mixed types in an object array) with a ``TypeError`` naming ``name``."""
+    try:
+        return np.unique(y, return_inverse=True)
+    except TypeError as exc:                   # the sort compares incomparable objects
+        raise TypeError(f"`{name}` must hold class labels of one sortable type (integers or "
+                        f"strings), got {exc}") from None
 
 
 def median_width(d2: np.ndarray, name: str) -> float:

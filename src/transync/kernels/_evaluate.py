@@ -19,6 +19,7 @@ import numpy as np
 
 from .._progress import progress_bar
 from .._validation import check_array, check_choice, check_int, check_square
+from ._checks import class_labels
 
 __all__ = [
     "CVResult",
@@ -139,7 +140,10 @@ def spectrum(K) -> np.ndarray:
     """
     K = check_array(K, "K", ndim=2)
     check_square(K, "K")
-    return np.linalg.eigvalsh(0.5 * (K + K.T))
+    w = np.linalg.eigvalsh(0.5 * K + 0.5 * K.T)             # no K + K.T overflow
+    if not np.isfinite(w).all():
+        raise ValueError("`K` is too large: its eigenvalues overflow float64; rescale it")
+    return w
 
 
 def min_eigenvalue_ratio(K) -> float:
@@ -175,6 +179,10 @@ def min_eigenvalue_ratio(K) -> float:
         return 0.0
     if w[-1] <= 0:
         raise ValueError(f"`K` must have a positive eigenvalue, got largest {w[-1]:.6g}")
+    if abs(w[0]) / np.finfo(float).max > w[-1]:
+        raise ValueError(f"`K` must have a positive eigenvalue within float64 range of its "
+                         f"negative ones (not a kernel matrix?), got lambda_min {w[0]:.6g} and "
+                         f"lambda_max {w[-1]:.6g}")
     return float(w[0] / w[-1])
 
 
@@ -242,6 +250,21 @@ class CVResult:
     def __str__(self) -> str:
         return (f"{100 * self.mean:.1f} ± {100 * self.std:.1f} "
                 f"({self.n_repeats} x {self.n_splits}-fold)")
+
+
+def _check_accuracies(res: CVResult, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(accuracies, per_repeat)`` of a CVResult, checked: an (n_repeats, n_splits) and an
+    (n_repeats,) array of accuracies in [0, 1] (a hand-built CVResult may hold anything)."""
+    acc = check_array(res.accuracies, f"{name}.accuracies", ndim=2)
+    per = check_array(res.per_repeat, f"{name}.per_repeat", ndim=1)
+    if per.shape[0] != acc.shape[0]:
+        raise ValueError(f"`{name}.per_repeat` must have one entry per repetition "
+                         f"({acc.shape[0]}), got shape {per.shape}")
+    for arr, what in ((acc, "accuracies"), (per, "per_repeat")):
+        if arr.size and (arr.min() < 0 or arr.max() > 1):
+            raise ValueError(f"`{name}.{what}` must hold accuracies in [0, 1], got range "
+                             f"[{arr.min():.6g}, {arr.max():.6g}]")
+    return acc, per
 
 
 def _fingerprint(folds: np.ndarray) -> str:
@@ -369,7 +392,7 @@ def repeated_cv(K, y, *, n_splits: int = 10, n_repeats: int = 10, C_grid=None,
     C_grid = check_array(C_grid, "C_grid", ndim=1)
     if C_grid.size == 0 or C_grid.min() <= 0:
         raise ValueError(f"`C_grid` must be a non-empty list of values > 0, got {C_grid}")
-    classes, y_idx = np.unique(y, return_inverse=True)
+    classes, y_idx = class_labels(y, "y")
     if classes.shape[0] < 2:
         raise ValueError(f"`y` must contain at least 2 classes, got {classes.shape[0]}")
     counts = np.bincount(y_idx)
@@ -454,16 +477,24 @@ def paired_ttest(a: CVResult, b: CVResult, *, over: str = "corrected") -> tuple[
         if not isinstance(r, CVResult):
             raise TypeError(f"`{name}` must be a CVResult, got {type(r).__name__}")
     over = check_choice(over, "over", ("corrected", "repeats", "folds"))
-    if a.fingerprint != b.fingerprint or a.folds.shape != b.folds.shape:
+    if a.fingerprint != b.fingerprint or np.shape(a.folds) != np.shape(b.folds):
         raise ValueError("`a` and `b` must come from the same folds (same y, n_splits, n_repeats "
                          f"and random_state), got fold fingerprints {a.fingerprint} and "
                          f"{b.fingerprint}")
+    acc = [_check_accuracies(r, name) for r, name in ((a, "a"), (b, "b"))]
+    if acc[0][0].shape != acc[1][0].shape:
+        raise ValueError(f"`a` and `b` must hold accuracies of the same shape (same folds), got "
+                         f"{acc[0][0].shape} and {acc[1][0].shape}")
     if over == "repeats":
-        x, z = a.per_repeat, b.per_repeat
+        x, z = acc[0][1], acc[1][1]
     else:
-        x, z = a.accuracies.ravel(), b.accuracies.ravel()
+        x, z = acc[0][0].ravel(), acc[1][0].ravel()
     if x.shape[0] < 2:
-        raise ValueError(f"a paired t-test needs at least 2 pairs, got {x.shape[0]} ({over})")
+        raise ValueError(f"`a` and `b` must hold at least 2 paired accuracies for a t-test, got "
+                         f"{x.shape[0]} ({over})")
+    if over == "corrected" and acc[0][0].shape[1] < 2:
+        raise ValueError(f"`a` and `b` must come from n_splits >= 2 folds for the corrected "
+                         f"t-test, got {acc[0][0].shape[1]}")
     d = x - z
     if np.ptp(d) <= 1e-12 * max(1.0, float(np.abs(d).max())):
         # (numerically) zero variance: scipy would warn and return NaN
@@ -475,7 +506,7 @@ def paired_ttest(a: CVResult, b: CVResult, *, over: str = "corrected") -> tuple[
     if over != "corrected":
         res = ttest_rel(x, z)
         return float(res.statistic), float(res.pvalue)
-    n_splits = a.accuracies.shape[1]
+    n_splits = acc[0][0].shape[1]
     m = d.shape[0]
     ratio = 1.0 / (n_splits - 1)              # n_test / n_train of k-fold CV
     var = float(np.var(d, ddof=1))

@@ -66,6 +66,13 @@ def _hks_stack(A: np.ndarray, times: np.ndarray) -> np.ndarray:
     n = A.shape[1]
     idx = np.arange(n)
     A[:, idx, idx] = 0.0                        # self-loops do not enter the Laplacian
+    # L does not change when a graph's weights are scaled: a power of 4 (exact, with an exact
+    # square root) brings the largest weight to [1/4, 1], so the degrees neither overflow
+    # (weights near 1e308) nor lose digits as subnormals
+    top = A.max((1, 2))
+    exp4 = np.where(top > 0, np.frexp(np.where(top > 0, top, 1.0))[1] // 2, 0)
+    if exp4.any():
+        A = np.ldexp(A, -2 * exp4[:, None, None])
     deg = A.sum(2)                              # (G, n)
     inv = np.zeros_like(deg)
     np.divide(1.0, np.sqrt(deg), out=inv, where=deg > 0)

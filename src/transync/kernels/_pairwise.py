@@ -80,13 +80,13 @@ import numpy as np
 
 from .._blas import blas_limit
 from .._progress import progress_bar
-from .._validation import as_generator, check_choice, check_int, check_positive
+from .._validation import as_generator, check_choice, check_index_pairs, check_int, check_positive
 from ..matching import sm as _sm_reference
 from ..multigraph import PairAffinities, run_lockstep
 from ..parallel import map_chunks, split_chunks
 from ..permutations import solve_lap
-from ._checks import (check_adjacency, check_feature_list, check_node_labels, check_pair_indices,
-                      check_sequence, check_width, median_width, squared_distances)
+from ._checks import (check_adjacency, check_feature_list, check_node_labels, check_sequence,
+                      check_width, median_width, squared_distances)
 
 __all__ = ["DUMMY_AFFINITY", "LABEL_MISMATCH", "PAIRWISE_MATCHERS",
            "default_sigma2", "match_pairs"]
@@ -207,7 +207,12 @@ def _power_iteration(aff, max_iter, tol):
         if not len(active):
             break
         W = sub.matvec(X[active])
-        nrm = np.sqrt((W * W).sum((1, 2)))
+        with np.errstate(over="ignore"):
+            nrm = np.sqrt((W * W).sum((1, 2)))
+        big = ~np.isfinite(nrm)                   # |W|^2 overflows (a huge dummy_affinity):
+        if big.any():                             # the norm of W / max|W| instead
+            W[big] /= np.abs(W[big]).max((1, 2))[:, None, None]
+            nrm[big] = np.sqrt((W[big] * W[big]).sum((1, 2)))
         moving = nrm > 0
         W /= np.where(moving, nrm, 1.0)[:, None, None]
         settled = np.sqrt(((W - X[active]) ** 2).sum((1, 2))) < tol
@@ -375,7 +380,7 @@ def match_pairs(features, adjacencies, pairs, *, n, matcher="rrwm", sigma2=None,
     """
     feats, adjs, labels = _check_inputs(features, adjacencies, node_labels)
     N = len(feats)
-    pairs = check_pair_indices(pairs, N)
+    pairs = check_index_pairs(pairs, N, what="graph indices")
     sizes = np.array([len(h) for h in feats], dtype=np.int64)
     n = check_int(n, "n", minimum=1)
     if sizes.max() > n:
@@ -383,12 +388,9 @@ def match_pairs(features, adjacencies, pairs, *, n, matcher="rrwm", sigma2=None,
         raise ValueError(f"`n` must be at least the largest graph: graph {k} has {sizes[k]} "
                          f"nodes, n={n}")
     matcher = check_choice(matcher, "matcher", PAIRWISE_MATCHERS)
-    if sigma2 is None:
-        sigma2 = default_sigma2(feats, rng=rng)
-    else:
-        sigma2 = check_width(sigma2, "sigma2")
-        if rng is not None:
-            as_generator(rng)
+    if rng is not None:
+        rng = as_generator(rng)                 # checked even where the sample needs none
+    sigma2 = default_sigma2(feats, rng=rng) if sigma2 is None else check_width(sigma2, "sigma2")
     dummy = DUMMY_AFFINITY if dummy_affinity is None else check_positive(
         dummy_affinity, "dummy_affinity", allow_zero=True)
     if chunk_size is not None:
@@ -400,11 +402,14 @@ def match_pairs(features, adjacencies, pairs, *, n, matcher="rrwm", sigma2=None,
     if P == 0:
         return out
 
-    # padded collection: features (N, n, f), adjacency (N, n, n) uint8, labels (N, n)
+    # padded collection at the largest graph's size (every pair is solved within it; the
+    # slots beyond map to themselves): features (N, m, f), adjacency (N, m, m) uint8, labels
+    m_max = int(sizes.max())
+    out[:, m_max:] = np.arange(m_max, n, dtype=np.int32)
     f = feats[0].shape[1]
-    H = np.zeros((N, n, f))
-    A = None if matcher == "node" else np.zeros((N, n, n), np.uint8)
-    L = None if labels is None else np.full((N, n), -1, np.int64)
+    H = np.zeros((N, m_max, f))
+    A = None if matcher == "node" else np.zeros((N, m_max, m_max), np.uint8)
+    L = None if labels is None else np.full((N, m_max), -1, np.int64)
     for g in range(N):
         k = sizes[g]
         H[g, :k] = feats[g]
@@ -431,7 +436,7 @@ def match_pairs(features, adjacencies, pairs, *, n, matcher="rrwm", sigma2=None,
                 sel.append(idx)
             results = map_chunks(fn, payloads, executor=executor)
             for idx, res in zip(sel, results):
-                out[idx] = res
+                out[idx, :m_max] = res
                 bar.update(len(idx))
     finally:
         bar.close()

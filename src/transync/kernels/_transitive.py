@@ -24,11 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import check_array, check_choice, check_int, check_positive
+from .._validation import check_array, check_choice, check_index_pairs, check_int, check_positive
 from ..permutations import solve_lap
 from ..synchronization import synchronize_permutations
-from ._checks import (check_feature_list, check_int_array, check_node_labels,
-                      check_pair_indices, check_width, median_width, squared_distances)
+from ._checks import (check_feature_list, check_int_array, check_node_labels, check_width,
+                      class_labels, median_width, squared_distances)
 from ._evaluate import cosine_normalize
 
 __all__ = [
@@ -292,7 +292,7 @@ def graph_descriptors(features, node_labels=None, label_values=None) -> np.ndarr
         return out
     if label_values is None:
         raise ValueError("`label_values` must be given with `node_labels`")
-    vals = np.asarray(label_values)
+    vals = check_int_array(label_values, "label_values")
     if vals.ndim != 1 or vals.size == 0 or (vals.size > 1 and np.any(vals[1:] <= vals[:-1])):
         raise ValueError(f"`label_values` must be a non-empty 1-d array of strictly increasing "
                          f"label values (one histogram bin each), got "
@@ -417,23 +417,12 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
     if not isinstance(keep_embedding, (bool, np.bool_)):
         raise TypeError(f"`keep_embedding` must be a bool, got {type(keep_embedding).__name__}")
     A = check_int_array(assignments, "assignments", 2)
-    pr = check_int_array(pairs, "pairs", 2)
+    pr = check_index_pairs(pairs, N, what="graph indices", distinct=True)
     if A.size == 0:
         A = A.reshape(0, n)
-    if pr.size == 0:
-        pr = pr.reshape(0, 2)
-    if pr.shape[1] != 2:
-        raise ValueError(f"`pairs` must have shape (P, 2), got shape {pr.shape}")
     if A.shape != (pr.shape[0], n):
         raise ValueError(f"`assignments` must have shape (P, n) = ({pr.shape[0]}, {n}) to match "
                          f"`pairs` and `n`, got shape {A.shape}")
-    if pr.size and (pr.min() < 0 or pr.max() >= N):
-        raise ValueError(f"`pairs` must hold graph indices in [0, {N}), got values in "
-                         f"[{int(pr.min())}, {int(pr.max())}]")
-    if np.any(pr[:, 0] == pr[:, 1]):
-        q = int(np.flatnonzero(pr[:, 0] == pr[:, 1])[0])
-        raise ValueError(f"`pairs` must not pair a graph with itself, got {pr[q].tolist()} at "
-                         f"row {q}")
     _check_permutation_rows(A, "assignments")
     real = None
     if sizes is not None:
@@ -609,6 +598,9 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
     A = check_int_array(assignments, "assignments", 3, keep_dtype=True)
     lab = check_int_array(labels, "labels", 2)
     M, K, n = A.shape
+    if n < 1:
+        raise ValueError(f"`assignments` must have shape (M, N, n) with n >= 1 (padded nodes), "
+                         f"got shape {A.shape}")
     N = lab.shape[0]
     if lab.shape[1:] != (n,) or (fitted is None and N != K):
         want = f"(N, n) = ({K}, {n})" if fitted is None else f"(N, {n})"
@@ -640,7 +632,7 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
         real = check_int_array(sizes, "sizes", 1)
         fit_real = check_int_array(fitted_sizes, "fitted_sizes", 1)
         for arr, name, k in ((real, "sizes", M), (fit_real, "fitted_sizes", N)):
-            if arr.shape != (k,) or arr.min() < 1 or arr.max() > n:
+            if arr.shape != (k,) or (k and (arr.min() < 1 or arr.max() > n)):
                 raise ValueError(f"`{name}` must hold {k} node counts in [1, {n}], got "
                                  f"{arr.tolist()!r:.80}")
     if node_labels is not None:
@@ -655,7 +647,11 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
             raise ValueError(f"`embedding` must have shape (N, n, d) = ({N}, {n}, d), got "
                              f"shape {E.shape}")
         Q = np.zeros((M, n, E.shape[2]))
-        if method == "spectral":
+        if method == "orthogonal":
+            # polar(sum_j P_tj Q_j) does not change when E is scaled: a power of two that brings
+            # its largest entry to [0.5, 1) keeps the vote sums and the SVD inside float64
+            E, = _scaled(E)
+        else:
             if degrees is None or eigenvalues is None:
                 raise ValueError("`degrees` and `eigenvalues` (Alignment.info) are needed to "
                                  "place a spectral embedding")
@@ -671,7 +667,8 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
             # a column whose eigenvalue is not positive cannot be extended: left at zero
             lam_inv = np.where(lam > 1e-12, 1.0 / np.where(lam > 1e-12, lam, 1.0), 0.0)
             dinv = np.where(deg > 0, 1.0 / np.sqrt(np.where(deg > 0, deg, 1.0)), 0.0)
-            E = E * dinv[:, :, None]                      # D^{-1/2} U, once
+            with np.errstate(over="ignore", invalid="ignore"):
+                E = E * dinv[:, :, None]                  # D^{-1/2} U, once
     out = np.empty((M, n), dtype=np.int64)
     step = max(1, _SLOT_BLOCK_ELEMENTS // max(K * n, 1))
     for s in range(0, M, step):                           # blocks of new graphs bound memory
@@ -697,17 +694,22 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
                 out[s + t, k:] = np.setdiff1d(np.arange(n), c)
         if E is None:
             continue
-        for t in range(b):                                # (K, n, d) gathered per new graph
-            rows = E[jj[min(t, jj.shape[0] - 1)], blk[t]]
-            if valid is None:
-                Q[s + t] = rows.sum(0)
-                cnt = np.full(n, float(K))
-            else:
-                Q[s + t] = np.einsum("ju,jud->ud", valid[t], rows)
-                cnt = valid[t].sum(0).astype(float)
-            if method == "spectral":                      # eigenvector equation, row by row
-                c = np.where(cnt > 0, 1.0 / np.sqrt(np.maximum(cnt, 1.0)), 0.0)
-                Q[s + t] *= c[:, None] * lam_inv[None, :]
+        with np.errstate(over="ignore", invalid="ignore"):   # spectral: checked below
+            for t in range(b):                            # (K, n, d) gathered per new graph
+                rows = E[jj[min(t, jj.shape[0] - 1)], blk[t]]
+                if valid is None:
+                    Q[s + t] = rows.sum(0)
+                    cnt = np.full(n, float(K))
+                else:
+                    Q[s + t] = np.einsum("ju,jud->ud", valid[t], rows)
+                    cnt = valid[t].sum(0).astype(float)
+                if method == "spectral":                  # eigenvector equation, row by row
+                    c = np.where(cnt > 0, 1.0 / np.sqrt(np.maximum(cnt, 1.0)), 0.0)
+                    Q[s + t] *= c[:, None] * lam_inv[None, :]
+    if E is not None and method == "spectral" and not np.isfinite(Q).all():
+        raise ValueError("the spectral placement overflows float64: `embedding` is too large "
+                         "for its `degrees` and `eigenvalues` (the fitted Alignment's own "
+                         "values never are)")
     if E is not None and method == "orthogonal":
         if real is None:
             U, _, Vt = np.linalg.svd(Q, full_matrices=False)   # polar factor, batched
@@ -809,7 +811,12 @@ def relaxed_features(features, embedding) -> np.ndarray:
         raise ValueError(f"`embedding` must have one (n, d) block per graph ({len(feats)}), got "
                          f"shape {E.shape}")
     pad = _padded_features(feats, E.shape[1])
-    return np.einsum("gud,guf->gdf", E, pad)
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = np.einsum("gud,guf->gdf", E, pad)
+    if not np.isfinite(out).all():
+        raise ValueError("the values of `embedding` and `features` are too large: Q_i^T F_i "
+                         "overflows float64; rescale them")
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -985,7 +992,7 @@ def _check_overflow(K: np.ndarray, dx: np.ndarray, dy: np.ndarray, name: str) ->
 
 def _matched_pairs(pairs, N: int) -> tuple[np.ndarray, np.ndarray]:
     """Rows ``(i, j)`` of ``pairs`` checked to cover every unordered pair of ``N`` graphs once."""
-    pr = check_pair_indices(pairs, N)
+    pr = check_index_pairs(pairs, N, what="graph indices")
     self_pairs = np.flatnonzero(pr[:, 0] == pr[:, 1])
     if self_pairs.size:
         raise ValueError(f"`pairs` must pair distinct graphs, got pairs[{self_pairs[0]}] = "
@@ -1194,10 +1201,10 @@ def prune_by_size(sizes, y, *, quantile: float | None = 0.95, max_nodes: int | N
         parts.append(f"{q:g} size quantile {qv:g}")
     if max_nodes is not None:
         mx = check_int(max_nodes, "max_nodes", minimum=1)
-        cap = min(cap, mx)
+        cap = min(cap, min(mx, int(s.max())))       # int64-safe: above the largest, no cap
         parts.append(f"max_nodes {mx}")
     size_ok = s <= cap
-    classes, inverse = np.unique(yy, return_inverse=True)
+    classes, inverse = class_labels(yy, "y")
     counts = np.bincount(inverse[size_ok], minlength=classes.size)
     class_ok = counts >= min_class_size
     keep = np.flatnonzero(size_ok & class_ok[inverse]).astype(np.int64)

@@ -546,7 +546,8 @@ def _observation_components(stk: StackedPairs, disconnected: str) -> list[np.nda
     G = sp.coo_matrix((np.ones(int(pos.sum())), (stk.pairs[pos, 0], stk.pairs[pos, 1])),
                       shape=(stk.n_objects, stk.n_objects))
     n_comp, comp = connected_components(G, directed=False)
-    comps = [np.flatnonzero(comp == c) for c in range(n_comp)]
+    order = np.argsort(comp, kind="stable")         # members of every component at once
+    comps = np.split(order, np.flatnonzero(np.diff(comp[order])) + 1)
     if n_comp > 1 and disconnected == "raise":
         raise DegenerateInputError(
             f"the observation graph is disconnected: {n_comp} components, e.g. objects "

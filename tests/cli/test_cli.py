@@ -204,6 +204,38 @@ def test_debug_shows_the_traceback_and_unexpected_errors_stay_one_line(bad_input
                    "with --debug for the traceback)\n")
 
 
+@pytest.mark.filterwarnings("default")
+def test_warnings_print_one_line_each(bad_inputs, capsys, monkeypatch):
+    """A library warning during a command (a solver at its iteration budget) is one line on
+    stderr, not Python's file:line format with the source line."""
+    import warnings
+
+    import transync.matching
+    from transync.exceptions import ConvergenceWarning
+
+    real = transync.matching.match_graphs
+
+    def warns(*args, **kwargs):
+        warnings.warn("match_graphs: stopped at\n its budget", ConvergenceWarning, stacklevel=2)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(transync.matching, "match_graphs", warns)
+    p = str(bad_inputs / "p2.txt")
+    assert main(["match", p, p]) == 0
+    err = capsys.readouterr().err
+    assert err == "transync: warning: match_graphs: stopped at its budget\n"
+
+
+def test_sync_json_with_integers_beyond_int64_is_a_named_error(tmp_path, capsys):
+    """A huge integer in an assignment was an 'unexpected OverflowError' (a fuzz found it)."""
+    f = tmp_path / "big.json"
+    f.write_text('{"pairs": [[1, 0, [100000000000000000000, 0]], [2, 0, [1, 0]]]}')
+    assert main(["sync", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("transync: error: ") and "within int64" in err
+    assert "unexpected" not in err
+
+
 @pytest.mark.parametrize("method", ["hungarian", "sinkhorn"])
 def test_linear_methods_use_a_unary_term_and_recover_shuffled_points(tmp_path, method):
     rng = np.random.default_rng(3)

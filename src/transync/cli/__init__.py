@@ -18,6 +18,7 @@ import argparse
 import contextlib
 import sys
 import traceback
+import warnings
 
 from ._common import CLIError
 
@@ -31,7 +32,9 @@ Run `transync COMMAND --help` for a command's options (each shows its default)."
 
 _EPILOG = """\
 exit status: 0 success; 2 an error (one line on stderr: `transync: error: ...`; --debug shows
-the traceback); 130 interrupted (Ctrl-C; stored experiment trials are kept, rerun to resume)."""
+the traceback); 130 interrupted (Ctrl-C; stored experiment trials are kept, rerun to resume).
+Warnings (e.g. a solver stopped at its iteration budget) print one line each on stderr:
+`transync: warning: ...`."""
 
 
 class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
@@ -99,7 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     ----------
     argv : list of str, optional
         The arguments after the program name; ``None`` reads ``sys.argv[1:]``. A ``--debug``
-        anywhere in it shows the full traceback of an error.
+        anywhere in it shows the full traceback of an error (and warnings in Python's own
+        format; without it a warning prints as one line, ``transync: warning: ...``).
 
     Returns
     -------
@@ -122,7 +126,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)          # usage errors: argparse prints them, exits 2
     args.debug = debug
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            if not debug:                   # one line each, as the errors
+                warnings.showwarning = _show_warning
+            return int(args.func(args) or 0)
     except BrokenPipeError:        # output piped into e.g. `head`, which stopped reading
         import os
 
@@ -140,6 +147,11 @@ def main(argv: list[str] | None = None) -> int:
             traceback.print_exc()
         print(f"transync: error: {_one_line(exc)}", file=sys.stderr)
         return 2
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Print a warning as ``transync: warning: ...`` on one line of standard error."""
+    print(f"transync: warning: {' '.join(str(message).split())}", file=sys.stderr)
 
 
 def _one_line(exc: BaseException) -> str:

@@ -215,9 +215,10 @@ def _read_pairs(path: str) -> dict:
         raise CLIError(f"{path}: \"pairs\" must be a non-empty list {form}")
     pairs = {}
     for k, entry in enumerate(entries):
-        def ints(v):
+        def ints(v):                        # integers within int64
             return isinstance(v, list) and all(
-                isinstance(x, int) and not isinstance(x, bool) for x in v)
+                isinstance(x, int) and not isinstance(x, bool) and -2**63 <= x < 2**63
+                for x in v)
 
         ok = (isinstance(entry, list) and len(entry) == 3 and ints(entry[:2])
               and (ints(entry[2]) or (isinstance(entry[2], list) and entry[2]
@@ -226,7 +227,7 @@ def _read_pairs(path: str) -> dict:
         if not ok:
             raise CLIError(f"{path}: pairs[{k}] must be [i, j, map] with integers i, j and, as "
                            "the map, an assignment (a list of integers, -1 = unmatched) or a 0/1 "
-                           f"matrix (a list of equal-length integer rows), got "
+                           f"matrix (a list of equal-length integer rows), all within int64, got "
                            f"{json.dumps(entry)[:80]}")
         i, j, a = entry
         if (i, j) in pairs:

@@ -2234,6 +2234,71 @@ def test_split_chunks(n_items, executor, min_chunk, chunks_per_worker):
     check(sorted(flat.tolist()) == list(range(n_items)), "split_chunks: not a partition")
 
 
+IDX = st.sampled_from([0, 1, 2, -1, 3, 10**12, 1.0, 1.5, "0", None, True, np.int64(1)])
+
+
+@MEDIUM
+@given(i=IDX, j=IDX, g=IDX, k=IDX,
+       pairs=st.one_of(st.none(), any_arrays(max_dims=2), st.just([(0, 1), (1, 2)])),
+       other=st.one_of(st.just("same"), any_arrays(max_dims=2),
+                       st.just([np.array([0, 1]), np.array([1, 0])])),
+       max_size=st.sampled_from([20000, 0, -1, 2.5, 10**12]))
+def test_result_accessors(i, j, g, k, pairs, other, max_size):
+    """The accessors of every result type (pairwise, absolute, block, atom, pairwise_dict,
+    stacked_blocks, maps_from, accuracy, to_matrix) on any index: a valid value or a named
+    refusal, never an IndexError."""
+    from transync import match_collection, synchronize_doubly_stochastic, synchronize_permutations
+    from transync.graphs import Graph
+    from transync.permutations import MultiMatching
+
+    m = MultiMatching([np.array([0, 1, 2]), np.array([2, 0, -1]), np.array([1, 2])])
+    pw = {(0, 1): np.array([1, 2, 0]), (1, 2): np.array([0, 2, 1]), (0, 2): np.array([2, 1, 0])}
+    ps = synchronize_permutations(pw, rng=0)
+    bs = synchronize_doubly_stochastic({key: np.eye(3)[v] for key, v in pw.items()}, rng=0)
+    pts = np.random.default_rng(0).random((3, 4, 2))
+    mc = match_collection([Graph.from_points(p) for p in pts], progress=False, rng=0)
+    sizes = {"m": [3, 3, 2], "ps": [3, 3, 3], "bs": [3, 3, 3], "mc": [4, 4, 4]}
+    for name, obj in (("m", m), ("ps", ps), ("bs", bs), ("mc", mc)):
+        n = sizes[name]
+        a = call(obj.pairwise, i, j)
+        if a is not REFUSED:
+            check(isinstance(i, (int, np.integer)) and isinstance(j, (int, np.integer))
+                  and not isinstance(i, bool) and not isinstance(j, bool),
+                  f"{name}.pairwise accepted indices {i!r}, {j!r}")
+            check_assignment(a, n[i], n[j], f"{name}.pairwise({i}, {j})")
+        if hasattr(obj, "absolute"):
+            X = call(obj.absolute, g)
+            if X is not REFUSED:
+                check(np.shape(X)[0] == n[g], f"{name}.absolute({g}): shape {np.shape(X)}")
+        if hasattr(obj, "block"):
+            B = call(obj.block, i, j)
+            if B is not REFUSED:
+                check_finite_array(B, f"{name}.block")
+        if hasattr(obj, "atom"):
+            call(obj.atom, k)
+        if hasattr(obj, "stacked_blocks"):
+            S = call(obj.stacked_blocks, pairs)
+            if S is not REFUSED:
+                check_finite_array(S, f"{name}.stacked_blocks")
+        if name in ("m", "ps"):
+            D = call(obj.pairwise_dict, pairs)
+            if D is not REFUSED:
+                for (u, v), av in D.items():
+                    check_assignment(av, n[u], n[v], f"{name}.pairwise_dict[{(u, v)}]")
+        if name in ("m", "mc"):
+            acc = call(obj.accuracy, m if isinstance(other, str) and name == "m" else
+                       (mc.matching if isinstance(other, str) else other))
+            if acc is not REFUSED:
+                check_finite_scalar(acc, f"{name}.accuracy")
+                check(0 <= acc <= 1, f"{name}.accuracy {acc}")
+    M = call(m.to_matrix, max_size=max_size)
+    if M is not REFUSED:
+        check(M.shape == (8, 8), f"MultiMatching.to_matrix: shape {M.shape}")
+    F = call(m.maps_from, {(0, 1): np.array([1, 0, 2])}, pairs)
+    if F is not REFUSED:
+        check(np.asarray(F).dtype.kind in "iu", "MultiMatching.maps_from: dtype")
+
+
 def test_hunted_cases():
     """Inputs that contract hunts (derandomize=False, hundreds of examples) found breaking the
     contract; each failed on the code before its fix."""
@@ -2596,6 +2661,42 @@ def test_load_images(items):
         check_finite_array(im, "load_images")
 
 
+@COSTLY
+@given(st.integers(0, 2**16), st.sampled_from([2, 3]), st.data())
+def test_rectified_pairwise_and_evaluate_alignment(seed, n_views, data):
+    """estimate_rectified_pairwise and evaluate_alignment on small shifted textures, junk
+    homographies, masks and options: finite results or a named refusal."""
+    from transync import homography as hg
+    from transync.geometry import translation
+
+    rng = np.random.default_rng(seed)
+    base = textured(rng, 96, 96)
+    shifts = [(0, 0)] + [(2 * k, 3 * k) for k in range(1, n_views)]
+    imgs = [np.roll(base, s, axis=(0, 1)) for s in shifts]
+    H = np.stack([translation(-s[1], -s[0]) for s in shifts])
+    if data.draw(st.integers(0, 3)) == 0:
+        H = data.draw(st.one_of(HOMOGRAPHIES, float_arrays((n_views, 3, 3))))
+    pairs = data.draw(st.sampled_from([[(0, 1)], [(0, 1), (1, 0)], [], [(0, 0)], [(0, 5)],
+                                       "all", None]))
+    kw = data.draw(st.sampled_from([{}, {"margin": -1.0}, {"radius": 0.0}, {"guided": "no"},
+                                    {"reference": 9}, {"min_inliers": 4}, {"ratio": 2.0}]))
+    out = call(hg.estimate_rectified_pairwise, imgs, H, pairs, n_features=300, rng=0, **kw)
+    if out is not REFUSED:
+        mask = np.asarray(out.mask)
+        check_finite_array(np.asarray(out.H)[mask], "estimate_rectified_pairwise: H")
+    masks = [np.ones(im.shape, bool) for im in imgs]
+    if data.draw(st.integers(0, 3)) == 0:
+        masks = data.draw(st.sampled_from([None, masks[:1], [np.ones((3, 3), bool)] * n_views]))
+    H_est = H + data.draw(st.sampled_from([0.0, 0.0, 1e-3, np.nan])) \
+        if np.asarray(H).dtype.kind == "f" else H
+    res = call(hg.evaluate_alignment, imgs, H_est, H, masks_true=masks,
+               pairwise=data.draw(st.booleans()))
+    if res is not REFUSED:
+        for key, v in res.items():
+            check(isinstance(v, (float, int, np.floating, np.integer)), f"{key}: {v!r}")
+            check(not np.isnan(v) or key.startswith("pairwise"), f"evaluate_alignment[{key}] NaN")
+
+
 def test_hunted_homography_cases():
     """Inputs that contract hunts found breaking the contract in the homography layer; each
     failed on the code before its fix."""
@@ -2626,6 +2727,13 @@ def test_hunted_homography_cases():
     for sizes in ((40, 30), [(40, 30)], "x"):
         check(call(hg.view_graph_pairs, np.stack([np.eye(3)] * 2), sizes, reference=0)
               is REFUSED, f"view_graph_pairs accepted sizes={sizes!r}")
+    # evaluate_alignment on one (3, 3) estimate instead of a stack: numpy's AxisError; and
+    # estimate_rectified_pairwise on non-numeric homographies: a float() conversion error
+    imgs = [t, np.roll(t, 2, axis=1)]
+    check(call(hg.evaluate_alignment, imgs, np.eye(3), np.stack([np.eye(3)] * 2),
+               masks_true=[np.ones((32, 32), bool)] * 2) is REFUSED, "H_est of one matrix")
+    check(call(hg.estimate_rectified_pairwise, imgs, np.full((2, 3, 3), "a"), [(0, 1)])
+          is REFUSED, "string homographies")
     # pairwise_corner_error on NaN estimates: RuntimeWarning from the matrix product
     E = call(hg.pairwise_corner_error, np.full((2, 3, 3), np.nan), np.stack([np.eye(3)] * 2),
              image_size=(64, 48))

@@ -10,8 +10,8 @@ from ..exceptions import UnlinkedViewsWarning
 from ..geometry import normalize_determinant
 from ._dense import mean_warped_image
 from ..metrics import brenner_focus, corner_error, pairwise_corner_error, segmentation_scores
-from .._validation import check_int
-from ._sparse import estimate_pairwise_homographies, load_images, to_gray
+from .._validation import check_array, check_homographies, check_int
+from ._sparse import check_image, estimate_pairwise_homographies, load_images, to_gray
 
 __all__ = ["chained_homographies", "evaluate_alignment", "to_reference_homographies"]
 
@@ -146,6 +146,24 @@ def chained_homographies(images, *, reference=0, n_features=2000, features=None,
     return _finish(H, "chained_homographies", pw)
 
 
+def _check_masks(masks, gray, name: str) -> list:
+    """One boolean mask per image, each of its image's (h, w) shape."""
+    if masks is None or isinstance(masks, (str, bytes)) or not hasattr(masks, "__len__"):
+        raise TypeError(f"`{name}` must be a list of boolean masks, one per image, got "
+                        f"{type(masks).__name__}")
+    if len(masks) != len(gray):
+        raise ValueError(f"`{name}` must hold one mask per image ({len(gray)}), got "
+                         f"{len(masks)}")
+    out = []
+    for k, (m, g) in enumerate(zip(masks, gray)):
+        m = check_array(m, f"{name}[{k}]", dtype=bool)
+        if m.shape != g.shape:
+            raise ValueError(f"`{name}[{k}]` must have the shape of `images[{k}]` {g.shape}, "
+                             f"got {m.shape}")
+        out.append(m)
+    return out
+
+
 def evaluate_alignment(images, H_est, H_true, *, masks_true, reference=0, masks_est=None,
                        pairwise=False) -> dict:
     """Corner errors (views other than the reference), accuracy at 1/3/5 px, Brenner ratio and,
@@ -191,11 +209,30 @@ def evaluate_alignment(images, H_est, H_true, *, masks_true, reference=0, masks_
     >>> r["mean_error"], r["acc_1px"], round(r["brenner_ratio"], 3)
     (0.0, 1.0, 1.0)
     """
-    gray = [to_gray(im) for im in images]
+    if images is None or isinstance(images, (str, bytes)) or (
+            isinstance(images, np.ndarray) and images.ndim == 2):
+        raise TypeError(f"`images` must be a list of images, got {type(images).__name__}")
+    gray = [to_gray(check_image(im, f"images[{k}]", min_size=1)) for k, im in enumerate(images)]
     n = len(gray)
+    if n < 2:
+        raise ValueError(f"`images` must hold at least 2 images (the reference and a view), "
+                         f"got {n}")
+    H_est = check_array(H_est, "H_est", ndim=3, finite=False)     # NaN: a failed view
+    H_true = check_homographies(H_true, "H_true", ndim=3)
+    for name, H in (("H_est", H_est), ("H_true", H_true)):
+        if H.shape != (n, 3, 3):
+            raise ValueError(f"`{name}` must have shape ({n}, 3, 3) (one per image), got "
+                             f"{H.shape}")
+    masks_true = _check_masks(masks_true, gray, "masks_true")
+    masks_est = None if masks_est is None else _check_masks(masks_est, gray, "masks_est")
+    reference = check_int(reference, "reference", minimum=0, maximum=n - 1)
+    if not isinstance(pairwise, (bool, np.bool_)):
+        raise TypeError(f"`pairwise` must be True or False, got {pairwise!r}")
     sizes = np.array([(g.shape[1], g.shape[0]) for g in gray], float)
-    H_est = np.asarray(H_est, float)
     ok = np.all(np.isfinite(H_est), axis=(1, 2))
+    with np.errstate(all="ignore"):                     # singular estimates fail too
+        sv = np.linalg.svd(np.where(ok[:, None, None], H_est, np.eye(3)), compute_uv=False)
+    ok &= sv[:, -1] > 1e-14 * sv[:, 0]
     err = np.full(n, 1000.0)
     if ok.any():
         err[ok] = corner_error(H_est[ok], H_true[ok], image_size=sizes[ok])

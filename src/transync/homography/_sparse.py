@@ -12,7 +12,9 @@ import numpy as np
 
 from .._validation import (
     as_generator,
+    check_array,
     check_choice,
+    check_homographies,
     check_index_pairs,
     check_int,
     check_positive,
@@ -595,9 +597,13 @@ def estimate_rectified_pairwise(images, H_to_ref, pairs, *, reference=0, margin=
     gray = [to_gray(im) for im in load_images(images)]
     n = len(gray)
     reference = check_int(reference, "reference", minimum=0, maximum=n - 1)
-    H_to_ref = np.asarray(H_to_ref, dtype=float)
+    H_to_ref = check_array(H_to_ref, "H_to_ref", finite=False)      # NaN: no estimate
     if H_to_ref.shape != (n, 3, 3):
         raise ValueError(f"`H_to_ref` must have shape ({n}, 3, 3), got {H_to_ref.shape}")
+    known = np.isfinite(H_to_ref).all(axis=(1, 2))
+    check_homographies(H_to_ref[known], "H_to_ref", ndim=3)       # the estimates: invertible
+    if not isinstance(guided, (bool, np.bool_)):
+        raise TypeError(f"`guided` must be True or False, got {guided!r}")
     margin = check_positive(margin, "margin", allow_zero=True)
     if margin > 2:
         raise ValueError(f"`margin` must lie in [0, 2], got {margin!r}")

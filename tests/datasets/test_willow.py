@@ -110,7 +110,7 @@ def test_missing_field(tmp_path):
     (np.zeros((3, 10)), "expected a 2 x K array (x row, y row), got shape (3, 10)"),
     (np.zeros((2, 0)), "expected a 2 x K array (x row, y row), got shape (2, 0)"),
     (np.array(["ab", "cd"]), "expected a numeric 2 x K array, got MATLAB class char"),
-    (XY + 1j, "expected a numeric 2 x K array, got MATLAB class complex"),
+    (XY + 1j, "expected a numeric 2 x K array, got MATLAB class double (complex)"),
 ])
 def test_bad_field_shape_or_type(tmp_path, value, message):
     _class(tmp_path, n=2)
@@ -183,7 +183,8 @@ def test_complex_flag_without_imaginary_part_is_a_named_error(tmp_path):
     data[flags + 1] |= 0x08                                      # the complex bit
     bad = _corrupt_class(tmp_path, data)
     _err(ValueError, tmp_path,
-         f"{bad}, field 'pts_coord': expected a numeric 2 x K array, got MATLAB class complex")
+         f"{bad}, field 'pts_coord': expected a numeric 2 x K array, got MATLAB class double "
+         "(complex)")
 
 
 def test_compressed_v4_and_integer_annotations_load(tmp_path):
@@ -201,7 +202,8 @@ def test_v73_file_is_a_named_error(tmp_path):
     data[124:128] = b"\x00\x02IM"                                # version 0x0200: HDF5-based
     bad = _corrupt_class(tmp_path, data)
     _err(ValueError, tmp_path,
-         f"{bad}: a MATLAB v7.3 (HDF5) .mat file; save the annotation with -v7 (or -v6)")
+         f"{bad}: a MATLAB v7.3 (HDF5) .mat file, which is not supported; save it with -v7 "
+         "(or -v6)")
 
 
 @settings(max_examples=60, deadline=None, derandomize=True, database=None)

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..geometry import normalize_determinant
 from ._home import data_home
+from ._matfile import MatFieldError, MatFileError, read_mat
 
 __all__ = [
     "AdelaideRMFPair",
@@ -431,16 +432,15 @@ def list_adelaidermf(folder=None) -> list:
     return sorted(p.stem for p in folder.glob("*.mat") if p.is_file())
 
 
-def _mat_field(m: dict, key: str, path: Path) -> np.ndarray:
+def _mat_field(m: dict, names: list, key: str, path: Path) -> np.ndarray:
     if key not in m:
-        found = sorted(k for k in m if not k.startswith("__"))
         raise ValueError(f"`{path}`: field {key!r} missing (expected data, label, img1, img2; "
-                         f"found {', '.join(found) or 'none'})")
+                         f"found {', '.join(sorted(names)) or 'none'})")
     return np.asarray(m[key])
 
 
-def _mat_image(m: dict, key: str, path: Path) -> np.ndarray:
-    img = _mat_field(m, key, path)
+def _mat_image(m: dict, names: list, key: str, path: Path) -> np.ndarray:
+    img = _mat_field(m, names, key, path)
     if img.dtype.kind not in "uif" or img.ndim not in (2, 3) or min(img.shape[:2], default=0) < 1 \
             or (img.ndim == 3 and img.shape[2] not in (1, 3, 4)):
         raise ValueError(f"`{path}`, field {key!r}: expected an image (H, W) or (H, W, 3), "
@@ -449,7 +449,7 @@ def _mat_image(m: dict, key: str, path: Path) -> np.ndarray:
 
 
 def load_adelaidermf(name, folder=None) -> AdelaideRMFPair:
-    """Load one AdelaideRMF pair (``scipy.io.loadmat``).
+    """Load one AdelaideRMF pair (a MATLAB .mat file).
 
     Parameters
     ----------
@@ -485,8 +485,6 @@ def load_adelaidermf(name, folder=None) -> AdelaideRMFPair:
     >>> p.x2.tolist(), p.labels.tolist()
     ([[11.0, 5.0], [21.0, 7.0]], [1, 0])
     """
-    from scipy.io import loadmat
-
     if not isinstance(name, str) or not name or Path(name).name != name:
         raise ValueError(f"`name` must be a sequence name (a file stem without folder), "
                          f"got {name!r:.60}")
@@ -495,11 +493,16 @@ def load_adelaidermf(name, folder=None) -> AdelaideRMFPair:
     if not path.is_file():
         raise FileNotFoundError(f"`name`: no AdelaideRMF file {path}")
     try:
-        m = loadmat(str(path))
-    except Exception as exc:  # scipy raises OSError, ValueError, TypeError... on broken files
-        raise ValueError(f"`{path}`: cannot read as a MATLAB .mat file "
-                         f"({type(exc).__name__}: {exc})") from None
-    data = _mat_field(m, "data", path)
+        m, names = read_mat(path, ("data", "label", "img1", "img2"))
+    except MatFieldError as exc:
+        expect = {"data": "a 6xN array (x1, y1, 1, x2, y2, 1)",
+                  "label": "one integer label per column of 'data'"}.get(
+                      exc.field, "an image (H, W) or (H, W, 3)")
+        raise ValueError(f"`{path}`, field {exc.field!r}: expected {expect}, got "
+                         f"{exc.what}") from None
+    except MatFileError as exc:
+        raise ValueError(f"`{path}`: {exc}") from None
+    data = _mat_field(m, names, "data", path)
     if data.dtype.kind not in "uif" or data.ndim != 2 or data.shape[0] != 6:
         raise ValueError(f"`{path}`, field 'data': expected a 6xN array (x1, y1, 1, x2, y2, 1), "
                          f"got shape {data.shape} and dtype {data.dtype}")
@@ -510,7 +513,7 @@ def load_adelaidermf(name, folder=None) -> AdelaideRMFPair:
     if np.any(data[2] == 0) or np.any(data[5] == 0):
         raise ValueError(f"`{path}`, field 'data': homogeneous rows 3 and 6 must be non-zero")
     n = data.shape[1]
-    raw = _mat_field(m, "label", path)
+    raw = _mat_field(m, names, "label", path)
     labels = raw.ravel()
     if raw.dtype.kind not in "uif" or labels.size != n:
         raise ValueError(f"`{path}`, field 'label': expected {n} labels (one per column of "
@@ -522,6 +525,6 @@ def load_adelaidermf(name, folder=None) -> AdelaideRMFPair:
     if labels.size and labels.min() < 0:
         raise ValueError(f"`{path}`, field 'label': expected labels >= 0 (0 = outlier), "
                          f"got minimum {int(labels.min())}")
-    img1, img2 = _mat_image(m, "img1", path), _mat_image(m, "img2", path)
+    img1, img2 = _mat_image(m, names, "img1", path), _mat_image(m, names, "img2", path)
     return AdelaideRMFPair(name=name, x1=(data[:2] / data[2]).T, x2=(data[3:5] / data[5]).T,
                            labels=labels, img1=img1, img2=img2)

@@ -136,3 +136,60 @@ def test_finish_hook_files_listed_and_skipped_without_plot(tmp_path):
     assert (tmp_path / "b" / "extra.md").read_text() == "12 records\n"
     assert seen == [(12, len(rep.summary))]
 
+
+
+def _returns(value):
+    def trial(config, rng):
+        return value
+    return trial
+
+
+@pytest.mark.parametrize("out, what", [
+    ({"value": "x"}, "real numbers by metric name, got 'value': 'x'"),
+    ({"value": 1 + 2j}, "real numbers by metric name"),
+    ({3: 1.0}, "real numbers by metric name, got 3: 1.0"),
+    ([("value", 1.0)], "must return a mapping"),
+])
+def test_a_trial_returning_junk_fails_that_trial_only(tmp_path, out, what):
+    """A non-number metric was a float() error that stopped the whole run (unnamed)."""
+    exp = Experiment(name="t", trial=_returns(out), trials=2, sweeps=[
+        Sweep(name="s", variable="x", values=[1], methods=["a"], metrics=("value",))])
+    rep = run_experiment(exp, tmp_path, progress=False, plot=False)
+    assert rep.n_new == 2 and rep.n_failed == 2
+    assert all(what in r["error"] for r in rep.records)
+
+
+@pytest.mark.parametrize("make, exc, match", [
+    (lambda s: Experiment(name="", trial=noisy_trial, sweeps=[s]), TypeError, "Experiment.name"),
+    (lambda s: Experiment(name="a/b", trial=noisy_trial, sweeps=[s]), ValueError, "figure file"),
+    (lambda s: Experiment(name="t", trial=noisy_trial, sweeps=[]), TypeError, "non-empty list"),
+    (lambda s: Experiment(name="t", trial=noisy_trial, sweeps=[s, s]), ValueError, "distinct"),
+    (lambda s: Experiment(name="t", trial=3, sweeps=[s]), TypeError, "callable"),
+    (lambda s: Experiment(name="t", trial=noisy_trial, sweeps=[s], trials=0), ValueError,
+     "Experiment.trials"),
+    (lambda s: Sweep(name="s", variable="x", values=[], methods=["a"]), ValueError,
+     "Sweep.values` must not be empty"),
+    (lambda s: Sweep(name="s", variable="x", values="12", methods=["a"]), TypeError,
+     "Sweep.values` must be a list"),
+    (lambda s: Sweep(name="s", variable="x", values=[1], methods=[""]), TypeError,
+     "Sweep.methods"),
+    (lambda s: Sweep(name="s", variable="x", values=[1], methods=["a"], base=3), TypeError,
+     "Sweep.base"),
+])
+def test_malformed_experiments_are_refused_by_name(make, exc, match):
+    sweep = Sweep(name="s", variable="x", values=np.arange(3), methods=("a",))   # arrays pass
+    with pytest.raises(exc, match=match):
+        make(sweep)
+
+
+def test_mean_se_of_huge_values_and_junk():
+    import warnings
+
+    from transync.experiments import mean_se
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")              # no overflow in the squares
+        assert mean_se([1e308, 1e308, None]) == (1e308, 0.0, 2)
+    for junk, exc in ((["a"], TypeError), (None, TypeError), ("12", TypeError)):
+        with pytest.raises(exc, match="`values`"):
+            mean_se(junk)

@@ -39,7 +39,9 @@ import errno
 import hashlib
 import json
 import math
+import numbers
 import os
+import re
 import signal
 import sqlite3
 import sys
@@ -47,7 +49,7 @@ import threading
 import time
 import traceback
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -60,6 +62,15 @@ from ..exceptions import ExperimentStoreError
 
 __all__ = ["Experiment", "ExperimentReport", "ExperimentStore", "Sweep", "run_experiment",
            "summarize"]
+
+#: an experiment's name names its figure on disk: no folder separators, not "." or ".."
+_FILE_NAME = re.compile(r"(?![.]{1,2}$)[^/\\\x00]+")
+
+
+def _check_name(value, name: str) -> str:
+    if not isinstance(value, str) or not value:
+        raise TypeError(f"`{name}` must be a non-empty string, got {value!r:.60}")
+    return value
 
 
 @dataclass(frozen=True)
@@ -100,6 +111,23 @@ class Sweep:
     base: Mapping = field(default_factory=dict)
     metrics: Sequence[str] = ("accuracy",)
     xlabel: str | None = None
+
+    def __post_init__(self):
+        for attr in ("name", "variable"):
+            _check_name(getattr(self, attr), f"Sweep.{attr}")
+        for attr in ("values", "methods", "metrics"):
+            seq = getattr(self, attr)
+            if isinstance(seq, (str, bytes)) or not isinstance(seq, (Sequence, np.ndarray)):
+                raise TypeError(f"`Sweep.{attr}` must be a list, got {type(seq).__name__}")
+            if attr != "metrics" and len(seq) == 0:
+                raise ValueError(f"`Sweep.{attr}` must not be empty (sweep {self.name!r})")
+        for attr in ("methods", "metrics"):
+            for item in getattr(self, attr):
+                _check_name(item, f"Sweep.{attr}")
+        if not isinstance(self.base, Mapping):
+            raise TypeError(f"`Sweep.base` must be a mapping, got {type(self.base).__name__}")
+        if self.xlabel is not None and not isinstance(self.xlabel, str):
+            raise TypeError(f"`Sweep.xlabel` must be a string or None, got {self.xlabel!r}")
 
     def configs(self):
         for value in self.values:
@@ -147,6 +175,29 @@ class Experiment:
     trials: int = 20
     description: str = ""
     finish: Callable[[list, list, Path], Sequence[Path]] | None = None
+
+    def __post_init__(self):
+        _check_name(self.name, "Experiment.name")
+        if not _FILE_NAME.fullmatch(self.name):
+            raise ValueError(f"`Experiment.name` names its figure file: no '/', '\\' or NUL, "
+                             f"not '.' or '..', got {self.name!r}")
+        if (isinstance(self.sweeps, (str, bytes)) or not isinstance(self.sweeps, Sequence)
+                or not self.sweeps or not all(isinstance(s, Sweep) for s in self.sweeps)):
+            raise TypeError(f"`Experiment.sweeps` must be a non-empty list of Sweep, got "
+                            f"{self.sweeps!r:.80}")
+        names = [s.name for s in self.sweeps]
+        if len(set(names)) != len(names):
+            raise ValueError(f"`Experiment.sweeps` must have distinct names, got {names}")
+        if not callable(self.trial):
+            raise TypeError(f"`Experiment.trial` must be callable (config, rng) -> metrics, got "
+                            f"{type(self.trial).__name__}")
+        check_int(self.trials, "Experiment.trials", minimum=1)
+        if not isinstance(self.description, str):
+            raise TypeError(f"`Experiment.description` must be a string, got "
+                            f"{type(self.description).__name__}")
+        if self.finish is not None and not callable(self.finish):
+            raise TypeError(f"`Experiment.finish` must be callable or None, got "
+                            f"{type(self.finish).__name__}")
 
 
 @dataclass(frozen=True)
@@ -486,6 +537,21 @@ def _stop_pool(pool) -> None:
             p.join(timeout=5)
 
 
+def _checked_metrics(out) -> dict:
+    """A trial's result as ``{name: float}``; anything else fails the trial, naming what."""
+    if not isinstance(out, Mapping):
+        raise TypeError(f"the trial must return a mapping {{metric: number}}, got "
+                        f"{type(out).__name__}")
+    metrics = {}
+    for k, v in out.items():
+        if not isinstance(k, str) or isinstance(v, (bool, np.bool_)) or not isinstance(
+                v, (numbers.Real, np.number)) or isinstance(v, np.complexfloating):
+            raise TypeError(f"the trial must return real numbers by metric name, got "
+                            f"{k!r}: {v!r:.60}")
+        metrics[k] = float(v)
+    return metrics
+
+
 def _run_one(trial_fn, config, seed):
     """Run one trial; never raises (errors are returned and stored)."""
     rng = np.random.default_rng(seed)
@@ -494,7 +560,7 @@ def _run_one(trial_fn, config, seed):
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            metrics = dict(trial_fn(dict(config), rng))
+            metrics = _checked_metrics(trial_fn(dict(config), rng))
         n_warn = len(caught)
         error = None
     except Exception:  # noqa: BLE001 - a failed trial is recorded, the run goes on
@@ -715,11 +781,20 @@ def mean_se(values) -> tuple[float, float, int]:
     >>> mean_se([])
     (nan, 0.0, 0)
     """
-    vals = np.array([v for v in values if v is not None], dtype=float)
+    if isinstance(values, (str, bytes)) or not isinstance(values, Iterable):
+        raise TypeError(f"`values` must be an iterable of numbers, got {type(values).__name__}")
+    try:
+        vals = np.array([v for v in values if v is not None], dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"`values` must hold numbers (or None), got {exc}") from None
     vals = vals[np.isfinite(vals)]
     n = vals.size
-    return (float(vals.mean()) if n else math.nan,
-            float(vals.std(ddof=1) / math.sqrt(n)) if n > 1 else 0.0, int(n))
+    # values beyond 1e150 would overflow the squares: their statistics are taken scaled
+    scale = float(np.abs(vals).max()) if n else 0.0
+    scale = scale if scale > 1e150 else 1.0
+    vals = vals / scale if scale != 1.0 else vals
+    return (float(vals.mean()) * scale if n else math.nan,
+            float(vals.std(ddof=1) / math.sqrt(n)) * scale if n > 1 else 0.0, int(n))
 
 
 #: axis labels (with units) of the metrics the experiments report
@@ -791,7 +866,7 @@ def summarize(experiment: Experiment, records: list[dict]) -> list[dict]:
     Examples
     --------
     >>> from transync.experiments import Experiment, Sweep, summarize
-    >>> exp = Experiment(name="toy", trial=None, sweeps=[
+    >>> exp = Experiment(name="toy", trial=print, sweeps=[
     ...     Sweep(name="noise", variable="noise", values=[0.0], methods=["a"])])
     >>> records = [dict(sweep="noise", config={"noise": 0.0, "method": "a"}, trial=t,
     ...                 metrics={"accuracy": acc, "seconds": 0.1}, error=None, seconds=0.1)

@@ -9,6 +9,8 @@ from .._validation import check_array, check_homographies, check_int, check_posi
 from ..geometry import normalize_determinant, translation
 from ._sparse import check_image
 
+__all__ = ["mean_warped_image", "refine_homography_ecc", "warp_to_reference"]
+
 #: OpenCV's largest warp canvas side (``SHRT_MAX``: its remap tables hold short coordinates)
 MAX_CANVAS = 32767
 #: OpenCV interpolation flags ``warp_to_reference`` takes (nearest, linear, cubic, area, Lanczos)
@@ -32,8 +34,6 @@ def _canvas(size, offset) -> tuple[tuple[int, int], tuple[float, float]]:
     if o.shape != (2,):
         raise ValueError(f"`offset` must be (x, y), got shape {o.shape}")
     return (int(s[0]), int(s[1])), (float(o[0]), float(o[1]))
-
-__all__ = ["mean_warped_image", "refine_homography_ecc", "warp_to_reference"]
 
 
 def _scale(H, s):

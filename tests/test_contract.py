@@ -1879,6 +1879,61 @@ def test_match_pairs_checks_rng():
           is REFUSED, "match_pairs: accepted rng='x'")
 
 
+@MEDIUM
+@given(small_graphs(), st.one_of(any_arrays(max_dims=2), st.just([2, 0, 1]), st.just(None)))
+def test_graph_permute_and_views(g, perm):
+    """Graph.permute on any permutation-like input, and the derived views (distances, angles,
+    edge_index, networkx round trip) on any small graph."""
+    from transync.graphs import Graph
+
+    if not isinstance(g, Graph):
+        return
+    n = g.n_nodes
+    p = call(g.permute, perm)
+    if p is not REFUSED:
+        arr = np.asarray(perm)
+        check(arr.shape == (n,) and sorted(arr.tolist()) == list(range(n)),
+              f"permute accepted {perm!r} for {n} nodes")
+        check(p.n_nodes == n, "permute changed the number of nodes")
+    E = call(g.edge_index)
+    if E is not REFUSED:
+        E = np.asarray(E)
+        check(E.size == 0 or (E.min() >= 0 and E.max() < n), "edge_index out of range")
+    for view in (g.distances, g.angles):
+        out = call(view)
+        if out is not REFUSED:
+            check_finite_array(out, view.__name__)
+    G = call(g.to_networkx)
+    if G is not REFUSED:
+        back = call(Graph.from_networkx, G)
+        check(back is REFUSED or back.n_nodes == n, "networkx round trip changed the size")
+
+
+@MEDIUM
+@given(st.data(), st.sampled_from([None, (2, 3), (3, 3), (0, 2), (3, 2), (1.5, 2), 2, "x"]),
+       st.sampled_from(["auto", "auto", "none", "x", None]), st.booleans())
+def test_landmark_sequence_graphs(data, keep, normalize, shuffle):
+    """LandmarkSequence.graphs / normalized_points on any frame list and keep range."""
+    from transync.datasets import LandmarkSequence
+
+    rng = np.random.default_rng(0)
+    seq = LandmarkSequence(name="toy", points=rng.uniform(0, 100, (4, 5, 2)),
+                           frames=np.arange(4), image_paths=None, image_sizes=None,
+                           source=None)
+    frames = data.draw(st.one_of(st.just([0, 1, 2]), st.just([0]), st.just([]),
+                                 st.just([0, 0, 1]), st.just([0, 9]), st.just([-1, 1]),
+                                 any_arrays(max_dims=1)))
+    out = call(seq.graphs, frames, keep=keep, normalize=normalize, shuffle=shuffle, rng=0)
+    if out is not REFUSED:
+        sizes = [gr.n_nodes for gr in out.graphs]
+        check(len(sizes) == np.asarray(frames).size, "one graph per frame")
+        check(all(1 <= s <= 5 for s in sizes), f"graph sizes {sizes}")
+        _check_labels(out.ground_truth.labels, sizes, out.ground_truth.n_universe, "truth")
+    P = call(seq.normalized_points, frames, normalize=normalize)
+    if P is not REFUSED:
+        check_finite_array(P, "normalized_points")
+
+
 # ----------------------------------------------------------------------------------- multigraph
 
 PAIR_SOLVERS = ["rrwm", "ga", "pf", "sm", "ipfp", "cao", "cao-pc"]

@@ -161,9 +161,11 @@ class LandmarkSequence:
         return P / diag[:, None, None]
 
     def _positions(self, frames) -> list[int]:
-        if isinstance(frames, (str, bytes)) or not isinstance(frames, (Sequence, np.ndarray)):
-            raise TypeError("`frames` must be a sequence of frame numbers, got "
-                            f"{type(frames).__name__}")
+        if (isinstance(frames, (str, bytes)) or not isinstance(frames, (Sequence, np.ndarray))
+                or np.ndim(frames) == 0):
+            what = (f"an array of shape {np.shape(frames)}" if isinstance(frames, np.ndarray)
+                    else type(frames).__name__)
+            raise TypeError(f"`frames` must be a sequence of frame numbers, got {what}")
         out = []
         for k, f in enumerate(list(np.asarray(frames).ravel()) if isinstance(frames, np.ndarray)
                               else frames):

@@ -544,8 +544,8 @@ def _checked_metrics(out) -> dict:
                         f"{type(out).__name__}")
     metrics = {}
     for k, v in out.items():
-        if not isinstance(k, str) or isinstance(v, (bool, np.bool_)) or not isinstance(
-                v, (numbers.Real, np.number)) or isinstance(v, np.complexfloating):
+        if not isinstance(k, str) or not isinstance(v, (numbers.Real, np.number, np.bool_)) \
+                or isinstance(v, np.complexfloating):          # a bool counts as 0 / 1
             raise TypeError(f"the trial must return real numbers by metric name, got "
                             f"{k!r}: {v!r:.60}")
         metrics[k] = float(v)

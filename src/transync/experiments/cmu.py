@@ -57,9 +57,9 @@ def load_sequence(data=None):
     except (FileNotFoundError, NotADirectoryError) as exc:
         where = "the default CMU House folder" if data is None else f"the data folder {data}"
         raise FileNotFoundError(
-            f"cmu experiment: cannot read {where} ({' '.join(str(exc).split())}); pass a folder "
-            "in the CMU layout (`label/<name><N>` files; `--data PATH` on the command line) or "
-            "set TRANSYNC_DATA to a folder holding `cmu-house`") from None
+            f"cannot read a CMU-layout sequence from {where} ({' '.join(str(exc).split())}); "
+            "pass a folder in the CMU layout (`label/<name><N>` files; `--data PATH` on the "
+            "command line) or set TRANSYNC_DATA to a folder holding `cmu-house`") from None
 
 
 def draw_frames(data, config: dict, n: int, gap: int, rng: np.random.Generator):

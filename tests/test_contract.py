@@ -178,22 +178,30 @@ def float_arrays(shape, elements=nasty_floats):
     return hnp.arrays(np.float64, shape, elements=elements)
 
 
+def arrays_of_kind(kind, shape):
+    """Strategy: arrays of ``shape`` of one kind: "f" nasty floats, "f01" floats in [0, 1],
+    "i" small int64, "i16", "u8", "b" bool, "c" complex, "U" strings."""
+    if kind == "f":
+        return float_arrays(shape)
+    if kind == "f01":
+        return float_arrays(shape, elements=tame_floats)
+    if kind == "i":
+        return hnp.arrays(np.int64, shape, elements=st.integers(-3, 6))
+    if kind in ("i16", "u8", "b"):
+        return hnp.arrays({"i16": np.int16, "u8": np.uint8, "b": np.bool_}[kind], shape)
+    if kind == "c":
+        return hnp.arrays(np.complex128, shape,
+                          elements=st.complex_numbers(max_magnitude=5, allow_nan=False))
+    return hnp.arrays(np.dtype("U3"), shape, elements=st.text("ab1.", max_size=3))
+
+
 @st.composite
 def any_arrays(draw, max_dims=3, max_side=4):
     """Arrays of any small shape and a dtype the API might meet: float (nasty), int, bool,
     complex, object/str."""
     shape = draw(hnp.array_shapes(min_dims=0, max_dims=max_dims, min_side=0, max_side=max_side))
-    kind = draw(st.sampled_from(["f", "f", "f", "i", "b", "c", "U"]))
-    if kind == "f":
-        return draw(float_arrays(shape))
-    if kind == "i":
-        return draw(hnp.arrays(np.int64, shape, elements=st.integers(-3, 6)))
-    if kind == "b":
-        return draw(hnp.arrays(np.bool_, shape))
-    if kind == "c":
-        return draw(hnp.arrays(np.complex128, shape,
-                               elements=st.complex_numbers(max_magnitude=5, allow_nan=False)))
-    return draw(hnp.arrays(np.dtype("U3"), shape, elements=st.text("ab1.", max_size=3)))
+    return draw(arrays_of_kind(draw(st.sampled_from(["f", "f", "f", "i", "b", "c", "U"])),
+                               shape))
 
 
 @st.composite
@@ -2406,21 +2414,8 @@ def images(draw, min_side=0, max_side=24):
     w = draw(st.integers(min_side, max_side))
     shape = draw(st.sampled_from([(h, w)] * 4 + [(h, w, 3)] * 3
                                  + [(h, w, 1), (h, w, 4), (h, w, 2), (h,), (2, h, w, 3)]))
-    kind = draw(st.sampled_from(["u8"] * 5 + ["f"] * 3 + ["fnasty", "b", "i16", "c", "U"]))
-    if kind == "u8":
-        return draw(hnp.arrays(np.uint8, shape))
-    if kind == "f":
-        return draw(hnp.arrays(np.float64, shape, elements=tame_floats))
-    if kind == "fnasty":
-        return draw(float_arrays(shape))
-    if kind == "b":
-        return draw(hnp.arrays(np.bool_, shape))
-    if kind == "i16":
-        return draw(hnp.arrays(np.int16, shape))
-    if kind == "c":
-        return draw(hnp.arrays(np.complex128, shape,
-                               elements=st.complex_numbers(max_magnitude=5, allow_nan=False)))
-    return draw(hnp.arrays(np.dtype("U3"), shape, elements=st.text("ab", max_size=2)))
+    kind = draw(st.sampled_from(["u8"] * 5 + ["f01"] * 3 + ["f", "b", "i16", "c", "U"]))
+    return draw(arrays_of_kind(kind, shape))
 
 
 def textured(rng, h=64, w=64):

@@ -353,14 +353,21 @@ def check_homographies(H, name: str, ndim: int | Sequence[int] = (2, 3)) -> np.n
         want = " or ".join({2: "(3, 3)", 3: "(N, 3, 3)"}[d] for d in
                            ((ndim,) if isinstance(ndim, int) else ndim))
         raise ValueError(f"`{name}` must have shape {want}, got shape {H.shape}")
-    if len(H3):
-        with np.errstate(all="ignore"):
-            sv = np.linalg.svd(H3, compute_uv=False)
-        singular = np.flatnonzero(~(sv[:, -1] > 1e-14 * sv[:, 0]))
-        if singular.size:
-            raise ValueError(f"`{name}` must hold invertible homographies, got a singular matrix "
-                             f"at index {int(singular[0])}")
+    singular = np.flatnonzero(~invertible_homographies(H3))
+    if singular.size:
+        raise ValueError(f"`{name}` must hold invertible homographies, got a singular matrix "
+                         f"at index {int(singular[0])}")
     return H
+
+
+def invertible_homographies(H: np.ndarray) -> np.ndarray:
+    """Which matrices of a finite ``(N, 3, 3)`` stack are invertible: smallest singular value
+    above ``1e-14`` times the largest (the test of :func:`check_homographies`)."""
+    if not len(H):
+        return np.zeros(0, dtype=bool)
+    with np.errstate(all="ignore"):
+        sv = np.linalg.svd(H, compute_uv=False)
+    return sv[:, -1] > 1e-14 * sv[:, 0]
 
 
 #: smallest positive scale (largest column sum of ``K``) an affinity may have: below it the

@@ -7,7 +7,7 @@ import numpy as np
 
 from .._validation import check_array, check_homographies, check_int, check_positive
 from ..geometry import normalize_determinant, translation
-from ._sparse import check_image
+from ._sparse import check_image, check_masks
 
 __all__ = ["mean_warped_image", "refine_homography_ecc", "warp_to_reference"]
 
@@ -261,13 +261,7 @@ def mean_warped_image(images, homographies, *, size, masks=None, offset=(0, 0),
         raise ValueError(f"`homographies` must hold one homography per image ({N}), got "
                          f"{len(Hs)}")
     if masks is not None:
-        if len(masks) != N:
-            raise ValueError(f"`masks` must hold one mask per image ({N}), got {len(masks)}")
-        masks = [check_array(m, f"masks[{k}]", dtype=bool) for k, m in enumerate(masks)]
-        for k, (m, im) in enumerate(zip(masks, imgs)):
-            if m.shape != im.shape:
-                raise ValueError(f"`masks[{k}]` must have the shape of `images[{k}]` "
-                                 f"{im.shape}, got {m.shape}")
+        masks = check_masks(masks, imgs, "masks")
     (w, h), offset = _canvas(size, offset)
     if not isinstance(normalize, (bool, np.bool_)):
         raise TypeError(f"`normalize` must be True or False, got {normalize!r}")

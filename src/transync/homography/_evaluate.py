@@ -10,8 +10,9 @@ from ..exceptions import UnlinkedViewsWarning
 from ..geometry import normalize_determinant
 from ._dense import mean_warped_image
 from ..metrics import brenner_focus, corner_error, pairwise_corner_error, segmentation_scores
-from .._validation import check_array, check_homographies, check_int
-from ._sparse import check_image, estimate_pairwise_homographies, load_images, to_gray
+from .._validation import check_array, check_homographies, check_int, invertible_homographies
+from ._sparse import (check_image, check_masks, estimate_pairwise_homographies, load_images,
+                      to_gray)
 
 __all__ = ["chained_homographies", "evaluate_alignment", "to_reference_homographies"]
 
@@ -146,24 +147,6 @@ def chained_homographies(images, *, reference=0, n_features=2000, features=None,
     return _finish(H, "chained_homographies", pw)
 
 
-def _check_masks(masks, gray, name: str) -> list:
-    """One boolean mask per image, each of its image's (h, w) shape."""
-    if masks is None or isinstance(masks, (str, bytes)) or not hasattr(masks, "__len__"):
-        raise TypeError(f"`{name}` must be a list of boolean masks, one per image, got "
-                        f"{type(masks).__name__}")
-    if len(masks) != len(gray):
-        raise ValueError(f"`{name}` must hold one mask per image ({len(gray)}), got "
-                         f"{len(masks)}")
-    out = []
-    for k, (m, g) in enumerate(zip(masks, gray)):
-        m = check_array(m, f"{name}[{k}]", dtype=bool)
-        if m.shape != g.shape:
-            raise ValueError(f"`{name}[{k}]` must have the shape of `images[{k}]` {g.shape}, "
-                             f"got {m.shape}")
-        out.append(m)
-    return out
-
-
 def evaluate_alignment(images, H_est, H_true, *, masks_true, reference=0, masks_est=None,
                        pairwise=False) -> dict:
     """Corner errors (views other than the reference), accuracy at 1/3/5 px, Brenner ratio and,
@@ -223,16 +206,14 @@ def evaluate_alignment(images, H_est, H_true, *, masks_true, reference=0, masks_
         if H.shape != (n, 3, 3):
             raise ValueError(f"`{name}` must have shape ({n}, 3, 3) (one per image), got "
                              f"{H.shape}")
-    masks_true = _check_masks(masks_true, gray, "masks_true")
-    masks_est = None if masks_est is None else _check_masks(masks_est, gray, "masks_est")
+    masks_true = check_masks(masks_true, gray, "masks_true")
+    masks_est = None if masks_est is None else check_masks(masks_est, gray, "masks_est")
     reference = check_int(reference, "reference", minimum=0, maximum=n - 1)
     if not isinstance(pairwise, (bool, np.bool_)):
         raise TypeError(f"`pairwise` must be True or False, got {pairwise!r}")
     sizes = np.array([(g.shape[1], g.shape[0]) for g in gray], float)
     ok = np.all(np.isfinite(H_est), axis=(1, 2))
-    with np.errstate(all="ignore"):                     # singular estimates fail too
-        sv = np.linalg.svd(np.where(ok[:, None, None], H_est, np.eye(3)), compute_uv=False)
-    ok &= sv[:, -1] > 1e-14 * sv[:, 0]
+    ok &= invertible_homographies(np.where(ok[:, None, None], H_est, np.eye(3)))  # singular: failed
     err = np.full(n, 1000.0)
     if ok.any():
         err[ok] = corner_error(H_est[ok], H_true[ok], image_size=sizes[ok])

@@ -116,6 +116,24 @@ def check_image(image, name: str, *, min_size: int = _MIN_SIZE, grey: bool = Fal
     return arr
 
 
+def check_masks(masks, images, name: str) -> list:
+    """One boolean mask per image of ``images``, each of its image's (h, w) shape."""
+    if masks is None or isinstance(masks, (str, bytes)) or not hasattr(masks, "__len__"):
+        raise TypeError(f"`{name}` must be a list of boolean masks, one per image, got "
+                        f"{type(masks).__name__}")
+    if len(masks) != len(images):
+        raise ValueError(f"`{name}` must hold one mask per image ({len(images)}), got "
+                         f"{len(masks)}")
+    out = []
+    for k, (m, im) in enumerate(zip(masks, images)):
+        m = check_array(m, f"{name}[{k}]", dtype=bool)
+        if m.shape != im.shape[:2]:
+            raise ValueError(f"`{name}[{k}]` must have the shape of `images[{k}]` {im.shape[:2]}, "
+                             f"got {m.shape}")
+        out.append(m)
+    return out
+
+
 def load_images(images) -> list:
     """Read file paths (``cv2.imread``) and pass arrays through.
 

@@ -602,6 +602,54 @@ def test_match_graphs_on_permuted_points(method, case, use_unary):
                                  f"edges at scale {scale}: the affinity underflowed silently")
 
 
+@MEDIUM
+@given(data=st.data(), model=st.sampled_from(["affine", "similarity", "homography", "bogus"]),
+       threshold=st.sampled_from([0.5] * 6 + [0.0, -1.0, 1e-12, 1e9, np.inf, np.nan, "x"]),
+       min_inliers=st.sampled_from([None] * 6 + [0, 2, 4, 100, 2.5]))
+def test_verify_assignment(data, model, threshold, min_inliers):
+    """Points of any scale (coincident, collinear, huge, NaN), any putative map: a verified map
+    that is an injective partial map with only finite transforms, or a named refusal."""
+    from transync.matching import verify_assignment
+
+    n1, n2 = data.draw(st.integers(0, 7)), data.draw(st.integers(0, 7))
+    kind = data.draw(st.sampled_from(["random"] * 4 + ["same", "collinear", "nasty", "junk"]))
+    scale = data.draw(st.sampled_from([1.0, 1.0, 1e-12, 1e-6, 1e6, 1e11, 1e13]))
+    if kind == "junk":
+        p1, p2 = data.draw(any_arrays(max_dims=2)), data.draw(any_arrays(max_dims=2))
+    elif kind == "nasty":
+        p1, p2 = data.draw(float_arrays((n1, 2))), data.draw(float_arrays((n2, 2)))
+    else:
+        p1 = data.draw(float_arrays((n1, 2), elements=tame_floats)) * scale
+        p2 = data.draw(float_arrays((n2, 2), elements=tame_floats)) * scale
+        if kind == "same":
+            p2 = np.ones((n2, 2)) * scale
+        elif kind == "collinear":
+            p1[:, 1] = p1[:, 0]
+    a, _ = data.draw(assignments(n1=np.shape(p1)[0] if np.ndim(p1) else 0,
+                                 n2=np.shape(p2)[0] if np.ndim(p2) else 0))
+    res = call(verify_assignment, p1, p2, a, model=model, threshold=threshold,
+               min_inliers=min_inliers, rng=0)
+    if res is REFUSED:
+        return
+    P1, P2 = np.asarray(p1, dtype=float), np.asarray(p2, dtype=float)
+    check(P1.ndim == 2 and P1.shape[1] == 2 and P2.ndim == 2 and P2.shape[1] == 2,
+          f"accepted points of shapes {P1.shape}, {P2.shape}")
+    check_finite_array(P1, "accepted points1")
+    check_finite_array(P2, "accepted points2")
+    out = res.assignment
+    check(out.shape == (len(P1),) and out.dtype.kind == "i", f"assignment shape {out.shape}")
+    m = out[out >= 0]
+    check(bool(np.all(out >= -1)) and bool(np.all(m < len(P2))), "assignment out of range")
+    check(np.unique(m).size == m.size, "verified map not injective")
+    check(res.n_inliers == m.size and res.verified == (m.size > 0 or res.verified),
+          f"n_inliers {res.n_inliers} for {m.size} matches")
+    check(res.verified or m.size == 0, "a failed verification kept matches")
+    if res.verified:
+        check_finite_array(res.transform, "transform of a verified map")
+    check(res.transform.shape == (3, 3) and np.isfinite(res.threshold) and res.threshold >= 0,
+          "transform shape or threshold")
+
+
 @COSTLY
 @given(method=st.sampled_from(["rrwm", "sm", "hungarian", "bogus"]),
        options=st.dictionaries(st.sampled_from(["maxiter", "max_iter", "tol", "n1", "variant",
@@ -2069,7 +2117,10 @@ def test_match_collection(gs, data, solver, sync, mode, partial, n_universe):
         {"sync_every": 1}, {"sync_every": 0}, {"sync_every": 2.5}, {"damping": 0.5},
         {"damping": 0.0}, {"damping": np.nan}, {"refine": False}, {"refine": 1},
         {"options": {"max_iter": 1}}, {"options": {"bogus": 1}}, {"options": 3},
-        {"executor": "serial"}, {"rng": -1}, {"progress": "no"}]))
+        {"executor": "serial"}, {"rng": -1}, {"progress": "no"},
+        {"verify": "affine"}, {"verify": "similarity"}, {"verify": "homography"},
+        {"verify": "affine", "verify_threshold": 3.0}, {"verify": "x"},
+        {"verify": "affine", "verify_threshold": 0.0}]))
     if affinity is None and data.draw(st.integers(0, 9)) == 0 and len(set(sizes)) == 1:
         m = sizes[0] ** 2
         affinity = np.abs(data.draw(float_arrays((len(sizes), len(sizes), m, m))))

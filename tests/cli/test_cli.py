@@ -158,6 +158,10 @@ def bad_inputs(tmp_path):
     (["collection", "{d}/p3.txt", "{d}/p3.txt", "--affinity", "length+angle", "--edges",
       "full"],
      r"length\+angle needs 2-d points"),
+    (["collection", "{d}/p3.txt", "{d}/p3.txt", "--edges", "full", "--verify", "affine"],
+     r"`verify='affine'` fits plane transforms .* graph 0 has 3-d points"),
+    (["collection", "{d}/p2.txt", "{d}/near.txt", "--verify", "affine", "--partial",
+      "dummies"], r"`verify` checks matches between the graphs' points"),
 ])
 def test_errors_are_one_line_and_exit_2(bad_inputs, capsys, argv, expected):
     import re
@@ -431,7 +435,9 @@ def _planted_point_sets(tmp_path, rng, d=15, n_sets=6):
     return files, ids
 
 
-@pytest.mark.parametrize("extra", [[], ["--partial", "dummies"], ["--mode", "offline"]])
+@pytest.mark.parametrize("extra", [[], ["--partial", "dummies"], ["--mode", "offline"],
+                                   ["--verify", "affine"],
+                                   ["--verify", "similarity", "--verify-threshold", "0.3"]])
 def test_collection_command_matches_point_sets_of_different_sizes(tmp_path, extra):
     files, ids = _planted_point_sets(tmp_path, np.random.default_rng(1))
     out = tmp_path / "res.json"
@@ -445,3 +451,7 @@ def test_collection_command_matches_point_sets_of_different_sizes(tmp_path, extr
         assert m == expect
     if not extra:
         assert res["n_universe"] == 15 and "estimated" in res["n_universe_rule"]
+    if "--verify" in extra:
+        assert res["verify"] == extra[1] and res["verified_pairs"] == len(res["pairs"])
+    else:
+        assert res["verify"] == "none" and res["verified_pairs"] is None

@@ -15,8 +15,10 @@ from transync.experiments import REGISTRY, run_experiment
 from transync.experiments.subgraph import (
     DUMMY_PAIRS,
     FIGURES,
+    GRAPH_METHODS,
     METHODS,
     SYNCHRONIZED,
+    VERIFIED,
     build,
     cmu_keep_range,
     run_method,
@@ -55,7 +57,7 @@ def test_registered_and_builds(no_data):
     for quick in (True, False):
         exp = build(quick=quick)
         assert exp.name == "subgraph" and {s.name for s in exp.sweeps} == SWEEPS
-        assert all(tuple(s.methods) == tuple(METHODS) for s in exp.sweeps)
+        assert all(tuple(s.methods) == GRAPH_METHODS for s in exp.sweeps)
         assert "left out" in exp.description
     full = {s.name: s for s in build().sweeps}
     assert build().trials >= 20
@@ -73,6 +75,11 @@ def test_figures_and_pairs_name_known_methods_and_sweeps():
         assert METHODS[b]["partial"] == "dummies" and "partial" not in METHODS[a]
         assert {k: v for k, v in METHODS[b].items() if k != "partial"} == METHODS[a]
     assert "RRWM" not in SYNCHRONIZED and len(SYNCHRONIZED) == len(METHODS) - 1
+    assert VERIFIED and set(VERIFIED) <= set(SYNCHRONIZED)
+    assert set(GRAPH_METHODS) | set(VERIFIED) == set(METHODS)
+    for m in VERIFIED:                    # each is a graph method with the verification added
+        kw = {k: v for k, v in METHODS[m].items() if k != "verify"}
+        assert kw in [METHODS[g] for g in GRAPH_METHODS]
 
 
 def test_unknown_method_and_missing_universe_are_refused():
@@ -83,7 +90,7 @@ def test_unknown_method_and_missing_universe_are_refused():
         run_method("S-RRWM known d", prob.graphs, None, np.random.default_rng(0))
 
 
-@pytest.mark.parametrize("method", list(METHODS))
+@pytest.mark.parametrize("method", list(GRAPH_METHODS))
 def test_planted_zero_noise_equal_sizes_is_recovered(method):
     """p_keep = 1, no outliers, no deformation, complete graphs: every pair's truth scores
     exp(0) = 1 on all its edge pairs, so every method finds it; the synchronized ones place the
@@ -185,9 +192,13 @@ def test_cmu_keep_range_and_sweep_on_a_written_sequence(tmp_path):
     cmu = {s.name: s for s in exp.sweeps}["cmu"]
     assert cmu.values == [4] and (cmu.base["keep_low"], cmu.base["keep_high"]) == (8, 10)
     assert "data" not in cmu.base and exp.trial.keywords["data"] == str(seq.resolve())
-    out = exp.trial(dict(cmu.base, n_frames=4, method="S-RRWM"), np.random.default_rng(0))
-    assert 8 <= out["size_min"] <= out["size_max"] <= 10
-    assert out["transitivity_cvr"] == 0.0 and out["f1"] > 0.8
+    assert tuple(cmu.methods) == GRAPH_METHODS + VERIFIED
+    for method in ("S-RRWM", "S-RRWM verified"):
+        out = exp.trial(dict(cmu.base, n_frames=4, method=method), np.random.default_rng(0))
+        assert 8 <= out["size_min"] <= out["size_max"] <= 10
+        assert out["transitivity_cvr"] == 0.0 and out["f1"] > 0.8
+    # translated, jittered copies: the affine verification keeps exactly the shared landmarks
+    assert out["f1"] == 1.0 and out["universe_ok"] == 1.0
     assert build(data=seq).sweeps[-1].values == [8]        # 20 frames asked, 8 in the sequence
 
 
@@ -215,6 +226,11 @@ def test_cmu_house_partial_trial():
                     np.random.default_rng(0))
     assert 20 <= out["size_min"] <= out["size_max"] <= 25
     assert out["transitivity_cvr"] == 0.0 and out["f1"] > 0.5
+    # the protocol's 20 frames with the geometric verification: the universe is found and F1
+    # is high (0.98-1.0 per draw, docs/experiments/subgraph; 0.75-0.80 without it)
+    out = exp.trial(dict(cmu.base, n_frames=20, method="RRWM+spectral verified"),
+                    np.random.default_rng(0))
+    assert out["transitivity_cvr"] == 0.0 and out["f1"] > 0.95 and out["universe_ok"] == 1.0
 
 
 def _record(sweep, value, method, trial_, **metrics):

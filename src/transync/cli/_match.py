@@ -173,6 +173,8 @@ def _cmd_collection(args) -> int:
     try:
         res = match_collection(graphs, solver=args.solver, sync=sync, mode=args.mode,
                                affinity=aff, n_universe=args.n_universe, partial=args.partial,
+                               verify=None if args.verify == "none" else args.verify,
+                               verify_threshold=args.verify_threshold,
                                rng=args.seed, progress=not args.quiet)
     except (ValueError, TypeError) as exc:
         raise CLIError(str(exc).splitlines()[0]) from exc
@@ -188,7 +190,9 @@ def _cmd_collection(args) -> int:
         "input_consistency": res.input_consistency, "converged": res.converged,
         "timings": {k: round(float(v), 4) for k, v in res.timings.items()},
         "edges": args.edges, "affinity": args.affinity, "sigma2": args.sigma2,
-        "coordinate_scale": scale,
+        "coordinate_scale": scale, "verify": args.verify,
+        "verified_pairs": (None if "verify" not in res.info
+                           else int(np.sum(res.info["verify"]["verified"]))),
     }
     return emit(payload, args.out)
 
@@ -301,6 +305,13 @@ def add_parsers(sub) -> None:
     p.add_argument("--sigma2", type=positive_float, default=0.05,
                    help="width of the Gaussian edge affinity, after scaling all point sets by "
                         "one factor to unit size")
+    p.add_argument("--verify", default="none",
+                   choices=["none", "affine", "similarity", "homography"],
+                   help="geometric verification of every pair's matches before the "
+                        "synchronization (2-d points of one rigid or planar object)")
+    p.add_argument("--verify-threshold", type=positive_float, default=None,
+                   help="verification gate, as a fraction of the median nearest-neighbour "
+                        "distance of the points (default 0.5)")
     p.add_argument("--seed", type=int, default=0, help="seed of the randomized steps")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--out", help="JSON output file (default: print)")

@@ -16,7 +16,10 @@ All methods of a trial see the same collection. Methods (:data:`METHODS`):
 * ``S-RRWM dummies``, ``S-GA dummies`` - the dummy-node baseline (thesis Fig. 7.3): every graph
   padded with isolated dummies to the largest size, the full-permutation method run, matches
   involving dummies dropped (``partial="dummies"``);
-* ``S-RRWM known d`` - ``S-RRWM`` told the universe size (``n_universe = max(d, largest graph)``).
+* ``S-RRWM known d`` - ``S-RRWM`` told the universe size (``n_universe = max(d, largest graph)``);
+* ``S-RRWM verified``, ``S-GA verified``, ``RRWM+spectral verified`` - on the ``cmu`` sweep only
+  (:data:`VERIFIED`: graphs with points): the same methods with the geometric verification of
+  the pairwise maps before the synchronization (``verify="affine"``).
 
 Sweeps, one variable at a time around N = 8 graphs, d = 20, ``p_keep`` in [0.6, 1], no
 outliers, deformation 0.05, complete graphs (grid: ``docs/experiments/subgraph/README.md``):
@@ -79,7 +82,16 @@ METHODS = {
     "S-GA dummies": {"solver": "ga", "sync": "birkhoff", "mode": "online", "partial": "dummies"},
     "S-RRWM known d": {"solver": "rrwm", "sync": "birkhoff", "mode": "online",
                        "n_universe": "d"},
+    "S-RRWM verified": {"solver": "rrwm", "sync": "birkhoff", "mode": "online",
+                        "verify": "affine"},
+    "S-GA verified": {"solver": "ga", "sync": "birkhoff", "mode": "online", "verify": "affine"},
+    "RRWM+spectral verified": {"solver": "rrwm", "sync": "spectral", "mode": "offline",
+                               "verify": "affine"},
 }
+#: the methods that need points (geometric verification): the CMU sweep's extra lines
+VERIFIED = tuple(m for m, kw in METHODS.items() if kw.get("verify"))
+#: the methods of the synthetic sweeps (graphs without points)
+GRAPH_METHODS = tuple(m for m in METHODS if m not in VERIFIED)
 #: universe method -> its dummy-node baseline (the pairs compared by the targets table)
 DUMMY_PAIRS = {"S-RRWM": "S-RRWM dummies", "S-GA": "S-GA dummies"}
 #: the methods whose output is synchronized (cycle-consistent by construction)
@@ -105,7 +117,7 @@ FIGURES = {
     "7.2": ("fig_7_2.png", _UNIVERSE_LINES, PARTIAL_SWEEPS, ("f1", "precision", "recall")),
     "7.3": ("fig_7_3_dummies.png", ("S-RRWM", "S-GA", "S-RRWM dummies", "S-GA dummies"),
             PARTIAL_SWEEPS, ("f1", "precision", "recall")),
-    "7.4": ("fig_7_4_equal_sizes.png", tuple(METHODS), ("equal_deformation", "equal_flip"),
+    "7.4": ("fig_7_4_equal_sizes.png", GRAPH_METHODS, ("equal_deformation", "equal_flip"),
             ("f1", "precision", "recall")),
     "7.5": ("fig_7_5_violations.png", _VIOLATION_LINES, ("deformation", "range"),
             ("accuracy", "capacity_cvr", "transitivity_cvr")),
@@ -301,7 +313,7 @@ def build(*, quick: bool = False, data=None) -> Experiment:
     base = dict(n_graphs=8, n_universe=20, p_low=0.6, p_high=1.0, n_outliers=0,
                 deformation=0.05, density=1.0, flip=0.0, sigma2=SIGMA2)
     equal = dict(p_low=1.0, n_outliers=2)
-    methods = tuple(METHODS)
+    methods = GRAPH_METHODS
     if quick:
         base.update(n_graphs=4, n_universe=8)
         equal.update(n_outliers=1)
@@ -339,7 +351,7 @@ def build(*, quick: bool = False, data=None) -> Experiment:
         cmu_base = dict(sequence=seq.name, fingerprint=sequence_fingerprint(seq),
                         keep_low=lo, keep_high=hi)
         sweeps.append(Sweep(name="cmu", variable="n_frames", values=[n_frames],
-                            methods=methods, base=cmu_base, metrics=METRICS,
+                            methods=methods + VERIFIED, base=cmu_base, metrics=METRICS,
                             xlabel=f"frames of {seq.name!r}, {lo}-{hi} of "
                                    f"{seq.n_landmarks} landmarks each"))
     where = (f"; CMU partial: {seq.name} ({seq.n_frames} frames)" if seq is not None

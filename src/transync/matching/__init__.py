@@ -23,6 +23,7 @@ from ._rrwm import RRWMStepper, rrwm
 from ._sinkhorn import SinkhornBatchOutput, sinkhorn_augmented_batch, sinkhorn_batch
 from ._sm import SMStepper, sm
 from ._stepwise import Stepper
+from ._verify import VERIFY_MODELS, VerificationResult, verify_assignment
 
 __all__ = [
     "DEFAULT_SIGMA2",
@@ -32,6 +33,8 @@ __all__ = [
     "GaussianEdgeFactors",
     "SeparableAffinity",
     "SparseAffinity",
+    "VERIFY_MODELS",
+    "VerificationResult",
     "as_affinity",
     "gaussian_edge_affinity",
     "gaussian_edge_factors",
@@ -57,4 +60,5 @@ __all__ = [
     "sinkhorn_batch",
     "sm",
     "solver_options",
+    "verify_assignment",
 ]

@@ -1,0 +1,246 @@
+"""Geometric verification of pairwise assignments (`verify_assignment`) and its stage in
+`match_collection` (`verify=`): planted transforms recovered exactly, spurious matches dropped,
+missed ones recovered, failures reported, relabelling invariance, the input contract."""
+
+import functools
+
+import numpy as np
+import pytest
+
+from transync import match_collection
+from transync.graphs import Graph
+from transync.matching import (
+    VERIFY_MODELS,
+    VerificationResult,
+    gaussian_edge_affinity,
+    verify_assignment,
+)
+from transync.metrics import multimatching_precision_recall
+from transync.permutations import MultiMatching
+
+
+def _transform(model, rng):
+    a = rng.uniform(-0.6, 0.6)
+    s = rng.uniform(0.7, 1.4)
+    R = s * np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    H = np.eye(3)
+    H[:2, :2] = R
+    H[:2, 2] = rng.uniform(-3, 3, 2)
+    if model in ("affine", "homography"):
+        H[:2, :2] = R @ np.array([[1.0, rng.uniform(-0.3, 0.3)], [0.0, rng.uniform(0.8, 1.2)]])
+    if model == "homography":
+        H[2, :2] = rng.uniform(-0.15, 0.15, 2)
+    return H
+
+
+def _apply(H, p):
+    q = p @ H[:2, :2].T + H[:2, 2]
+    return q / (p @ H[2, :2] + H[2, 2])[:, None]
+
+
+def _planted(model, seed, n=20, shared=15, outliers=3, corrupt=4):
+    """Graph 1: n points; graph 2: the first `shared` mapped by a transform, plus outliers,
+    shuffled. A putative map with `corrupt` wrong matches, two true matches missing, and the
+    unshared nodes matched to outliers."""
+    rng = np.random.default_rng(seed)
+    p1 = rng.random((n, 2))
+    H = _transform(model, rng)
+    q = np.vstack([_apply(H, p1[:shared]), _apply(H, rng.random((outliers, 2)) + 1.5)])
+    perm = rng.permutation(len(q))
+    p2 = q[perm]
+    pos = np.empty_like(perm)
+    pos[perm] = np.arange(len(q))                   # where row k of q went
+    truth = np.full(n, -1)
+    truth[:shared] = pos[:shared]
+    putative = truth.copy()
+    wrong = rng.choice(shared, corrupt, replace=False)
+    putative[wrong] = putative[np.roll(wrong, 1)]   # a cycle of wrong matches
+    putative[shared - 2:shared] = -1 if corrupt < shared - 2 else putative[shared - 2:shared]
+    putative[shared:shared + outliers] = pos[shared:shared + outliers]   # unshared -> outliers
+    return p1, p2, putative, truth, H
+
+
+@pytest.mark.parametrize("model", sorted(VERIFY_MODELS))
+@pytest.mark.parametrize("seed", range(4))
+def test_planted_transform_is_recovered_exactly(model, seed):
+    """Zero noise: the verified map is the truth (wrong matches dropped or corrected, missed
+    ones recovered, unshared nodes unmatched) and the transform is the planted one."""
+    p1, p2, putative, truth, H = _planted(model, seed)
+    res = verify_assignment(p1, p2, putative, model=model, rng=seed)
+    assert isinstance(res, VerificationResult) and res.verified and res.model == model
+    np.testing.assert_array_equal(res.assignment, truth)
+    assert res.n_inliers == int(np.sum(truth >= 0))
+    np.testing.assert_allclose(res.transform / res.transform[2, 2], H / H[2, 2], atol=1e-6)
+    assert res.threshold > 0 and 1 <= res.n_rounds <= 5
+
+
+def test_relabelling_the_second_graph_relabels_the_answer():
+    p1, p2, putative, truth, _ = _planted("affine", 7)
+    perm = np.random.default_rng(1).permutation(len(p2))      # new node u is old perm[u]
+    inv = np.argsort(perm)
+    moved = np.where(putative >= 0, inv[np.maximum(putative, 0)], -1)
+    a = verify_assignment(p1, p2, putative, rng=3).assignment
+    b = verify_assignment(p1, p2[perm], moved, rng=3).assignment
+    np.testing.assert_array_equal(b, np.where(a >= 0, inv[np.maximum(a, 0)], -1))
+
+
+def test_same_rng_same_answer_and_scale_free_gate():
+    p1, p2, putative, truth, _ = _planted("affine", 3)
+    r1 = verify_assignment(p1, p2, putative, rng=5)
+    r2 = verify_assignment(p1, p2, putative, rng=5)
+    np.testing.assert_array_equal(r1.assignment, r2.assignment)
+    # pixels instead of unit coordinates: the gate follows the points' spacing
+    r3 = verify_assignment(640 * p1, 480 * p2 + 1e4, putative, rng=5)
+    np.testing.assert_array_equal(r3.assignment, truth)
+    assert r3.threshold == pytest.approx(480 * r1.threshold, rel=1e-9)
+
+
+def test_unexplained_matches_fail_with_an_empty_map():
+    """Random putative matches between unrelated point sets: no transform explains six of
+    them within half the point spacing, so nothing survives."""
+    rng = np.random.default_rng(0)
+    failures = 0
+    for _ in range(20):
+        p1, p2 = rng.random((15, 2)), rng.random((15, 2))
+        res = verify_assignment(p1, p2, rng.permutation(15), rng=0)
+        if not res.verified:
+            failures += 1
+            assert np.all(res.assignment == -1) and res.n_inliers == 0
+    assert failures >= 18
+    # too few putative matches for the model's sample: failed, transform NaN
+    res = verify_assignment(rng.random((5, 2)), rng.random((5, 2)), [0, 1, -1, -1, -1])
+    assert not res.verified and np.all(res.assignment == -1)
+    assert np.all(np.isnan(res.transform)) and res.n_rounds == 0
+    # one point on the other side: no spacing to gate by, nothing to verify
+    assert not verify_assignment([[0.0, 0.0]], [[1.0, 1.0]], [0]).verified
+
+
+def test_min_inliers_decides_what_verifies():
+    p1, p2, putative, truth, _ = _planted("affine", 2)
+    assert verify_assignment(p1, p2, putative, min_inliers=15, rng=0).verified
+    res = verify_assignment(p1, p2, putative, min_inliers=16, rng=0)
+    assert not res.verified and np.all(res.assignment == -1)
+
+
+@pytest.mark.parametrize("kwargs, exc, match", [
+    (dict(points1=np.zeros((3, 3))), ValueError, "points1.*shape \\(n, 2\\)"),
+    (dict(points2=np.zeros((0, 2))), ValueError, "points2.*at least one point"),
+    (dict(points1=[[np.nan, 0.0]] * 4), ValueError, "points1"),
+    (dict(points2=np.full((4, 2), 1e13)), ValueError, "points2.*1e\\+12"),
+    (dict(assignment=[0, 1, 2]), ValueError, "assignment.*length 4"),
+    (dict(assignment=[0, 1, 2, 4]), ValueError, "assignment.*< n2=4"),
+    (dict(assignment=[0, 0, 1, 2]), ValueError, "assignment.*injective"),
+    (dict(assignment=[0.5, 1, 2, 3]), TypeError, "assignment"),
+    (dict(model="projective"), ValueError, "model"),
+    (dict(threshold=0.0), ValueError, "threshold"),
+    (dict(threshold=np.inf), ValueError, "threshold"),
+    (dict(min_inliers=2), ValueError, "min_inliers.*>= 3"),
+    (dict(min_inliers=4.0), TypeError, "min_inliers"),
+    (dict(max_rounds=0), ValueError, "max_rounds"),
+    (dict(rng=-1), ValueError, "rng"),
+])
+def test_bad_input_is_named(kwargs, exc, match):
+    args = dict(points1=np.random.default_rng(0).random((4, 2)),
+                points2=np.random.default_rng(1).random((4, 2)), assignment=[0, 1, 2, 3])
+    args.update(kwargs)
+    with pytest.raises(exc, match=match):
+        verify_assignment(**args)
+
+
+# ------------------------------------------------------------------ match_collection(verify=)
+
+def _landmark_collection(n_graphs=8, n_points=24, keep=(14, 20), seed=0):
+    """Views of one planar point set under mild affine maps (a rotation, a translation, a
+    little shear: edge lengths change a little, as between frames of a sequence), each keeping
+    a random subset, nodes shuffled, Delaunay graphs; ground truth as universe labels."""
+    rng = np.random.default_rng(seed)
+    base = rng.random((n_points, 2))
+    graphs, labels = [], []
+    for _ in range(n_graphs):
+        a = rng.uniform(-0.3, 0.3)
+        H = np.eye(3)
+        H[:2, :2] = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) @ np.array(
+            [[1.0, rng.uniform(-0.05, 0.05)], [0.0, 1.0]])
+        H[:2, 2] = rng.uniform(-1, 1, 2)
+        k = int(rng.integers(keep[0], keep[1] + 1))
+        kept = rng.permutation(n_points)[:k]
+        graphs.append(Graph.from_points(_apply(H, base[kept]), edges="delaunay"))
+        labels.append(kept)
+    return graphs, MultiMatching(labels, n_points)
+
+
+_AFFINITY = functools.partial(gaussian_edge_affinity, sigma2=0.01, attribute="length+angle")
+
+
+@pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
+@pytest.mark.parametrize("kwargs", [
+    dict(solver="rrwm", sync="spectral", mode="offline"),
+    dict(solver="rrwm"),                                   # S-RRWM, online
+])
+def test_match_collection_verified_recovers_planted_views(kwargs):
+    """Mildly transformed views of one point set keeping 18-22 of 24 points, no noise:
+    verified and synchronized, every correspondence is found and nothing else; the
+    unverified pipeline does not get there on the same graphs (F1 0.85)."""
+    graphs, truth = _landmark_collection(keep=(18, 22))
+    res = match_collection(graphs, affinity=_AFFINITY, verify="affine", rng=0, progress=False,
+                           **kwargs)
+    pr = multimatching_precision_recall(res, truth)
+    assert pr["precision"] == pr["recall"] == 1.0
+    assert res.consistency == 1.0 and res.n_universe == 24
+    info = res.info["verify"]
+    assert info["model"] == "affine" and info["verified"].mean() > 0.8   # poor pairs fail
+    assert info["n_inliers"].shape == (len(res.pairs),) and "verify" in res.timings
+    plain = match_collection(graphs, affinity=_AFFINITY, rng=0, progress=False, **kwargs)
+    assert multimatching_precision_recall(plain, truth)["f1"] < 0.9
+
+
+@pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
+def test_match_collection_verified_pairwise_only():
+    """sync=None: the verified pairwise maps themselves, far more precise than the matcher's
+    (unshared nodes can still meet a free point inside the gate by chance)."""
+    graphs, truth = _landmark_collection(keep=(18, 22))
+    res = match_collection(graphs, affinity=_AFFINITY, sync=None, verify="affine", rng=0,
+                           progress=False)
+    plain = match_collection(graphs, affinity=_AFFINITY, sync=None, rng=0, progress=False)
+    got = multimatching_precision_recall(res, truth)
+    assert got["f1"] > multimatching_precision_recall(plain, truth)["f1"] + 0.15
+    assert got["precision"] > 0.9 and res.matching is None
+
+
+@pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
+def test_match_collection_verified_equal_sizes():
+    """Equal sizes (full permutations): verification then synchronization into n slots."""
+    graphs, truth = _landmark_collection(n_graphs=5, keep=(24, 24), seed=3)
+    res = match_collection(graphs, solver="rrwm", sync="spectral", mode="offline",
+                           verify="similarity", verify_threshold=0.4, rng=0, progress=False)
+    assert res.n_universe == 24 and res.accuracy(truth) == 1.0
+    assert res.info["verify"]["threshold"] == 0.4
+
+
+def test_match_collection_verify_refusals():
+    graphs, _ = _landmark_collection(n_graphs=3)
+    with pytest.raises(ValueError, match="`verify` must be one of"):
+        match_collection(graphs, verify="rigid", progress=False)
+    with pytest.raises(ValueError, match="verify_threshold"):
+        match_collection(graphs, verify="affine", verify_threshold=-1.0, progress=False)
+    with pytest.raises(ValueError, match="partial='dummies'"):
+        match_collection(graphs, verify="affine", partial="dummies", progress=False)
+    no_points = [Graph(np.ones((4, 4)) - np.eye(4)) for _ in range(3)]
+    with pytest.raises(ValueError, match="graph 0 has no points"):
+        match_collection(no_points, verify="affine", progress=False)
+    three_d = [Graph.from_points(np.random.default_rng(k).random((5, 3)), edges="full") for k in range(3)]
+    with pytest.raises(ValueError, match="graph 0 has 3-d points"):
+        match_collection(three_d, verify="homography", progress=False)
+
+
+@pytest.mark.parametrize("kwargs", [dict(), dict(sync="orthogonal", mode="offline"),
+                                    dict(solver="cao", sync="spectral")])
+def test_match_collection_unverifiable_collection_matches_nothing(kwargs):
+    """Three unrelated point sets of equal size: no pair verifies, so no node gets a partner
+    (an evidence-free full permutation would be arbitrary), and the output stays consistent."""
+    rng = np.random.default_rng(0)
+    graphs = [Graph.from_points(rng.random((5, 2)), edges="full") for _ in range(3)]
+    res = match_collection(graphs, verify="affine", rng=0, progress=False, **kwargs)
+    assert not res.info["verify"]["verified"].any()
+    assert np.all(res.assignments == -1) and res.consistency == 1.0
+    assert all(np.all(lab == -1) for lab in res.matching.labels)

@@ -281,6 +281,23 @@ def test_estimate_universe_exact_at_zero_noise_and_invariant_to_relabelling(seed
     assert estimate_universe(soft).n_universe == ref
 
 
+def test_eigengap_split_step():
+    """The split-gap step of the soft estimate: one slot more when the gap after the largest is
+    at least ``split`` times it, never otherwise, and the plain rule without ``split``."""
+    from transync.synchronization._spectral import estimate_universe as rule
+
+    # a node kept by few objects sits between the plateau and the noise: two comparable gaps
+    vals = np.array([1.0, 1.0, 1.0, 0.55, 0.2, 0.18, 0.17])
+    assert rule(vals, 3)[0] == 3                                   # largest gap: after l_3
+    d, why = rule(vals, 3, split=0.6)                              # 0.35 >= 0.6 * 0.45
+    assert d == 4 and "split gap" in why
+    assert rule(vals, 3, split=0.8)[0] == 3                        # 0.35 < 0.8 * 0.45
+    clean = np.array([1.0, 1.0, 1.0, 0.2, 0.18, 0.17])             # one clean gap: unchanged
+    assert rule(clean, 3, split=0.6)[0] == 3
+    last = np.array([1.0, 1.0, 0.1])                               # the gap is the last one
+    assert rule(last, 2, split=0.6)[0] == 2
+
+
 def test_estimate_universe_bad_input():
     from transync.synchronization import estimate_universe
     X = np.array([[0.5, 0.5], [0.0, 0.0]])

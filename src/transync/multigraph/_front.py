@@ -831,8 +831,9 @@ def _synchronize(pairs, assignments, soft, lay, n_universe, sync, gen, min_score
         # The soft solutions keep the solver's uncertainty, which its rounded maps lose: a
         # universe node kept by few graphs whose hard matches went to other nodes keeps part
         # of its eigenvalue (estimate_universe; N = 8, d = 20, RRWM, 400 collections of
-        # benchmarks/universe_estimate.py: right on 93.2 % against 92.0 % from the maps; on
-        # 880 collections over four settings 83.8 % against 81.4 %).
+        # benchmarks/universe_estimate.py: right on 93.2 % against 92.0 % from the maps, 94.0 %
+        # with its split-gap step; on 880 collections over four settings 83.8 % against
+        # 81.4 %, before that step).
         est = estimate_universe(_by_pair(pairs, doubly_stochastic_iterates(soft), sizes),
                                 sizes=sizes)
         n_universe, rule = est.n_universe, f"soft {est.rule} (the pairwise solver's soft solutions)"

@@ -195,17 +195,28 @@ def block_krylov_eigs(matmat, M: int, k: int, *, k_values: int | None = None,
     return w[:kv], V[:, :k], n_prod, it, converged
 
 
-def estimate_universe(vals: np.ndarray, n_max: int) -> tuple[int, str]:
-    """Eigengap rule on the normalized spectrum: ``d = argmax_{k >= n_max} (l_k - l_{k+1})``."""
+def estimate_universe(vals: np.ndarray, n_max: int, *,
+                      split: float | None = None) -> tuple[int, str]:
+    """Eigengap rule on the normalized spectrum: ``d = argmax_{k >= n_max} (l_k - l_{k+1})``.
+
+    ``split``: when the gap right after the largest one, ``l_(d+1) - l_(d+2)``, is at least
+    ``split`` times it, ``d + 1`` (a universe node kept by few objects has a lower eigenvalue
+    than the others, between them and the noise, and splits one gap into two comparable ones).
+    """
     vals = np.asarray(vals)
     if vals.size <= n_max:
         return int(max(n_max, vals.size)), "fewer eigenvalues than nodes: d = n_max"
     gaps = vals[:-1] - vals[1:]           # gaps[k-1] = l_k - l_{k+1}
     cand = gaps[n_max - 1:]
     d = int(n_max + np.argmax(cand))
-    return d, (f"eigengap: largest gap l_d - l_(d+1) of the degree-normalized block matrix "
-               f"over {n_max} <= d <= {vals.size - 1} (max object size .. number of leading "
-               f"eigenvalues computed - 1)")
+    rule = (f"eigengap: largest gap l_d - l_(d+1) of the degree-normalized block matrix "
+            f"over {n_max} <= d <= {vals.size - 1} (max object size .. number of leading "
+            f"eigenvalues computed - 1)")
+    if split is not None and d < gaps.size and gaps[d] >= split * gaps[d - 1]:
+        d += 1
+        rule += (f"; the next gap is at least {split:g} times it (a split gap): one more "
+                 f"slot, d = {d}")
+    return d, rule
 
 
 def _hungarian_rows(S_blocks, sizes, off, d):

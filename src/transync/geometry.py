@@ -272,7 +272,8 @@ def hartley_normalization(points) -> tuple[np.ndarray, np.ndarray]:
         s = np.sqrt(2.0) / d if d > 0 else 1.0
         T = np.array([[s, 0.0, -s * c[0]], [0.0, s, -s * c[1]], [0.0, 0.0, 1.0]])
         normalized = (pts - c) * s
-    if not (np.all(np.isfinite(T)) and np.all(np.isfinite(normalized)) and s * s > 0):
+        spread_ok = s * s > 0
+    if not (np.all(np.isfinite(T)) and np.all(np.isfinite(normalized)) and spread_ok):
         raise ValueError("`points` cannot be normalized in floating point: their centroid or "
                          f"spread overflows (largest magnitude {np.abs(pts).max():.3g})")
     return T, normalized

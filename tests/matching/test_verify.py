@@ -225,6 +225,8 @@ def test_match_collection_verify_refusals():
         match_collection(graphs, verify="affine", verify_threshold=-1.0, progress=False)
     with pytest.raises(ValueError, match="partial='dummies'"):
         match_collection(graphs, verify="affine", partial="dummies", progress=False)
+    with pytest.raises(ValueError, match="`verify_threshold` sets the gate"):
+        match_collection(graphs, verify_threshold=0.5, progress=False)
     no_points = [Graph(np.ones((4, 4)) - np.eye(4)) for _ in range(3)]
     with pytest.raises(ValueError, match="graph 0 has no points"):
         match_collection(no_points, verify="affine", progress=False)
@@ -244,3 +246,34 @@ def test_match_collection_unverifiable_collection_matches_nothing(kwargs):
     assert not res.info["verify"]["verified"].any()
     assert np.all(res.assignments == -1) and res.consistency == 1.0
     assert all(np.all(lab == -1) for lab in res.matching.labels)
+
+
+@pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
+def test_match_collection_failed_pairs_do_not_inflate_the_universe():
+    """Equal sizes, default gate: 6 of 10 pairs verify. The failed ones are unobserved, not
+    evidence of disjoint graphs (as empty maps they doubled the estimate: 48 slots, F1 0.57)."""
+    graphs, truth = _landmark_collection(n_graphs=5, keep=(24, 24), seed=3)
+    for kwargs in (dict(), dict(sync="spectral", mode="offline"), dict(n_universe=24)):
+        res = match_collection(graphs, affinity=_AFFINITY, verify="affine", rng=0,
+                               progress=False, **kwargs)
+        assert not res.info["verify"]["verified"].all()
+        assert res.n_universe == 24 and res.accuracy(truth) == 1.0
+
+
+def test_extreme_scales_and_a_far_point():
+    """Coordinates near the float64 limits and one point 1e8 away from a unit cluster: the
+    normalization keeps the geometry (no overflow warning, no underflowed gate)."""
+    rng = np.random.default_rng(0)
+    p = rng.random((20, 2))
+    A = np.array([[0.9, -0.3], [0.4, 1.1]])
+    for scale in (1e-300, 1e-170, 1e-155, 1e11):
+        res = verify_assignment(p * scale, (p @ A.T) * scale, np.arange(20), rng=0)
+        assert res.verified and res.n_inliers == 20 and 0 < res.threshold < np.inf
+        np.testing.assert_allclose(res.transform[:2, :2], A, rtol=1e-6)
+    far = np.vstack([p, [[1e8, 1e8]]])
+    for model in ("affine", "similarity"):
+        res = verify_assignment(far, far @ A.T + 2 if model == "affine" else 2 * far + 1,
+                                np.arange(21), model=model, rng=0)
+        assert res.verified and res.n_inliers == 21
+    with pytest.raises(ValueError, match="`threshold` times the spacing"):
+        verify_assignment(p * 1e11, p * 1e11, np.arange(20), threshold=1e300)

@@ -296,6 +296,9 @@ def test_eigengap_split_step():
     assert rule(clean, 3, split=0.6)[0] == 3
     last = np.array([1.0, 1.0, 0.1])                               # the gap is the last one
     assert rule(last, 2, split=0.6)[0] == 2
+    flat = np.zeros(6)                                             # no gap at all: no step
+    d, why = rule(flat, 3, split=0.6)
+    assert d == 3 and "split" not in why
 
 
 def test_estimate_universe_bad_input():

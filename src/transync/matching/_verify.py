@@ -34,7 +34,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validation import as_generator, check_array, check_choice, check_int, check_positive
-from ..geometry import hartley_normalization
 from ..permutations import UNMATCHED, check_assignment, solve_lap
 
 __all__ = ["VERIFY_MODELS", "VerificationResult", "verify_assignment"]
@@ -110,6 +109,30 @@ def _nearest_neighbour_scale(points: np.ndarray) -> float:
     return float(np.median(d[:, 1]))
 
 
+def _normalization(points: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(T, T(points))``: a similarity taking the points' median to the origin and their median
+    distance from it to 1 (robust: one far point does not squeeze the others below OpenCV's
+    single precision). The points are first divided by a power of two near their largest
+    magnitude (exact), so that squared distances neither overflow nor underflow."""
+    top = float(np.abs(points).max())
+    unit = 2.0 ** np.round(np.log2(top)) if top > 0 else 1.0
+    q = points / unit
+    centre = np.median(q, axis=0)
+    r = np.sqrt(((q - centre) ** 2).sum(axis=1))
+    spread = float(np.median(r))
+    if spread <= 0:
+        spread = float(r.mean()) if r.mean() > 0 else 1.0
+    with np.errstate(over="ignore"):
+        s = 1.0 / (spread * unit)
+    if not np.isfinite(s):
+        raise ValueError(f"`{name}` cannot be normalized in floating point: the points' "
+                         f"spread (median distance {spread * unit:.3g} at magnitudes up to "
+                         f"{top:.3g}) is too small; rescale the points")
+    T = np.array([[s, 0.0, -s * unit * centre[0]], [0.0, s, -s * unit * centre[1]],
+                  [0.0, 0.0, 1.0]])
+    return T, (q - centre) / spread
+
+
 def _least_squares(model: str, src: np.ndarray, dst: np.ndarray) -> np.ndarray | None:
     """The least-squares transform ``src -> dst`` on every match (no outlier left to reject)."""
     k = len(src)
@@ -136,8 +159,8 @@ def _fit(model: str, src: np.ndarray, dst: np.ndarray, threshold: float, robust:
         H = _least_squares(model, src, dst)
     else:
         order = gen.permutation(len(src)) if robust else np.arange(len(src))
-        s = np.ascontiguousarray(src[order], dtype=np.float32)
-        d = np.ascontiguousarray(dst[order], dtype=np.float32)
+        s = np.ascontiguousarray(src[order], dtype=np.float64)
+        d = np.ascontiguousarray(dst[order], dtype=np.float64)
         try:
             if model == "homography":
                 H, _ = cv2.findHomography(s, d, cv2.RANSAC if robust else 0, threshold,
@@ -160,7 +183,9 @@ def _guided(H: np.ndarray, x1: np.ndarray, x2: np.ndarray, gate: float) -> np.nd
     w = x1 @ H[2, :2] + H[2, 2]               # 1 for affine and similarity transforms
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         q = q / w[:, None]
-    D = np.sqrt(((q[:, None, :] - x2[None, :, :]) ** 2).sum(-1))
+    q[w <= 0] = np.inf                        # mapped behind the camera: matches nothing
+    with np.errstate(over="ignore", invalid="ignore"):   # a wild transform: beyond any gate
+        D = np.sqrt(((q[:, None, :] - x2[None, :, :]) ** 2).sum(-1))
     D = np.where(np.isfinite(D), D, np.inf)
     a = solve_lap(np.minimum(D, gate), maximize=False)
     rows = np.flatnonzero(a >= 0)
@@ -253,16 +278,20 @@ def verify_assignment(points1, points2, assignment, *, model: str = "affine",
     max_rounds = check_int(max_rounds, "max_rounds", minimum=1)
     gen = as_generator(rng)
 
-    gate = threshold * _nearest_neighbour_scale(p2)
+    # Normalized coordinates: the fits and the gate do not depend on the units
+    T1, x1 = _normalization(p1, "points1")
+    T2, x2 = _normalization(p2, "points2")
+    g = threshold * _nearest_neighbour_scale(x2)
+    with np.errstate(over="ignore"):
+        gate = g / T2[0, 0]                   # the gate in the units of points2
+    if not np.isfinite(gate):
+        raise ValueError(f"`threshold` times the spacing of `points2` must be a finite "
+                         f"distance, got {threshold:g} x {1 / T2[0, 0]:g}")
     empty = np.full(len(p1), UNMATCHED, dtype=np.int64)
     failed = VerificationResult(empty, np.full((3, 3), np.nan), 0, False, gate, model, 0)
     src = np.flatnonzero(a >= 0)
-    if len(src) < max(k, min_inliers) or gate <= 0:
+    if len(src) < max(k, min_inliers) or g <= 0:
         return failed
-    # Hartley-normalized coordinates: OpenCV fits in float32, and the gate scales with points2.
-    T1, x1 = hartley_normalization(p1)
-    T2, x2 = hartley_normalization(p2)
-    g = gate * T2[0, 0]
     H = _fit(model, x1[src], x2[a[src]], g, True, gen)
     if H is None:
         return failed

@@ -212,7 +212,8 @@ def estimate_universe(vals: np.ndarray, n_max: int, *,
     rule = (f"eigengap: largest gap l_d - l_(d+1) of the degree-normalized block matrix "
             f"over {n_max} <= d <= {vals.size - 1} (max object size .. number of leading "
             f"eigenvalues computed - 1)")
-    if split is not None and d < gaps.size and gaps[d] >= split * gaps[d - 1]:
+    if split is not None and d < gaps.size and gaps[d - 1] > 0 \
+            and gaps[d] >= split * gaps[d - 1]:
         d += 1
         rule += (f"; the next gap is at least {split:g} times it (a split gap): one more "
                  f"slot, d = {d}")

@@ -2838,6 +2838,10 @@ def test_hunted_homography_cases():
     E = call(hg.pairwise_corner_error, np.full((2, 3, 3), np.nan), np.stack([np.eye(3)] * 2),
              image_size=(64, 48))
     check(E is not REFUSED and bool(np.all(np.isinf(E))), "NaN estimates: infinite errors")
+    # a canvas of 32767 x 32767 pixels: a MemoryError (or the kernel's OOM killer) after
+    # allocating 17 GB for the mean image's sum and count; now refused by its pixel count
+    check(call(hg.mean_warped_image, [t], np.eye(3)[None], size=(32767, 32767)) is REFUSED,
+          "a canvas of 1.07 billion pixels")
 
 
 def test_harness_flags_low_level_errors():

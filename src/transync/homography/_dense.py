@@ -13,14 +13,17 @@ __all__ = ["mean_warped_image", "refine_homography_ecc", "warp_to_reference"]
 
 #: OpenCV's largest warp canvas side (``SHRT_MAX``: its remap tables hold short coordinates)
 MAX_CANVAS = 32767
+#: largest canvas in pixels (16384 x 16384): ``mean_warped_image`` holds a float64 sum, an int32
+#: count and a float32 warp of the canvas, about 24 bytes a pixel at its peak (6 GiB here)
+MAX_CANVAS_PIXELS = 2**28
 #: OpenCV interpolation flags ``warp_to_reference`` takes (nearest, linear, cubic, area, Lanczos)
 _INTERPOLATIONS = (cv2.INTER_NEAREST, cv2.INTER_LINEAR, cv2.INTER_CUBIC, cv2.INTER_AREA,
                    cv2.INTER_LANCZOS4)
 
 
 def _canvas(size, offset) -> tuple[tuple[int, int], tuple[float, float]]:
-    """``size`` as (width, height) integers in ``[1, MAX_CANVAS]`` and ``offset`` as two
-    finite floats."""
+    """``size`` as (width, height) integers in ``[1, MAX_CANVAS]``, at most
+    ``MAX_CANVAS_PIXELS`` in all, and ``offset`` as two finite floats."""
     if size is None or isinstance(size, (str, bytes)):
         raise TypeError(f"`size` must be (width, height), got {type(size).__name__} {size!r}")
     s = check_array(size, "size", finite=False)
@@ -28,6 +31,10 @@ def _canvas(size, offset) -> tuple[tuple[int, int], tuple[float, float]]:
             or np.any(s < 1) or np.any(s > MAX_CANVAS)):
         raise ValueError(f"`size` must be (width, height), integers in [1, {MAX_CANVAS}], got "
                          f"{np.asarray(size).tolist()!r}")
+    if s[0] * s[1] > MAX_CANVAS_PIXELS:
+        raise ValueError(f"`size` must hold at most {MAX_CANVAS_PIXELS:,} pixels (a mean image of "
+                         f"that size takes about {MAX_CANVAS_PIXELS * 24 / 2**30:.0f} GiB), got "
+                         f"{int(s[0])} x {int(s[1])} = {int(s[0] * s[1]):,}")
     if offset is None or isinstance(offset, (str, bytes)):
         raise TypeError(f"`offset` must be (x, y), got {type(offset).__name__} {offset!r}")
     o = check_array(offset, "offset")
@@ -230,7 +237,7 @@ def mean_warped_image(images, homographies, *, size, masks=None, offset=(0, 0),
     -------
     mean : ndarray of shape (height, width), float32
         The mean warped image, NaN where no view contributes.
-    count : ndarray of shape (height, width), int
+    count : ndarray of shape (height, width), int32
         Number of views contributing to each pixel.
 
     Examples
@@ -268,7 +275,7 @@ def mean_warped_image(images, homographies, *, size, masks=None, offset=(0, 0),
     reference = check_int(reference, "reference", minimum=0, maximum=N - 1)
     T = translation(*offset)
     acc = np.zeros((h, w), np.float64)
-    cnt = np.zeros((h, w), np.float64)
+    cnt = np.zeros((h, w), np.int32)
     order = [reference] + [k for k in range(N) if k != reference]
     for k in order:
         im, H = imgs[k], T @ Hs[k]
@@ -290,6 +297,6 @@ def mean_warped_image(images, homographies, *, size, masks=None, offset=(0, 0),
             wi = a * wi + (ym - a * xm)
         acc[vi] += wi[vi]
         cnt[vi] += 1
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = np.where(cnt > 0, acc / np.maximum(cnt, 1), np.nan)
-    return mean.astype(np.float32), cnt.astype(int)
+    acc /= np.maximum(cnt, 1)                 # in place: the canvas may be large
+    acc[cnt == 0] = np.nan
+    return acc.astype(np.float32), cnt

@@ -281,7 +281,7 @@ def _run(graphs, lay, pairs, affinity, solver, sync, mode, executor, options, sy
         stage = _cao_stage(aff, N, solver, options, executor, progress, timings, info)
     elif mode == "online" and sync is not None:
         stage = _online_stage(aff, N, lay, solver, sync, options, sync_every, damping, gen,
-                              progress, timings, info)
+                              progress, timings, info, build_output=verify is None)
     else:
         stage = _offline_stage(aff, solver, options, executor, progress, timings)
     assignments, soft, n_iter, unconverged = stage
@@ -728,7 +728,9 @@ def _with_slack(Y, pairs, sizes, n) -> np.ndarray:
 
 
 def _online_stage(aff, N, lay, solver, sync, options, sync_every, damping, gen, progress,
-                  timings, info):
+                  timings, info, *, build_output: bool = True):
+    """The lock-step solvers with synchronization points. ``build_output``: also build and
+    score the consistent output candidates (not when a verification replaces them)."""
     point = _SyncPoint(aff.pairs, lay, sync, gen)
     rule, candidates = "", {}
     if lay.kind == "universe" and lay.n_universe is None:
@@ -758,6 +760,11 @@ def _online_stage(aff, N, lay, solver, sync, options, sync_every, damping, gen, 
     first_rounding, seconds_at_points = point.first_rounding, point.seconds
     t = time.perf_counter()
     final = out.assignments          # the solvers' own rounding (as transync.matching's)
+    first = first_rounding if first_rounding is not None else final
+    if not build_output:
+        timings["sync"] = seconds_at_points
+        info.update({"n_sync": out.n_sync, "input_assignments": first})
+        return final, out.soft, out.n_iter, int(np.sum(~out.converged))
     method = "spectral" if sync == "birkhoff" else sync
     perm = _synchronize(aff.pairs, lay.strip(aff.pairs, final), None, lay, point.n_universe,
                         method, gen)
@@ -772,7 +779,6 @@ def _online_stage(aff, N, lay, solver, sync, options, sync_every, damping, gen, 
               for k, m in candidates.items()}
     best = max(scores, key=scores.get)
     timings["sync"] = seconds_at_points + time.perf_counter() - t
-    first = first_rounding if first_rounding is not None else final
     info.update({"n_sync": out.n_sync, "output": best, "candidate_scores": scores,
                  "matching": candidates[best], "input_assignments": first,
                  "n_universe_rule": rule or perm.info.get("n_universe_rule", "")})

@@ -107,6 +107,19 @@ def test_bad_images():
         estimate_plane_homographies(["/nonexistent/a.png", "/nonexistent/b.png"])
 
 
+def test_canvas_too_large_is_refused_before_the_sparse_stage():
+    """A 4000 x 2700 reference with canvas_margin=2 needs a 20000 x 13500 canvas (270 M
+    pixels): refused at once, naming canvas_margin (not the internal `size` of
+    mean_warped_image, after the sparse stage); the segmentation alone needs the canvas too."""
+    big = np.zeros((2700, 4000), np.uint8)
+    with pytest.raises(ValueError, match=r"`canvas_margin`=2 on the reference view 0 "
+                                         r"\(4000 x 2700 pixels\) makes a 20000 x 13500"):
+        estimate_plane_homographies([big, big], canvas_margin=2.0)
+    wide = np.zeros((16, 7000), np.uint8)                 # 35000 pixels a side
+    with pytest.raises(ValueError, match="beyond 32767 pixels a side"):
+        estimate_plane_homographies([wide, wide], canvas_margin=2.0, dense=False)
+
+
 def test_scene_rendering_matches_ground_truth(scene):
     """Warping a view with its true homography reproduces the reference on the plane."""
     import cv2

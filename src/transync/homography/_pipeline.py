@@ -23,7 +23,7 @@ from .._validation import as_generator, check_array, check_choice, check_int, ch
 from ..exceptions import DegenerateInputError, UnlinkedViewsWarning
 from ..geometry import image_corners, normalize_determinant, transfer_points, translation
 from ..synchronization import synchronize_homographies
-from ._dense import mean_warped_image, refine_homography_ecc
+from ._dense import MAX_CANVAS, MAX_CANVAS_PIXELS, mean_warped_image, refine_homography_ecc
 from ._segmentation import segment_plane
 from ._sparse import (
     _METHODS,
@@ -427,6 +427,17 @@ def _segment_round(gray, H, idx, masks, *, r_sub, margin, rng):
     return flipped / total
 
 
+def _check_canvas(size, margin: float, reference: int) -> None:
+    """The canvas of the reference view widened by ``margin`` on every side must fit OpenCV's
+    and the mean image's limits (checked before the sparse stage, not after it)."""
+    w, h = (int(v + 2 * round(margin * v)) for v in size)
+    if max(w, h) > MAX_CANVAS or w * h > MAX_CANVAS_PIXELS:
+        raise ValueError(f"`canvas_margin`={margin:g} on the reference view {reference} "
+                         f"({size[0]} x {size[1]} pixels) makes a {w} x {h} canvas, beyond "
+                         f"{MAX_CANVAS} pixels a side or {MAX_CANVAS_PIXELS:,} in all: lower "
+                         f"`canvas_margin` or downscale the images")
+
+
 def _template(gray, H, idx, masks, sizes, *, reference, r_sub, target, margin):
     """The dense step's template: the mean warped image on the canvas, or the reference view.
     Returns ``(Tc, template, template_mask)`` with ``Tc`` the reference-to-canvas offset."""
@@ -634,6 +645,8 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
     pairs = _check_pairs_input(pairs, n)
     gray = [to_gray(im) for im in imgs]
     sizes = [(g.shape[1], g.shape[0]) for g in gray]
+    if use_dense or segment:
+        _check_canvas(sizes[reference], opts.canvas_margin, reference)
     timing = {}
     pw, sync, maps, corr, sync_rect = _sparse_stage(gray, sizes, pairs, reference=reference,
                                                     robust=robust, rectify=rectify,

@@ -96,8 +96,8 @@ def test_same_rng_same_answer_and_scale_free_gate():
 
 
 def test_unexplained_matches_fail_with_an_empty_map():
-    """Random putative matches between unrelated point sets: no transform explains six of
-    them within half the point spacing, so nothing survives."""
+    """Random putative matches between unrelated point sets: no transform explains half of
+    them (the default min_inliers) within half the point spacing, so nothing survives."""
     rng = np.random.default_rng(0)
     failures = 0
     for _ in range(20):

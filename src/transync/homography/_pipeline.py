@@ -31,6 +31,7 @@ from ._sparse import (
     estimate_pairwise_homographies,
     estimate_rectified_pairwise,
     load_images,
+    margin_canvas,
     sift_features,
     to_gray,
 )
@@ -430,7 +431,7 @@ def _segment_round(gray, H, idx, masks, *, r_sub, margin, rng):
 def _check_canvas(size, margin: float, reference: int) -> None:
     """The canvas of the reference view widened by ``margin`` on every side must fit OpenCV's
     and the mean image's limits (checked before the sparse stage, not after it)."""
-    w, h = (int(v + 2 * round(margin * v)) for v in size)
+    (w, h), _ = margin_canvas(size, margin)
     if max(w, h) > MAX_CANVAS or w * h > MAX_CANVAS_PIXELS:
         raise ValueError(f"`canvas_margin`={margin:g} on the reference view {reference} "
                          f"({size[0]} x {size[1]} pixels) makes a {w} x {h} canvas, beyond "
@@ -444,9 +445,9 @@ def _template(gray, H, idx, masks, sizes, *, reference, r_sub, target, margin):
     if target == "reference":
         return np.eye(3), gray[reference].astype(np.float32), masks[reference]
     wr, hr = sizes[reference]
-    ox, oy = int(round(margin * wr)), int(round(margin * hr))
-    tpl, cnt = mean_warped_image([gray[i] for i in idx], H[idx], size=(wr + 2 * ox, hr + 2 * oy),
-                                 offset=(ox, oy), masks=[masks[i] for i in idx], reference=r_sub)
+    canvas, (ox, oy) = margin_canvas((wr, hr), margin)
+    tpl, cnt = mean_warped_image([gray[i] for i in idx], H[idx], size=canvas, offset=(ox, oy),
+                                 masks=[masks[i] for i in idx], reference=r_sub)
     return translation(ox, oy), np.nan_to_num(tpl), cnt > 0
 
 

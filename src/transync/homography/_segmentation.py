@@ -18,6 +18,7 @@ import numpy as np
 
 from .._validation import as_generator, check_array, check_int, check_positive, check_probability
 from ..geometry import translation
+from ._sparse import margin_canvas
 
 __all__ = ["PlaneSegmentation", "segment_plane", "segment_plane_evidence"]
 
@@ -59,12 +60,6 @@ class PlaneSegmentation:
 
 def _box(x, k):
     return cv2.boxFilter(x, cv2.CV_32F, (k, k), borderType=cv2.BORDER_REFLECT)
-
-
-def _canvas(size, margin):
-    w, h = size
-    mx, my = int(round(margin * w)), int(round(margin * h))
-    return (w + 2 * mx, h + 2 * my), (mx, my)
 
 
 def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, smooth=4.0,
@@ -201,7 +196,7 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
     min_views, threshold = o["min_views"], o["threshold"]
     n = len(imgs)
     h0, w0 = imgs[reference].shape[:2]
-    (W, Hc), (ox, oy) = _canvas((w0, h0), margin)
+    (W, Hc), (ox, oy) = margin_canvas((w0, h0), margin)
     T = translation(ox, oy)
     warped = np.empty((n, Hc, W), np.float32)
     valid = np.empty((n, Hc, W), bool)

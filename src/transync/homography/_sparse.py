@@ -274,6 +274,14 @@ def sift_features(gray, *, n_features=4000) -> tuple[np.ndarray, np.ndarray]:
     return pts, desc
 
 
+def margin_canvas(size, margin: float) -> tuple[tuple[int, int], tuple[int, int]]:
+    """``((width, height), (mx, my))``: the canvas of a ``size = (w, h)`` reference view widened
+    by ``margin`` times its width / height on every side, and the view's offset in it."""
+    w, h = size
+    mx, my = int(round(margin * w)), int(round(margin * h))
+    return (w + 2 * mx, h + 2 * my), (mx, my)
+
+
 def _ratio_matches(desc_i, desc_j, ratio, seed):
     """Lowe's ratio-test matches ``(index in i, index in j)`` of the descriptors of view j.
 
@@ -632,9 +640,8 @@ def estimate_rectified_pairwise(images, H_to_ref, pairs, *, reference=0, margin=
     n_features = check_int(n_features, "n_features", minimum=1, maximum=10**6)
     pairs = _check_pairs(pairs, n)
     h0, w0 = gray[reference].shape
-    mx, my = int(round(margin * w0)), int(round(margin * h0))
+    size, (mx, my) = margin_canvas((w0, h0), margin)
     T = translation(mx, my)
-    size = (w0 + 2 * mx, h0 + 2 * my)
     feats = _warped_features(gray, H_to_ref, T, size, n_features)
     if not guided:
         pw = estimate_pairwise_homographies(gray, pairs=pairs, features=feats, method=method,

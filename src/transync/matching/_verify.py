@@ -268,8 +268,6 @@ def verify_assignment(points1, points2, assignment, *, model: str = "affine",
     a = check_assignment(assignment, "assignment", n1=len(p1), n2=len(p2))
     model = check_choice(model, "model", tuple(VERIFY_MODELS))
     threshold = check_positive(threshold, "threshold")
-    if not np.isfinite(threshold):
-        raise ValueError(f"`threshold` must be finite, got {threshold}")
     k = VERIFY_MODELS[model]
     if min_inliers is None:
         min_inliers = max(2 * k, -(-min(len(p1), len(p2)) // 2))
@@ -290,7 +288,7 @@ def verify_assignment(points1, points2, assignment, *, model: str = "affine",
     empty = np.full(len(p1), UNMATCHED, dtype=np.int64)
     failed = VerificationResult(empty, np.full((3, 3), np.nan), 0, False, gate, model, 0)
     src = np.flatnonzero(a >= 0)
-    if len(src) < max(k, min_inliers) or g <= 0:
+    if len(src) < min_inliers or g <= 0:          # min_inliers >= k, the minimal sample
         return failed
     H = _fit(model, x1[src], x2[a[src]], g, True, gen)
     if H is None:
@@ -303,7 +301,7 @@ def verify_assignment(points1, points2, assignment, *, model: str = "affine",
             break
         current = new
         rows = np.flatnonzero(current >= 0)
-        if len(rows) < max(k, min_inliers):
+        if len(rows) < min_inliers:
             break
         refit = _fit(model, x1[rows], x2[current[rows]], g, False, gen)
         if refit is None:

@@ -301,9 +301,7 @@ def _run(graphs, lay, pairs, affinity, solver, sync, mode, executor, options, sy
         t = time.perf_counter()
         assignments = _verify_stage(graphs, pairs, assignments, verify, gen, progress, info)
         timings["verify"] = time.perf_counter() - t
-        matching, soft, refine = None, None, False    # synchronize the verified maps
-        for key in ("n_universe_rule", "output", "candidate_scores"):   # of discarded outputs
-            info.pop(key, None)
+        soft, refine = None, False    # synchronize the verified maps (hard), as they are
     if sync is not None and matching is None:
         t = time.perf_counter()
         if verify is None:
@@ -542,8 +540,6 @@ def _check_verify(verify, threshold, graphs, lay: "_Layout"):
                          f"None, got {verify!r}")
     if threshold is not None:
         threshold = check_positive(threshold, "verify_threshold")
-        if not np.isfinite(threshold):
-            raise ValueError(f"`verify_threshold` must be finite, got {threshold}")
     if lay.kind == "dummies":
         raise ValueError(f"`verify` checks matches between the graphs' points, and the "
                          f"dummy-node baseline's padded nodes have none: use "

@@ -386,11 +386,11 @@ def test_pairwise_assignment_kernel_ignores_pair_order_and_orientation(rng):
 def test_pairwise_assignment_kernel_validation(rng):
     feats = _random_features(4, 2, rng, 2, 3)
     pairs, A = _random_maps(4, 3, rng)
-    with pytest.raises(ValueError, match="cover all 6 pairs.*missing e.g. \\(2, 3\\)"):
+    with pytest.raises(ValueError, match="all 6 pairs of the 4 graphs.*missing e.g. \\(2, 3\\)"):
         pairwise_assignment_kernel(feats, A[:-1], pairs[:-1])
-    with pytest.raises(ValueError, match="once.*rows 0 and 5"):
+    with pytest.raises(ValueError, match=r"not repeat a pair.*\(1, 0\) at row 5 after \(0, 1\)"):
         pairwise_assignment_kernel(feats, A, np.r_[pairs[:5], [[1, 0]]])
-    with pytest.raises(ValueError, match="distinct graphs.*pairs\\[2\\]"):
+    with pytest.raises(ValueError, match=r"i != j, got \(3, 3\) at row 2"):
         pairwise_assignment_kernel(feats, A, np.r_[pairs[:2], [[3, 3]], pairs[3:]])
     with pytest.raises(ValueError, match=r"graph indices in \[0, 4\), got range"):
         pairwise_assignment_kernel(feats, A, np.r_[pairs[:5], [[2, 4]]])
@@ -575,3 +575,38 @@ def test_prune_by_size_validation():
         prune_by_size([3, 4], [0, 1], min_class_size=5)
     with pytest.raises(TypeError, match="max_nodes"):
         prune_by_size([3, 4], [0, 1], max_nodes=2.5)
+
+
+def test_gaussian_gram_is_exact_far_from_the_origin(rng):
+    """The per-slot Gaussian Gram uses the expansion ||x||^2 + ||y||^2 - 2<x, y>; its rounding
+    grows with the norms. Features 1e6 from the origin (spread 1) must still give the direct
+    form's kernel (the slots are centered first); uncentered, the error was ~1e-4."""
+    feats = [F + 1e6 for F in _random_features(6, 3, rng)]
+    n = max(len(F) for F in feats)
+    labels = np.array([np.r_[rng.permutation(len(F)), -np.ones(n - len(F), int)]
+                       for F in feats])
+    labels = np.array([np.argsort(np.where(lab < 0, n + np.arange(n), lab)) for lab in labels])
+    X = aligned_features(feats, labels)
+    gamma = 0.7
+    got = assignment_kernel(X, kernel="gaussian", gamma=gamma, normalize=False)
+    d = X[..., -1]
+    want = np.einsum("ia,ja,ija->ij", d, d,
+                     np.exp(-gamma * ((X[:, None] - X[None, :]) ** 2).sum(-1)))
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("matcher", ["node", "sm", "rrwm"])
+def test_gaussian_kernel_of_identical_graphs_is_psd(matcher):
+    """Found by a contract hunt: two copies of one graph have node features equal up to
+    rounding (1e-16); the median width was that rounding (1e-30), the Gaussian of width 1e30
+    ran on the Gram expansion's noise, and the cosine-normalized Gram was [[1, 1.67], [1.67,
+    1]]. Rounding-level distances are 0 now: the copies are identical, K is all ones."""
+    from transync.graphs import Graph
+    from transync.kernels import TransitiveAssignmentKernel
+
+    A = np.array([[0, 0, 1, 1, 1], [0, 0, 1, 1, 1], [1, 1, 0, 0, 1], [1, 1, 0, 0, 1],
+                  [1, 1, 1, 1, 0]], float)
+    est = TransitiveAssignmentKernel(matcher=matcher, kernel="gaussian", random_state=0)
+    K = est.fit_transform([Graph(A), Graph(A)])
+    np.testing.assert_allclose(K, np.ones((2, 2)), atol=1e-12)
+    assert est.gamma_ == 1.0

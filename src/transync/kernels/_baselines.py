@@ -31,7 +31,8 @@ from .._validation import check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning
 from ..graphs import Graph
 from ..parallel import map_chunks, split_chunks
-from ._checks import check_feature_list, check_graph_list, check_node_labels, check_width
+from ._checks import (check_feature_list, check_graph_list, check_node_labels, check_width,
+                      expanded_squared_distances)
 from ._evaluate import cosine_normalize
 from ._pairwise import default_sigma2
 
@@ -62,8 +63,11 @@ def _check_graphs(graphs) -> list[np.ndarray]:
 
 
 def _sq_dist(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
-    D = (X * X).sum(1)[:, None] + (Y * Y).sum(1)[None, :] - 2.0 * (X @ Y.T)
-    return np.maximum(D, 0.0, out=D)
+    """Squared distances between the rows of ``X`` and ``Y`` (expanded, centered on ``Y``'s
+    mean, rounding noise 0)."""
+    center = Y.mean(0)
+    X, Y = X - center, Y - center
+    return expanded_squared_distances((X * X).sum(1)[:, None], (Y * Y).sum(1)[None, :], X @ Y.T)
 
 
 # --------------------------------------------------------------------------- 3-graphlets

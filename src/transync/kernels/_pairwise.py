@@ -86,7 +86,8 @@ from ..multigraph import PairAffinities, run_lockstep
 from ..parallel import map_chunks, split_chunks
 from ..permutations import solve_lap
 from ._checks import (check_adjacency, check_feature_list, check_node_labels, check_sequence,
-                      check_width, median_width, squared_distances)
+                      check_width, expanded_squared_distances, median_width,
+                      squared_distances)
 
 __all__ = ["DUMMY_AFFINITY", "LABEL_MISMATCH", "PAIRWISE_MATCHERS",
            "default_sigma2", "match_pairs"]
@@ -184,8 +185,8 @@ def _node_affinity(feat, sizes, labels, pl, sigma2, dummy):
     Hi, Hj = feat[pl[:, 0]], feat[pl[:, 1]]
     n = feat.shape[1]
     sq_i, sq_j = (Hi * Hi).sum(2), (Hj * Hj).sum(2)
-    D = sq_i[:, :, None] + sq_j[:, None, :] - 2.0 * np.matmul(Hi, np.swapaxes(Hj, 1, 2))
-    np.maximum(D, 0.0, out=D)
+    D = expanded_squared_distances(sq_i[:, :, None], sq_j[:, None, :],
+                                   np.matmul(Hi, np.swapaxes(Hj, 1, 2)))
     with np.errstate(over="ignore", under="ignore"):            # far nodes: exactly 0
         N = np.exp(D * (-1.0 / sigma2), out=D)
     if labels is not None:

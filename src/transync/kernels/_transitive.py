@@ -28,7 +28,8 @@ from .._validation import check_array, check_choice, check_index_pairs, check_in
 from ..permutations import solve_lap
 from ..synchronization import synchronize_permutations
 from ._checks import (check_feature_list, check_int_array, check_node_labels, check_width,
-                      class_labels, median_width, squared_distances)
+                      class_labels, expanded_squared_distances, median_width,
+                      squared_distances)
 from ._evaluate import cosine_normalize
 
 __all__ = [
@@ -882,15 +883,20 @@ def _gaussian_gram(X: np.ndarray, Y: np.ndarray, gamma: float) -> np.ndarray:
     N, n, _ = X.shape
     M = Y.shape[0]
     K = np.zeros((N, M))
+    dx, dy = X[..., -1], Y[..., -1]
+    # per slot, the mean of its real nodes: distances unchanged, the expansion's rounding
+    # (which grows with the norms) down to the spread of the features (dummies weigh 0)
+    real = (dx != 0).sum(0)[:, None]
+    center = np.where(dx[..., None] != 0, X, 0.0).sum(0) / np.maximum(real, 1)
+    X, Y = X - center, Y - center
     xx = (X ** 2).sum(-1)                                   # (N, n)
     yy = (Y ** 2).sum(-1)
-    dx, dy = X[..., -1], Y[..., -1]
     step = max(1, _SLOT_BLOCK_ELEMENTS // max(N * M, 1))
     for s in range(0, n, step):                             # blocks of slots, not pairs
         sl = slice(s, min(s + step, n))
         cross = np.matmul(X[:, sl].transpose(1, 0, 2), Y[:, sl].transpose(1, 2, 0))  # (b, N, M)
-        d2 = xx[:, sl].T[:, :, None] + yy[:, sl].T[:, None, :] - 2.0 * cross
-        np.maximum(d2, 0.0, out=d2)
+        d2 = expanded_squared_distances(xx[:, sl].T[:, :, None], yy[:, sl].T[:, None, :],
+                                        cross)
         w = dx[:, sl].T[:, :, None] * dy[:, sl].T[:, None, :]
         K += (w * np.exp(-gamma * d2)).sum(0)
     return K
@@ -992,25 +998,8 @@ def _check_overflow(K: np.ndarray, dx: np.ndarray, dy: np.ndarray, name: str) ->
 
 def _matched_pairs(pairs, N: int) -> tuple[np.ndarray, np.ndarray]:
     """Rows ``(i, j)`` of ``pairs`` checked to cover every unordered pair of ``N`` graphs once."""
-    pr = check_index_pairs(pairs, N, what="graph indices")
-    self_pairs = np.flatnonzero(pr[:, 0] == pr[:, 1])
-    if self_pairs.size:
-        raise ValueError(f"`pairs` must pair distinct graphs, got pairs[{self_pairs[0]}] = "
-                         f"{pr[self_pairs[0]].tolist()}")
-    lo, hi = pr.min(axis=1), pr.max(axis=1)
-    code = lo * N + hi
-    uniq, count = np.unique(code, return_counts=True)
-    if (count > 1).any():
-        k = np.flatnonzero(code == uniq[np.argmax(count > 1)])
-        raise ValueError(f"`pairs` must give each pair of graphs once, got "
-                         f"{pr[k[0]].tolist()} at rows {k[0]} and {k[1]}")
-    expected = N * (N - 1) // 2
-    if uniq.size != expected:
-        iu, ju = np.triu_indices(N, 1)
-        missing = np.setdiff1d(iu * N + ju, uniq)[0]
-        raise ValueError(f"`pairs` must cover all {expected} pairs of the {N} graphs (the "
-                         f"kernel compares every pair through its own map), got {uniq.size}; "
-                         f"missing e.g. ({missing // N}, {missing % N})")
+    pr = check_index_pairs(pairs, N, what="graph indices", distinct=True, unique=True,
+                           complete="the kernel compares every pair through its own map")
     return pr[:, 0], pr[:, 1]
 
 

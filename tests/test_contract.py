@@ -108,7 +108,9 @@ def _forbidden(exc, fn_name="") -> str | None:
 def call(fn, *args, **kwargs):
     """Call ``fn``; return its value, or REFUSED after a documented exception.
 
-    Raise ContractViolation on an undocumented exception, a foreign warning or a hang.
+    Raise ContractViolation on an undocumented exception, a foreign warning or a hang. A
+    foreign warning before a refusal counts too: the input reached the numerics before it was
+    refused (NaN arithmetic, then an internal array's check).
     """
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -119,6 +121,10 @@ def call(fn, *args, **kwargs):
             raise
         except Exception as exc:  # noqa: BLE001 - the contract is about which ones
             why = _forbidden(exc, getattr(fn, "__name__", ""))
+            foreign = [w for w in caught if not issubclass(w.category, OUR_WARNINGS)]
+            if why is None and foreign:
+                why = (f"refused after a foreign warning {foreign[0].category.__name__}: "
+                       f"{foreign[0].message}")
             STATS.setdefault(getattr(fn, "__qualname__", str(fn)), [0, 0])[1] += 1
             MESSAGES.setdefault(getattr(fn, "__qualname__", str(fn)), {}).setdefault(
                 str(exc)[:90], 0)
@@ -2435,12 +2441,16 @@ def test_hunted_cases():
     # a negative seed: numpy's "expected non-negative integer" named nothing
     check(call(match_collection, [g3, g3], rng=-1, progress=False) is REFUSED, "rng=-1")
     # subnormal affinities: NaN and RuntimeWarnings inside every scaled solver
-    for solver in (rrwm, ga, pf, sm):
-        check(call(solver, np.full((4, 4), 1e-310), n1=2, n2=2) is REFUSED,
-              f"{solver.__name__} on a subnormal K")
+    # (RRWM's pygmtools variant, match_collection's offline default, was missed at first)
+    for solver, kw in ((rrwm, {}), (rrwm, dict(variant="pygmtools")), (ga, {}), (pf, {}),
+                       (sm, {})):
+        check(call(solver, np.full((4, 4), 1e-310), n1=2, n2=2, **kw) is REFUSED,
+              f"{solver.__name__} {kw} on a subnormal K")
     tiny = PairAffinities.from_blocks(np.full((2, 2, 1, 1), 5e-324), n=1)
-    for solver in ("rrwm", "ga", "pf"):
-        check(call(run_lockstep, tiny, solver=solver) is REFUSED, f"lock-step {solver}, tiny K")
+    for solver, kw in (("rrwm", {}), ("rrwm", dict(options={"variant": "pygmtools"})),
+                       ("ga", {}), ("pf", {})):
+        check(call(run_lockstep, tiny, solver=solver, **kw) is REFUSED,
+              f"lock-step {solver} {kw}, tiny K")
     # a million graphs of which three are observed: the components of the observation graph
     # were gathered one comparison pass per component (quadratic: a hang)
     from transync.kernels import synchronize_alignments

@@ -214,3 +214,27 @@ def test_check_array_refuses_text_for_numeric_dtypes():
             check_array(text, "x")
     np.testing.assert_array_equal(check_array(np.array([1, 2], dtype=object), "x"), [1.0, 2.0])
     assert check_array(np.array(["a"]), "x", dtype=None).dtype.kind == "U"    # no dtype asked
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(n=st.integers(1, 7), data=st.data())
+def test_complete_pairs_accepts_every_pair_once_in_any_order_and_names_a_missing_one(n, data):
+    """``check_index_pairs(complete=...)``: every unordered pair, either orientation, any row
+    order, passes; dropping any one is refused with that pair named (brute force)."""
+    from transync._validation import check_index_pairs
+
+    iu, ju = np.triu_indices(n, 1)
+    pairs = np.column_stack([iu, ju])
+    flip = np.array(data.draw(st.lists(st.booleans(), min_size=len(pairs),
+                                       max_size=len(pairs))), dtype=bool)
+    pairs[flip] = pairs[flip][:, ::-1]
+    pairs = pairs[data.draw(st.permutations(range(len(pairs))))]
+    out = check_index_pairs(pairs, n, unique=True, complete="test")
+    np.testing.assert_array_equal(out, pairs.reshape(-1, 2))
+    if len(pairs):
+        k = data.draw(st.integers(0, len(pairs) - 1))
+        lo, hi = sorted(pairs[k].tolist())
+        with pytest.raises(ValueError, match=rf"all {len(pairs)} pairs of the {n} objects "
+                                             rf"\(test\), got {len(pairs) - 1}; missing e\.g\. "
+                                             rf"\({lo}, {hi}\)"):
+            check_index_pairs(np.delete(pairs, k, axis=0), n, unique=True, complete="test")

@@ -23,6 +23,11 @@ __all__ = [
     "check_shape",
     "check_square",
     "check_choice",
+    "check_index_pairs",
+    "check_homographies",
+    "invertible_homographies",
+    "check_affinity_scale",
+    "MIN_AFFINITY_SCALE",
 ]
 
 
@@ -255,7 +260,7 @@ def check_int_array(x, name: str, *, ndim: int | Sequence[int] | None = None,
 
 def check_index_pairs(pairs, n: int, name: str = "pairs", *, what: str = "object indices",
                       distinct: bool = False, ordered: bool = False, unique: bool = False,
-                      nonempty: bool = False) -> np.ndarray:
+                      nonempty: bool = False, complete: str | None = None) -> np.ndarray:
     """Check that ``pairs`` is a list of index pairs into ``n`` objects; return ``(P, 2)`` int64.
 
     The one "pairs of indices" check of the package (view graphs, the pairs a result is asked
@@ -280,6 +285,10 @@ def check_index_pairs(pairs, n: int, name: str = "pairs", *, what: str = "object
         Refuse a pair given twice, in either orientation.
     nonempty : bool, default=False
         Refuse an input without pairs.
+    complete : str, optional
+        Require every unordered pair of the ``n`` objects (either orientation); the string
+        says why, in the message (e.g. ``"CAO composes every pair through every third
+        graph"``). Use it with ``unique`` (a repeat would stand in for a missing pair).
 
     Returns
     -------
@@ -305,6 +314,10 @@ def check_index_pairs(pairs, n: int, name: str = "pairs", *, what: str = "object
     Traceback (most recent call last):
         ...
     ValueError: `pairs` must not repeat a pair, got (1, 0) at row 1 after (0, 1)
+    >>> check_index_pairs([[0, 1], [2, 1]], 3, unique=True, complete="all are compared")
+    Traceback (most recent call last):
+        ...
+    ValueError: `pairs` must hold all 3 pairs of the 3 objects (all are compared), got 2; ...
     """
     arr = check_int_array(pairs, name, integral_floats=True, what=f"integer {what}")
     if arr.ndim == 1 and arr.size in (0, 2):
@@ -316,6 +329,8 @@ def check_index_pairs(pairs, n: int, name: str = "pairs", *, what: str = "object
     if not len(arr):
         if nonempty:
             raise ValueError(f"`{name}` must hold at least one pair, got none")
+        if complete is not None:
+            _check_complete(arr, n, name, what, complete)
         return arr
     lo, hi = int(arr.min()), int(arr.max())
     if lo < 0 or hi >= n:
@@ -335,7 +350,23 @@ def check_index_pairs(pairs, n: int, name: str = "pairs", *, what: str = "object
             k = int(rep[0])
             raise ValueError(f"`{name}` must not repeat a pair, got {tuple(arr[k].tolist())} at "
                              f"row {k} after {tuple(arr[first[inverse[k]]].tolist())}")
+    if complete is not None:
+        _check_complete(arr, n, name, what, complete)
     return arr
+
+
+def _check_complete(arr: np.ndarray, n: int, name: str, what: str, why: str) -> None:
+    """Refuse a list of valid pairs that misses a pair of the ``n`` objects."""
+    total = n * (n - 1) // 2
+    have = np.zeros((n, n), dtype=bool)
+    have[arr.min(axis=1), arr.max(axis=1)] = True
+    iu, ju = np.triu_indices(n, 1)
+    missing = np.flatnonzero(~have[iu, ju])
+    if missing.size:
+        ex = ", ".join(f"({iu[m]}, {ju[m]})" for m in missing[:3])
+        noun = what.removesuffix(" indices") + "s"
+        raise ValueError(f"`{name}` must hold all {total} pairs of the {n} {noun} ({why}), got "
+                         f"{total - missing.size}; missing e.g. {ex}")
 
 
 def check_homographies(H, name: str, ndim: int | Sequence[int] = (2, 3)) -> np.ndarray:

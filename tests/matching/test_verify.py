@@ -195,6 +195,25 @@ def test_match_collection_verified_recovers_planted_views(kwargs):
 
 
 @pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
+def test_match_collection_verification_does_not_depend_on_the_executor():
+    """Offline, the verification is spread over the executor like the pairwise stage; every
+    pair draws its own seed first, so threads and processes give the serial result."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    graphs, _ = _landmark_collection(n_graphs=7, keep=(16, 22), seed=4)
+    kwargs = dict(affinity=_AFFINITY, solver="rrwm", sync="spectral", mode="offline",
+                  verify="affine", rng=5, progress=False)
+    serial = match_collection(graphs, **kwargs)
+    with ThreadPoolExecutor(3) as pool:
+        threads = match_collection(graphs, executor=pool, **kwargs)
+    processes = match_collection(graphs, executor=2, **kwargs)
+    for other in (threads, processes):
+        np.testing.assert_array_equal(other.assignments, serial.assignments)
+        for key in ("n_inliers", "verified"):
+            np.testing.assert_array_equal(other.info["verify"][key], serial.info["verify"][key])
+
+
+@pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
 def test_match_collection_verified_pairwise_only():
     """sync=None: the verified pairwise maps themselves, far more precise than the matcher's
     (unshared nodes can still meet a free point inside the gate by chance)."""

@@ -275,6 +275,7 @@ class _PygmtoolsRRWMStepper(RRWMStepper):
         self._walk = aff
         rows = aff.matvec(np.ones((self.n1, self.n2)))
         self.max_degree = float(rows.max()) if rows.size else 0.0
+        check_affinity_scale(self.max_degree)
         denom = self.max_degree + float(rows.min(initial=0.0)) * 1e-5
         self._scale = 1.0 / denom if denom > 0 else 0.0
         self._v = np.full((self.n1, self.n2), 1.0 / (self.n1 * self.n2))

@@ -87,15 +87,17 @@ def all_pairs(n_graphs: int) -> np.ndarray:
     return np.stack(np.triu_indices(n_graphs, 1), axis=1).astype(np.int64)
 
 
-def check_pairs(pairs, n_graphs: int, name: str = "pairs") -> np.ndarray:
-    """``pairs`` as an int array of shape (P, 2) with ``0 <= i < j < n_graphs``, no duplicates.
+def check_pairs(pairs, n_graphs: int, name: str = "pairs", *,
+                complete: str | None = None) -> np.ndarray:
+    """``pairs`` as an int array of shape (P, 2) with ``0 <= i < j < n_graphs``, no duplicates
+    (and every pair when ``complete`` says why, as in ``check_index_pairs``).
 
     ``None`` gives :func:`all_pairs`.
     """
     if pairs is None:
         return all_pairs(n_graphs)
     return check_index_pairs(pairs, n_graphs, name, what="graph indices", ordered=True,
-                             unique=True, nonempty=True)
+                             unique=True, nonempty=True, complete=complete)
 
 
 def _vec_batch(X: np.ndarray) -> np.ndarray:

@@ -282,21 +282,9 @@ def cao(initial, pairs, n_graphs: int, score: Callable, *, variant: str = "cao-p
 
 
 def _check_pairs(pairs, N: int) -> np.ndarray:
-    arr = check_pairs(pairs, N)          # (P, 2), 0 <= i < j < N, no repeated pair
-    i, j = arr[:, 0], arr[:, 1]
-    flat = i * N + j
-    total = N * (N - 1) // 2
-    if len(arr) != total:
-        have = np.zeros(N * N, dtype=bool)
-        have[flat] = True
-        iu, ju = np.triu_indices(N, 1)
-        miss = np.flatnonzero(~have[iu * N + ju])
-        ex = ", ".join(f"({iu[m]}, {ju[m]})" for m in miss[:3])
-        raise ValueError(f"`pairs` must hold all N(N-1)/2 = {total} pairs of the "
-                         f"n_graphs={N} graphs (CAO composes every pair through every third "
-                         f"graph; a partial view graph is not supported), got {len(arr)} "
-                         f"pairs; missing e.g. {ex}")
-    return arr
+    """(P, 2), 0 <= i < j < N, every pair once."""
+    return check_pairs(pairs, N, complete="CAO composes every pair through every third graph; "
+                                          "a partial view graph is not supported")
 
 
 def _check_initial(initial, P: int) -> np.ndarray:

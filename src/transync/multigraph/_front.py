@@ -137,7 +137,8 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
         The view graph: which pairs to match (default: all). Synchronization needs it connected;
         CAO needs all pairs.
     executor : None, "serial", "processes", int or Executor-like, optional
-        Spreads the independent pairwise work (offline mode, CAO's pairwise stage): ``None`` /
+        Spreads the independent pairwise work (offline mode, CAO's pairwise stage, the offline
+        geometric verification; the result does not depend on it): ``None`` /
         ``"serial"``, ``"processes"`` or ``n_jobs`` (joblib), or anything with ``submit`` (a
         ``concurrent.futures`` executor or a ``dask.distributed.Client``). The online solvers run
         all pairs in lock-step in this process and refuse an executor.
@@ -299,7 +300,8 @@ def _run(graphs, lay, pairs, affinity, solver, sync, mode, executor, options, sy
     matching = info.pop("matching", None)
     if verify is not None:
         t = time.perf_counter()
-        assignments = _verify_stage(graphs, pairs, assignments, verify, gen, progress, info)
+        assignments = _verify_stage(graphs, pairs, assignments, verify, executor, gen, progress,
+                                        info)
         timings["verify"] = time.perf_counter() - t
         soft, refine = None, False    # synchronize the verified maps (hard), as they are
     if sync is not None and matching is None:
@@ -500,19 +502,17 @@ def _check_options(options, solver: str) -> dict:
 
 def _check_pairs(pairs, N: int, *, need_all: bool, need_connected: bool) -> np.ndarray:
     """The view graph as (P, 2) rows ``i < j`` (either order accepted), checked."""
-    allp = all_pairs(N)
     if pairs is None:
-        return allp
+        return all_pairs(N)
     arr = check_array(pairs, "pairs", dtype=None)
     if arr.ndim == 2 and arr.shape[1:] == (2,) and arr.size and arr.dtype.kind in "iuf":
         same = np.flatnonzero(arr[:, 0] == arr[:, 1])
         if same.size:
             raise ValueError(f"`pairs[{same[0]}]` pairs graph {arr[same[0], 0]} with itself")
         arr = np.sort(arr, axis=1)
-    arr = check_pairs(arr, N)        # shape, integer indices in range, no repeated pair
-    if need_all and len(arr) != len(allp):
-        raise ValueError(f"CAO composes maps through every third graph and needs all "
-                         f"{len(allp)} pairs of the {N} graphs; `pairs` has {len(arr)}")
+    # shape, integer indices in range, no repeated pair (and all of them for CAO)
+    arr = check_pairs(arr, N, complete="CAO composes maps through every third graph"
+                      if need_all else None)
     if need_connected:
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import connected_components
@@ -555,27 +555,43 @@ def _check_verify(verify, threshold, graphs, lay: "_Layout"):
 # --------------------------------------------------------------------------- stages
 
 
-def _verify_stage(graphs, pairs, assignments, verify, gen, progress, info) -> np.ndarray:
-    """Every pair's map (between real nodes) through ``verify_assignment``."""
-    from .._progress import progress_bar
+def _verify_chunk(payload):
+    """Worker (module level, picklable): verify a chunk of pairs' maps."""
     from ..matching import verify_assignment
 
+    points, pairs, assignments, seeds, model, gate = payload
+    out = np.full_like(assignments, -1)
+    n_inliers = np.zeros(len(pairs), dtype=np.int64)
+    verified = np.zeros(len(pairs), dtype=bool)
+    for p, (i, j) in enumerate(pairs):
+        ni = len(points[i])
+        res = verify_assignment(points[i], points[j], assignments[p, :ni], model=model,
+                                rng=int(seeds[p]), **gate)
+        out[p, :ni] = res.assignment
+        n_inliers[p], verified[p] = res.n_inliers, res.verified
+    return out, n_inliers, verified
+
+
+def _verify_stage(graphs, pairs, assignments, verify, executor, gen, progress,
+                  info) -> np.ndarray:
+    """Every pair's map (between real nodes) through ``verify_assignment``.
+
+    Each pair has its own seed, drawn here, so the result does not depend on ``executor``.
+    """
     model, threshold = verify
     gate = {} if threshold is None else {"threshold": threshold}
     A = np.asarray(assignments, dtype=np.int64)
+    seeds = gen.integers(2**63, size=len(pairs))
+    points = [g.points for g in graphs]
+    chunks = split_chunks(len(pairs), executor)
+    outs = map_chunks(_verify_chunk,
+                      [(points, pairs[idx], A[idx], seeds[idx], model, gate) for idx in chunks],
+                      executor=executor, progress=progress, desc="verify pairs")
     out = np.full_like(A, -1)
     n_inliers = np.zeros(len(pairs), dtype=np.int64)
     verified = np.zeros(len(pairs), dtype=bool)
-    seeds = gen.integers(2**63, size=len(pairs))
-    with progress_bar(len(pairs), "verify pairs", enabled=progress) as bar:
-        for p in range(len(pairs)):
-            i, j = int(pairs[p, 0]), int(pairs[p, 1])
-            ni = graphs[i].n_nodes
-            res = verify_assignment(graphs[i].points, graphs[j].points, A[p, :ni], model=model,
-                                    rng=int(seeds[p]), **gate)
-            out[p, :ni] = res.assignment
-            n_inliers[p], verified[p] = res.n_inliers, res.verified
-            bar.update()
+    for idx, (o, n_in, ok) in zip(chunks, outs):
+        out[idx], n_inliers[idx], verified[idx] = o, n_in, ok
     info["verify"] = {"model": model, "threshold": threshold, "n_inliers": n_inliers,
                       "verified": verified}        # threshold None: verify_assignment's
     return out

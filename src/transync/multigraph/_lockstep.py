@@ -232,6 +232,7 @@ class _RRWMPygmtools(_Batch):
         self.sk_half = o["sinkhorn_max_iter"]
         rows = aff._product(np.ones((self.P, self.n1, self.n2)))
         top = rows.max((1, 2))
+        check_affinity_scale(top)
         denom = top + rows.min((1, 2), initial=0.0) * 1e-5
         self.scale = np.where(denom > 0, 1.0 / np.where(denom > 0, denom, 1.0), 0.0)
         self.v = np.full((self.P, self.n1, self.n2), 1.0 / (self.n1 * self.n2))

@@ -400,7 +400,7 @@ def test_every_option_has_help_and_shows_its_default(command):
         if action.help == argparse.SUPPRESS or not action.option_strings or action.dest == "help":
             continue
         assert action.help, f"{command} {action.option_strings[0]} has no help"
-        if action.default not in (None, False):
+        if action.default is not None and action.default is not False:     # 0 too (== False)
             assert "(default" in sub._get_formatter()._get_help_string(action), \
                 f"{command} {action.option_strings[0]} does not show its default"
         if action.choices:

@@ -1,5 +1,5 @@
-"""Command-line interface: ``transync demo | experiment | match | sync | homography | kernel |
-datasets``.
+"""Command-line interface: ``transync demo | experiment | match | collection | sync |
+homography | kernel | datasets``.
 
 The CLI holds no logic of its own: every subcommand parses arguments, calls the library through
 its public names and writes plain files (JSON, CSV, PNG) that other tools can read. Heavy
@@ -31,8 +31,10 @@ transync: consistent correspondences and transformations from many noisy pairwis
 Run `transync COMMAND --help` for a command's options (each shows its default)."""
 
 _EPILOG = """\
-exit status: 0 success; 2 an error (one line on stderr: `transync: error: ...`; --debug shows
-the traceback); 130 interrupted (Ctrl-C; stored experiment trials are kept, rerun to resume).
+exit status: 0 success; 1 finished, but some trials failed (experiment, demo: rerun to retry)
+or no data folder was found (datasets); 2 an error (one line on stderr: `transync: error: ...`;
+--debug shows the traceback); 130 interrupted (Ctrl-C; stored experiment trials are kept, rerun
+to resume).
 Warnings (e.g. a solver stopped at its iteration budget) print one line each on stderr:
 `transync: warning: ...`."""
 
@@ -44,7 +46,8 @@ class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
     def _get_help_string(self, action):
         text = action.help or ""
         default = action.default
-        if (default not in (None, False, argparse.SUPPRESS) and "(default" not in text
+        if (default is not None and default is not False and default is not argparse.SUPPRESS
+                and "(default" not in text
                 and action.option_strings):
             shown = " ".join(map(str, default)) if isinstance(default, (list, tuple)) else default
             text = f"{text} (default: {shown})" if text else f"default: {shown}"

@@ -143,7 +143,8 @@ def add_parsers(sub) -> None:
     p.add_argument("--list", action="store_true", help="list the experiments")
     p.add_argument("--quick", action="store_true",
                    help="small version (seconds to a minute; what `transync demo` runs)")
-    p.add_argument("--out", help="output folder (default: results/NAME)")
+    p.add_argument("--out", help="output folder (default: results/NAME, or results/NAME-quick "
+                                 "with --quick)")
     p.add_argument("--data", metavar="PATH",
                    help="data of the experiments on real data (cmu: a folder in the CMU layout, "
                         "default TRANSYNC_DATA's cmu-house; subgraph: the same, for its CMU "
@@ -153,9 +154,10 @@ def add_parsers(sub) -> None:
                    help="comma-separated data sets to run (kernels: TU names, e.g. MUTAG,PTC_MR; "
                         "default: all five of the thesis)")
     p.add_argument("--trials", type=positive_int,
-                   help="trials per configuration (default: the experiment's own, 20 for the "
-                        "full thesis experiments; fewer than stored: nothing new runs and every "
-                        "stored trial is reported)")
+                   help="trials per configuration (default: the experiment's own: 20 for "
+                        "multigraph, subgraph, cmu and sync, 30 for pairwise, 5 for homography, "
+                        "10 repetitions for kernels; fewer than stored: nothing new runs and "
+                        "every stored trial is reported)")
     p.add_argument("--workers", type=positive_int, default=1,
                    help="worker processes for the trials (1 = in this process)")
     p.add_argument("--seed", type=int, default=0,

@@ -147,7 +147,7 @@ def _write_outputs(out: Path, res, payload: dict, args, names, seconds) -> list[
               "- `masks/mask_NNN.png`: the plane mask of image NNN in its own pixels "
               "(255 = on the dominant plane).",
               "- `mean_warped.png`: the mean of all images warped into the reference frame, on "
-              "a canvas extending the reference image by the canvas margin on every side. "
+              "the reference image's own canvas (parts of views outside it are cut off). "
               "Sharp where the homographies agree, blurred where they do not; black where no "
               "warped image covers the canvas (outside every view's footprint)."]
     (out / "report.md").write_text("\n".join(lines) + "\n")

@@ -259,10 +259,11 @@ def _cmd_sync(args) -> int:
 
 
 def add_parsers(sub) -> None:
-    """Register ``match`` and ``sync``."""
+    """Register ``match``, ``collection`` and ``sync``."""
     p = sub.add_parser("match", help="match two point sets (.npy, .txt or .csv, one point a row)")
     p.add_argument("points1", help="first point set: .npy, or .txt/.csv with one point (x y [z]) "
-                                    "a row; a header line is skipped")
+                                    "a row, no header line (blank lines and lines starting "
+                                    "with # are skipped)")
     p.add_argument("points2", help="second point set, same format and dimension")
     p.add_argument("--method", default="rrwm", choices=list(METHODS),
                    help="solver; hungarian and sinkhorn use the linearized edge affinity as "
@@ -285,7 +286,8 @@ def add_parsers(sub) -> None:
     p.add_argument("points", nargs="+", help="two or more point sets: .npy, or .txt/.csv with "
                                              "one point a row (sets may differ in size)")
     p.add_argument("--solver", default="rrwm", choices=list(COLLECTION_SOLVERS),
-                   help="pairwise solver (rrwm, ga, pf: online synchronized by default) or CAO")
+                   help="pairwise solver (rrwm, ga, pf: online synchronized by default; sm, "
+                        "ipfp: with --mode offline) or CAO")
     p.add_argument("--sync", default="birkhoff", choices=list(COLLECTION_SYNCS),
                    help="synchronization; none: plain pairwise matching (CAO: use none)")
     p.add_argument("--mode", default="online", choices=["online", "offline"],
@@ -293,7 +295,7 @@ def add_parsers(sub) -> None:
                         "every pair, then synchronize once")
     p.add_argument("--n-universe", type=positive_int, default=None,
                    help="universe size (default: estimated; the number of points when all sets "
-                        "have the same size)")
+                        "have the same size, unless --verify is given)")
     p.add_argument("--partial", default="universe", choices=list(PARTIAL),
                    help="point sets of different sizes: map them into the universe, or pad "
                         "them with dummy nodes (the baseline)")
@@ -325,6 +327,7 @@ def add_parsers(sub) -> None:
                    help="permutation synchronization method (transync.synchronize_permutations)")
     p.add_argument("--n-universe", type=positive_int, default=None,
                    help="size of the universe of nodes (default: estimated from the spectrum; "
-                        "the number of nodes when every object has the same size)")
+                        "the number of nodes when every object has the same size and every "
+                        "map is a full permutation)")
     p.add_argument("--out", help="JSON output file (default: print)")
     p.set_defaults(func=_cmd_sync)

@@ -77,12 +77,12 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
     cross-validation) the alignment is *transductive*: it uses the test graphs' structure, never
     their labels. :meth:`transform` on new graphs is *inductive*: the fitted universe stays
     fixed, each new graph is matched to every fitted graph and placed by
-    ``P_t = Hungarian(sum_j P_tj P_j)`` (methods page *Transitive assignment kernels*, step 7;
-    for ``kernel="relaxed"``
-    also ``Q_t = polar(sum_j P_tj Q_j)``), then compared with the fitted graphs; in a
-    ``Pipeline`` / ``GridSearchCV`` the test folds are handled this way. ``transform`` of the
-    very objects passed to ``fit`` (the same list of the same ``Graph`` objects) returns
-    ``gram_`` (the transductive rows) rather than re-placing them.
+    ``P_t = Hungarian(sum_j P_tj P_j)`` (methods page *Transitive assignment kernels*,
+    *Transductive and inductive use*; for ``kernel="relaxed"`` also
+    ``Q_t = polar(sum_j P_tj Q_j)``), then compared with the fitted graphs; in a ``Pipeline``
+    / ``GridSearchCV`` the test folds are handled this way. ``transform`` of the very objects
+    passed to ``fit`` (the same list of the same ``Graph`` objects) returns ``gram_`` (the
+    transductive rows) rather than re-placing them.
 
     The inductive rows approximate the transductive ones: the fitted labels are a fixed point of
     the placement rule (both ``sync`` methods refine them with it), so a copy of a fitted graph

@@ -338,7 +338,7 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
                            refine: int | None = None, rng=None) -> Alignment:
     r"""Project pairwise permutations of padded graphs onto the transitive space.
 
-    Solves (the methods page *Transitive assignment kernels*, step 5)
+    Solves (the methods page *Transitive assignment kernels*, step 4)
 
     .. math:: \max_{P_1..P_N \in \Pi_n} \sum_{(i,j)} \langle P_{ij}, P_i P_j^\top \rangle
 
@@ -528,7 +528,7 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
                  method: str = "orthogonal",
                  fitted=None) -> tuple[np.ndarray, np.ndarray | None]:
     """Place new graphs in a fitted universe (inductive use; methods page *Transitive assignment
-    kernels*, step 7).
+    kernels*, *Transductive and inductive use*).
 
     ``P_t = Hungarian(sum_j P_tj P_j)``: node ``u`` of new graph ``t`` goes to the slot that most
     fitted graphs ``j`` put its partner ``assignments[t, j, u]`` in. With ``embedding``, also the

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import check_choice, check_int, check_positive
+from .._validation import check_affinity_scale, check_choice, check_int, check_positive
 from ..permutations import assignment_to_matrix, solve_lap
 from ._affinity import as_affinity
 from ._result import MatchingResult
@@ -66,6 +66,7 @@ class IPFPStepper(_BaseStepper):
         super().__init__(aff, max_iter=check_int(max_iter, "max_iter", minimum=1))
         self.tol = check_positive(tol, "tol")
         self._K = _symmetric(aff)
+        check_affinity_scale(self._K.max_column_sum())
         if isinstance(init, str):
             check_choice(init, "init", ("uniform", "sm"))
             if init == "sm":

@@ -122,7 +122,7 @@ def _normalization(points: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarra
     spread = float(np.median(r))
     if spread <= 0:
         spread = float(r.mean()) if r.mean() > 0 else 1.0
-    with np.errstate(over="ignore"):
+    with np.errstate(over="ignore", divide="ignore"):    # subnormal: spread * unit is 0
         s = 1.0 / (spread * unit)
     if not np.isfinite(s):
         raise ValueError(f"`{name}` cannot be normalized in floating point: the points' "

@@ -79,7 +79,9 @@ class LinearMapSyncResult:
         corner transfer error (pixels for :func:`synchronize_homographies`) or relative
         Frobenius error, see ``info["residual"]``.
     objective : float
-        Weighted mean squared residual over the kept pairs.
+        Weighted mean squared residual over the kept pairs whose residual is finite (a corner
+        residual is infinite when one of the two maps sends a corner of the unit square to the
+        line at infinity; ``residuals`` shows it); ``inf`` only when every kept pair's is.
     n_iter : int
         Number of null-space solves (1 without ``robust``).
     converged : bool
@@ -141,11 +143,11 @@ def _residual(A, B, kind: str) -> np.ndarray:
     if kind == "corner":
         pa = np.einsum("...ab,kb->...ka", A, _CORNERS)
         pb = np.einsum("...ab,kb->...ka", B, _CORNERS)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             pa = pa[..., :2] / pa[..., 2:3]
             pb = pb[..., :2] / pb[..., 2:3]
-        r = np.linalg.norm(pa - pb, axis=-1).mean(axis=-1)
-        return np.where(np.isfinite(r), r, np.inf)
+            r = np.linalg.norm(pa - pb, axis=-1).mean(axis=-1)
+        return np.where(np.isfinite(r), r, np.inf)      # a corner sent to the line at infinity
     num = np.linalg.norm(A - B, axis=(-2, -1))
     den = np.linalg.norm(B, axis=(-2, -1))
     return num / np.maximum(den, 1e-300)
@@ -502,7 +504,9 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
     weights_out[np.ix_(keep, keep)] = w
     inliers = obs & (weights_out > 1e-5 * max(float(weights_out.max()), 1e-300))
     kept = (w > 0) & ok
-    objective = float(np.sum(w[kept] * r_k[kept] ** 2) / max(np.sum(w[kept]), 1e-300))
+    finite = kept & np.isfinite(r_k)        # corner residuals: inf when a corner goes to infinity
+    objective = (float(np.sum(w[finite] * r_k[finite] ** 2) / max(np.sum(w[finite]), 1e-300))
+                 if finite.any() or not kept.any() else np.inf)
     info = {
         "singular_values": sv,
         "spectral_gap": float(sv[d] / max(sv[d - 1], 1e-300)) if len(sv) > d else np.inf,

@@ -11,21 +11,9 @@ from transync.experiments.cmu import METHODS, build, frame_gaps, load_sequence, 
 N_FRAMES, N_LANDMARKS = 8, 10
 
 
-def _write_sequence(root, name="toy", n_frames=N_FRAMES, jitter=0.3):
-    """Landmarks in pixels, slowly translated and jittered from frame to frame."""
-    rng = np.random.default_rng(7)
-    base = rng.uniform(0, 300, size=(N_LANDMARKS, 2))
-    label = root / "label"
-    label.mkdir(parents=True)
-    for k in range(n_frames):
-        P = base + 2.0 * k + rng.normal(0, jitter, base.shape)
-        (label / f"{name}{k + 1}").write_text("".join(f"{x:.6f} {y:.6f}\n" for x, y in P))
-    return root
-
-
 @pytest.fixture()
-def sequence(tmp_path):
-    return _write_sequence(tmp_path / "seq")
+def sequence(tmp_path, write_sequence):
+    return write_sequence(tmp_path / "seq", n_frames=N_FRAMES, n_landmarks=N_LANDMARKS)
 
 
 def test_registered_and_builds_on_the_folder(sequence):
@@ -97,8 +85,8 @@ def test_trial_spreads_frames(sequence):
         trial(dict(cfg, gap=3), np.random.default_rng(0), data=str(sequence))
 
 
-def test_quick_run_through_the_cli(tmp_path, capsys):
-    sequence = _write_sequence(tmp_path / "short", n_frames=5)     # 4 frames: gap 1 only
+def test_quick_run_through_the_cli(tmp_path, capsys, write_sequence):
+    sequence = write_sequence(tmp_path / "short", n_frames=5, n_landmarks=N_LANDMARKS)  # gap 1
     out = tmp_path / "out"
     assert main(["experiment", "cmu", "--quick", "--data", str(sequence), "--out", str(out),
                  "--no-progress", "--trials", "1"]) == 0

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from transync.datasets import make_graph_collection
-from transync.experiments import REGISTRY, run_experiment
+from transync.experiments import REGISTRY
 from transync.experiments.multigraph import (
     FIGURES,
     HARD_DEFORMATION,
@@ -91,21 +91,16 @@ def _small(exp):
     return dataclasses.replace(exp, sweeps=sweeps)
 
 
-def _end_to_end(exp, folder, trials, plot):
-    first = run_experiment(exp, folder, trials=trials, progress=False, plot=plot)
-    assert first.n_failed == 0, [r["error"] for r in first.records if r["error"]][:1]
-    n = (trials or exp.trials) * sum(len(s.values) * len(s.methods) for s in exp.sweeps)
-    assert first.n_new == n == len(first.records)
-    again = run_experiment(exp, folder, trials=trials, progress=False, plot=False)
-    assert again.n_new == 0 and len(again.records) == n
+def _end_to_end(run_twice, exp, folder, trials, plot):
+    first, again = run_twice(exp, folder, trials, plot)
     acc = {(r["sweep"], r["value"], r["method"]): r["mean"] for r in again.summary
            if r["metric"] == "accuracy"}
     assert acc[("deformation", 0.0, "S-RRWM")] == 1.0
     return first
 
 
-def test_small_run_end_to_end_and_resumes(tmp_path):
-    _end_to_end(_small(build(quick=True)), tmp_path, trials=1, plot=False)
+def test_small_run_end_to_end_and_resumes(tmp_path, run_twice):
+    _end_to_end(run_twice, _small(build(quick=True)), tmp_path, trials=1, plot=False)
 
 
 def test_finish_draws_the_thesis_figures_from_the_sweeps_that_ran(monkeypatch, tmp_path):
@@ -140,8 +135,8 @@ def test_finish_draws_the_thesis_figures_from_the_sweeps_that_ran(monkeypatch, t
 
 
 @pytest.mark.slow
-def test_quick_mode_end_to_end(tmp_path):
-    rep = _end_to_end(build(quick=True), tmp_path, trials=None, plot=True)
+def test_quick_mode_end_to_end(tmp_path, run_twice):
+    rep = _end_to_end(run_twice, build(quick=True), tmp_path, trials=None, plot=True)
     assert (tmp_path / "multigraph.png").stat().st_size > 0
     assert {p.name for p in rep.extra_files} == {f[0] for f in FIGURES.values()}
     assert all(p.stat().st_size > 0 for p in rep.extra_files)

@@ -4,14 +4,13 @@ write, and a small run end to end (stored, resumed)."""
 
 import dataclasses
 import functools
-import json
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from transync.datasets import make_subgraph_collection
-from transync.experiments import REGISTRY, run_experiment
+from transync.experiments import REGISTRY
 from transync.experiments.subgraph import (
     DUMMY_PAIRS,
     FIGURES,
@@ -38,18 +37,6 @@ def no_data(monkeypatch, tmp_path):
     """A data home without `cmu-house`: the cmu sweep is left out."""
     (tmp_path / "data").mkdir()
     monkeypatch.setenv("TRANSYNC_DATA", str(tmp_path / "data"))
-
-
-def _write_sequence(root, n_frames=8, n_landmarks=12, jitter=0.3):
-    """Landmarks in pixels, slowly translated and jittered from frame to frame (CMU layout)."""
-    rng = np.random.default_rng(7)
-    base = rng.uniform(0, 300, size=(n_landmarks, 2))
-    label = root / "label"
-    label.mkdir(parents=True)
-    for k in range(n_frames):
-        P = base + 2.0 * k + rng.normal(0, jitter, base.shape)
-        (label / f"toy{k + 1}").write_text("".join(f"{x:.6f} {y:.6f}\n" for x, y in P))
-    return root
 
 
 def test_registered_and_builds(no_data):
@@ -185,9 +172,9 @@ def test_unsynchronized_rrwm_under_noise_is_inconsistent():
         constraint_violations(maps, sizes=prob.sizes).transitivity.cvr)
 
 
-def test_cmu_keep_range_and_sweep_on_a_written_sequence(tmp_path):
+def test_cmu_keep_range_and_sweep_on_a_written_sequence(tmp_path, write_sequence):
     assert cmu_keep_range(30) == (20, 25) and cmu_keep_range(1) == (1, 1)
-    seq = _write_sequence(tmp_path / "seq")
+    seq = write_sequence(tmp_path / "seq", n_landmarks=12)
     exp = build(quick=True, data=seq)
     cmu = {s.name: s for s in exp.sweeps}["cmu"]
     assert cmu.values == [4] and (cmu.base["keep_low"], cmu.base["keep_high"]) == (8, 10)
@@ -239,7 +226,7 @@ def _record(sweep, value, method, trial_, **metrics):
                 metrics=metrics, error=None, seconds=1.0)
 
 
-def test_tables_from_planted_records(tmp_path, monkeypatch):
+def test_tables_from_planted_records(tmp_path, monkeypatch, write_sequence):
     """Targets: universe vs dummies per point with ties; the paired F1 loss is computed on the
     problems where S-RRWM's universe estimate is wrong (figures are the runner's, not drawn)."""
     import transync.experiments._plot as plot_module
@@ -259,7 +246,7 @@ def test_tables_from_planted_records(tmp_path, monkeypatch):
                             universe_error=0.0, **zero))
         recs.append(_record("range", 1.0, "S-RRWM dummies", t, f1=1.0, universe_ok=1.0,
                             universe_error=0.0, **zero))
-    exp = build(quick=True, data=_write_sequence(tmp_path / "seq"))
+    exp = build(quick=True, data=write_sequence(tmp_path / "seq", n_landmarks=12))
     paths = exp.finish(recs, [], tmp_path)
     names = {p.name for p in paths}
     assert {"table_7_2.md", "table_universe.md", "table_targets.md"} <= names
@@ -285,32 +272,22 @@ def _small(exp):
     return dataclasses.replace(exp, sweeps=sweeps)
 
 
-def _end_to_end(exp, folder, trials, plot):
-    first = run_experiment(exp, folder, trials=trials, progress=False, plot=plot)
-    assert first.n_failed == 0, [r["error"] for r in first.records if r["error"]][:1]
-    n = (trials or exp.trials) * sum(len(s.values) * len(s.methods) for s in exp.sweeps)
-    assert first.n_new == n == len(first.records)
-    again = run_experiment(exp, folder, trials=trials, progress=False, plot=False)
-    assert again.n_new == 0 and len(again.records) == n
-    def key(r):
-        return r["sweep"], json.dumps(r["config"], sort_keys=True), r["trial"]
-
-    stored = {key(r): r["metrics"] for r in first.records}
-    assert all(stored[key(r)] == r["metrics"] for r in again.records)     # nothing recomputed
+def _end_to_end(run_twice, exp, folder, trials, plot):
+    first, again = run_twice(exp, folder, trials, plot)
     f1 = {(r["sweep"], r["value"], r["method"]): r["mean"] for r in again.summary
           if r["metric"] == "f1"}
     assert f1[("deformation", 0.0, "S-RRWM")] > 0.9
     return first
 
 
-def test_small_run_end_to_end_and_resumes(tmp_path, no_data):
-    _end_to_end(_small(build(quick=True)), tmp_path, trials=1, plot=False)
+def test_small_run_end_to_end_and_resumes(tmp_path, no_data, run_twice):
+    _end_to_end(run_twice, _small(build(quick=True)), tmp_path, trials=1, plot=False)
 
 
 @pytest.mark.slow
-def test_quick_mode_end_to_end(tmp_path):
-    exp = build(quick=True, data=_write_sequence(tmp_path / "seq"))
-    rep = _end_to_end(exp, tmp_path / "out", trials=None, plot=True)
+def test_quick_mode_end_to_end(tmp_path, write_sequence, run_twice):
+    exp = build(quick=True, data=write_sequence(tmp_path / "seq", n_landmarks=12))
+    rep = _end_to_end(run_twice, exp, tmp_path / "out", trials=None, plot=True)
     assert (tmp_path / "out" / "subgraph.png").stat().st_size > 0
     names = {p.name for p in rep.extra_files}
     assert {f[0] for f in FIGURES.values()} <= names

@@ -23,10 +23,21 @@ import numpy as np
 
 from ._runner import METRIC_LABELS, metric_label, value_label  # noqa: F401 (re-exported)
 
-__all__ = ["METRIC_LABELS", "metric_label", "plot_experiment", "render_experiment"]
+__all__ = ["METRIC_LABELS", "metric_label", "plot_experiment", "pyplot", "render_experiment"]
 
 _MARKERS = ("o", "s", "^", "D", "v", "P", "X", "<", ">", "*", "h", "p")
 _STYLES = ("-", "--", "-.", ":")
+
+
+def pyplot():
+    """``matplotlib.pyplot`` on the non-interactive Agg backend (experiments write files, on
+    machines without a display); imported here, on first use, not at package import."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def _styles(methods: list[str], plt) -> dict[str, dict]:
@@ -120,11 +131,9 @@ def plot_experiment(experiment, summary: list[dict], path) -> Path:
 
 def render_experiment(experiment, summary: list[dict]):
     """The figure of :func:`plot_experiment` (a matplotlib ``Figure``; the caller closes it)."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
+
+    plt = pyplot()
 
     nrows = max(1, len(experiment.sweeps))
     ncols = max([len(sw.metrics) for sw in experiment.sweeps] + [1])

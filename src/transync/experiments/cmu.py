@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..matching import gaussian_edge_affinity
+from ._plot import pyplot
 from ._runner import Experiment, Sweep, mean_se
 from .multigraph import collection_metrics, run_method
 
@@ -184,11 +185,7 @@ def finish(records, summary, out_dir, *, title: str) -> list[Path]:
 
 
 def _plot_table(methods, gaps, stats, path: Path, title: str, n_frames: int) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(1.2 + 1.1 * len(methods), 3.4))
     width = 0.8 / max(len(gaps), 1)
     x = np.arange(len(methods))

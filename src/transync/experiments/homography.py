@@ -52,6 +52,7 @@ from ..homography import (
 )
 from ..metrics import segmentation_scores
 from ..synchronization import synchronize_homographies
+from ._plot import pyplot
 from ._runner import Experiment, Sweep, mean_se
 
 METHODS = ("ransac_to_reference", "chained", "sync", "sync_dense")
@@ -291,17 +292,8 @@ def _write_tables(data, path) -> Path:
     return path
 
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def _plot_datasets(data, path) -> Path:
-    plt = _pyplot()
+    plt = pyplot()
     names = list(data)
     x = np.arange(len(names))
     width = 0.8 / len(_COLUMNS)
@@ -329,7 +321,7 @@ def _plot_datasets(data, path) -> Path:
 
 
 def _plot_precision_recall(data, path) -> Path:
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.4))
     rounds = list(range(1, ROUNDS + 1))
     for ax, key in ((axes[0], "precision"), (axes[1], "recall")):
@@ -384,7 +376,7 @@ def _plot_segmentation_example(base, path) -> Path:
         s = segmentation_scores(m, truth)
         return f"P {s['precision']:.3f}  R {s['recall']:.3f}"
 
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(2, 3, figsize=(11, 6.6))
     panels = [(scene.images[scene.reference], "reference view", "gray"),
               (scene.images[view], f"view {view}", "gray"),

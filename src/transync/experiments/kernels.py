@@ -68,6 +68,7 @@ from pathlib import Path
 import numpy as np
 
 from .._validation import check_int
+from ._plot import pyplot
 from ._runner import Experiment, Sweep
 
 __all__ = ["DATASETS", "KERNELS", "GramEntry", "PreparedSet", "build", "compute_gram",
@@ -1021,17 +1022,8 @@ def _psd(spectra, sets, methods, out: Path) -> Path:
     return path
 
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def _plot_spectra(spectra, sets, methods, out: Path) -> Path:
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, len(sets), figsize=(max(7.0, 3.6 * len(sets) + 2.4), 3.6),
                              squeeze=False)
     cycle = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -1079,7 +1071,7 @@ def _plot_dimensionality(records, out: Path) -> Path | None:
             panels.append((sweep, xlabel, cells))
     if not panels:
         return None
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels) + 1.6, 3.5),
                              squeeze=False)
     for ax, (sweep, xlabel, cells) in zip(axes[0], panels):

@@ -285,7 +285,7 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
         cm = cv2.morphologyEx(cm, cv2.MORPH_OPEN, k3)
         cm = cv2.morphologyEx(cm, cv2.MORPH_CLOSE, k3)
         # pixels outside the eroded valid region keep the label of their neighbourhood
-        cm_full = cv2.dilate(cm, kern) if True else cm
+        cm_full = cv2.dilate(cm, kern)
         cm = np.where(valid[i], cm, cm_full)
         canvas_masks.append(cm > 0)
         hi, wi_ = imgs[i].shape[:2]

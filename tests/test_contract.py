@@ -2448,6 +2448,12 @@ def test_hunted_cases():
                        (sm, {}), (ipfp, {})):
         check(call(solver, np.full((4, 4), 1e-310), n1=2, n2=2, **kw) is REFUSED,
               f"{solver.__name__} {kw} on a subnormal K")
+    # entries near float64's largest: every solver overflowed (RuntimeWarnings, NaN)
+    for solver in (rrwm, ga, pf, sm, ipfp):
+        check(call(solver, np.full((4, 4), 1.7e308), n1=2, n2=2) is REFUSED,
+              f"{solver.__name__} on a huge K")
+    check(call(PairAffinities.from_blocks, np.full((3, 3, 4, 4), 1e300), n=2) is REFUSED,
+          "huge K blocks accepted")
     tiny = PairAffinities.from_blocks(np.full((2, 2, 1, 1), 5e-324), n=1)
     for solver, kw in (("rrwm", {}), ("rrwm", dict(options={"variant": "pygmtools"})),
                        ("ga", {}), ("pf", {})):
@@ -2462,6 +2468,15 @@ def test_hunted_cases():
     # subnormal points: a divide-by-zero RuntimeWarning before the named refusal
     check(call(verify_assignment, np.zeros((1, 2)), np.array([[5e-324, 0.0], [0.0, 0.0]]),
                np.array([0])) is REFUSED, "subnormal points accepted")
+    # view centres near float64's largest: np.linalg.norm overflowed with a RuntimeWarning
+    from transync.homography import segment_plane_evidence, view_graph_pairs
+    H = np.full((2, 3, 3), 5.5e-263)
+    H[0, 0, 0] = 1.0
+    check(call(view_graph_pairs, H, [(40, 30), (40, 30)], reference=0, k=3) is not REFUSED,
+          "far view centres refused")
+    # a float64 image beyond float32's range: an 'overflow in cast' warning, then "not finite"
+    check(call(segment_plane_evidence, [np.full((8, 8), 1e300)], np.eye(3)[None]) is REFUSED,
+          "an image beyond float32 accepted")
     # a homography sending a unit-square corner to infinity: the objective was inf (one
     # infinite corner residual in the mean) after an 'invalid value' RuntimeWarning
     T = np.ones((2, 2, 3, 3))
@@ -2471,8 +2486,11 @@ def test_hunted_cases():
         out = call(transync.synchronize_homographies, T, robust=robust)
         check(np.isfinite(out.objective) and np.isinf(out.residuals[1, 0]),
               f"infinite corner residual, robust={robust}: objective {out.objective}")
-    # scores near the float64 limit: CAO's mean score overflowed (RuntimeWarning, inf history)
-    huge = PairAffinities.from_blocks(np.full((3, 3, 1, 1), 1.7976931348623157e308), n=1)
+    # scores near the float64 limit: CAO's mean score overflowed (RuntimeWarning, inf history);
+    # blocks beyond MAX_AFFINITY_SCALE are refused now, the largest accepted must still work
+    check(call(PairAffinities.from_blocks, np.full((3, 3, 1, 1), 1.7976931348623157e308), n=1)
+          is REFUSED, "K blocks at float64's largest accepted")
+    huge = PairAffinities.from_blocks(np.full((3, 3, 1, 1), 1e300), n=1)
     out = call(cao, np.zeros((3, 1), np.int64), np.asarray(huge.pairs), 3,
                huge.score_assignments)
     check(out is not REFUSED and bool(np.isfinite(out.history["score"]).all()),

@@ -27,7 +27,9 @@ __all__ = [
     "check_homographies",
     "invertible_homographies",
     "check_affinity_scale",
+    "check_affinity_magnitude",
     "MIN_AFFINITY_SCALE",
+    "MAX_AFFINITY_SCALE",
 ]
 
 
@@ -77,7 +79,8 @@ def check_array(x, name: str, *, ndim: int | Sequence[int] | None = None, dtype=
         # numpy would parse "1" as 1.0, which hides a wrong argument
         raise TypeError(f"`{name}` must be numeric, got text ({_describe(x)})")
     try:
-        arr = np.array(src, dtype=dtype, copy=copy) if copy else np.asarray(src, dtype=dtype)
+        with np.errstate(over="ignore"):     # a narrowing cast (float32): reported below
+            arr = np.array(src, dtype=dtype, copy=copy) if copy else np.asarray(src, dtype=dtype)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"`{name}` must be convertible to a {np.dtype(dtype)} array, "
                         f"got {_describe(x)}: {exc}") from None
@@ -88,6 +91,11 @@ def check_array(x, name: str, *, ndim: int | Sequence[int] | None = None, dtype=
             raise ValueError(f"`{name}` must have {want} dimensions, got shape {arr.shape}")
     if finite and arr.dtype.kind in "fc" and not np.all(np.isfinite(arr)):
         bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
+        if (isinstance(src, np.ndarray) and src.dtype.kind in "fiu"
+                and src.dtype.itemsize > arr.dtype.itemsize and np.all(np.isfinite(src))):
+            raise ValueError(f"`{name}` must fit in {arr.dtype} (magnitudes up to "
+                             f"{float(np.finfo(arr.dtype).max):.3g}), got {bad} entries beyond it "
+                             f"(largest {float(np.abs(src).max()):.3g})")
         raise ValueError(f"`{name}` must be finite, got {bad} NaN or infinite entries")
     return arr
 
@@ -421,6 +429,28 @@ def check_affinity_scale(top, name: str = "K") -> None:
         raise ValueError(f"`{name}` is too small to match on: its largest column sum "
                          f"{float(top[small].min()):.3g} is below {MIN_AFFINITY_SCALE:g} (its "
                          f"products lose their digits); rescale the affinity")
+
+
+#: largest sum of affinity entries the solvers meet: an affinity whose largest entry times its
+#: number of candidates (a bound on every column sum, product ``K x`` and matching score) is
+#: above it is refused, so that no product overflows float64
+MAX_AFFINITY_SCALE = 1e300
+
+
+def check_affinity_magnitude(top_entry, n_candidates: int, name: str = "K") -> None:
+    """Refuse an affinity whose largest entry ``top_entry`` times ``n_candidates`` (``n1 n2``)
+    exceeds :data:`MAX_AFFINITY_SCALE`.
+
+    >>> check_affinity_magnitude(1e299, 100)
+    Traceback (most recent call last):
+        ...
+    ValueError: `K` is too large to match on: its largest entry 1e+299 times its 100 candidates ...
+    """
+    top = float(top_entry)
+    if top > MAX_AFFINITY_SCALE / max(int(n_candidates), 1):
+        raise ValueError(f"`{name}` is too large to match on: its largest entry {top:.3g} times "
+                         f"its {int(n_candidates)} candidates exceeds {MAX_AFFINITY_SCALE:g} "
+                         f"(its products overflow float64); rescale the affinity")
 
 
 def _first(arr: np.ndarray, bad: np.ndarray) -> str:

@@ -368,7 +368,7 @@ def test_nearly_symmetric_adjacency_stored_exactly_symmetric():
     assert Graph(B).adjacency[0, 1] == 1.0                 # exact input kept bit for bit
 
 
-@pytest.mark.parametrize("scale", [1e-300, 1e200, 1e306])
+@pytest.mark.parametrize("scale", [1e-300, 1e200, 1e298])
 @pytest.mark.parametrize("method", list(METHODS))
 def test_extreme_affinity_scale_same_answer_no_overflow(scale, method):
     """Every solver ranks matchings by vec(X)^T K vec(X): a positive factor changes nothing."""

@@ -342,7 +342,8 @@ def view_graph_pairs(H_to_ref, sizes, *, reference, k=3) -> list[tuple[int, int]
         if not np.all(np.isfinite(centers[i])):
             pairs.update((min(i, j), max(i, j)) for j in range(n) if j != i)
             continue
-        d = np.linalg.norm(centers - centers[i], axis=1)
+        with np.errstate(over="ignore", invalid="ignore"):   # far centres: inf, not linked
+            d = np.hypot(*(centers - centers[i]).T)
         d[i] = np.inf
         d[reference] = np.inf
         d[~np.isfinite(d)] = np.inf

@@ -44,6 +44,7 @@ import scipy.sparse as sp
 
 from .._blas import blas_limit
 from .._validation import (
+    check_affinity_magnitude,
     check_array,
     check_choice,
     check_index_pairs,
@@ -145,13 +146,16 @@ def _check_sizes(n1, n2) -> tuple[int, int]:
     return check_int(n1, "n1", minimum=1), check_int(n2, "n2", minimum=1)
 
 
-def _check_values(values: np.ndarray, name: str) -> None:
-    """Finite and non-negative (``values`` already a real float array)."""
+def _check_values(values: np.ndarray, name: str, n_candidates: int) -> None:
+    """Finite, non-negative and not so large that the solvers' sums overflow (``values``
+    already a real float array)."""
     if not np.all(np.isfinite(values)):
         bad = int(values.size - np.count_nonzero(np.isfinite(values)))
         raise ValueError(f"`{name}` must be finite, got {bad} NaN or infinite entries")
     if values.size and values.min() < 0:
         raise ValueError(f"`{name}` must be non-negative, got minimum {values.min():.6g}")
+    if values.size:
+        check_affinity_magnitude(values.max(), n_candidates, name)
 
 
 def _check_lawler_shape(K, n1: int, n2: int, name: str) -> None:
@@ -216,7 +220,7 @@ class DenseAffinity(_MatrixAffinity):
         n1, n2 = _check_sizes(n1, n2)
         K = check_array(K, name, ndim=2)
         _check_lawler_shape(K, n1, n2, name)
-        _check_values(K, name)
+        _check_values(K, name, n1 * n2)
         super().__init__(K, n1, n2)
 
     def diag(self):
@@ -265,7 +269,7 @@ class SparseAffinity(_MatrixAffinity):
             raise TypeError(f"`{name}` must be a real sparse matrix, got dtype {K.dtype}")
         K = sp.csr_matrix(K, dtype=float)
         _check_lawler_shape(K, n1, n2, name)
-        _check_values(K.data, name)
+        _check_values(K.data, name, n1 * n2)
         super().__init__(K, n1, n2)
 
     def diag(self):
@@ -290,7 +294,7 @@ def _check_node_term(node, n1: int, n2: int):
     node = check_array(node, "node", ndim=2)
     if node.shape != (n1, n2):
         raise ValueError(f"`node` must have shape (n1, n2) = ({n1}, {n2}), got {node.shape}")
-    _check_values(node, "node")
+    _check_values(node, "node", n1 * n2)
     return node
 
 
@@ -358,7 +362,7 @@ class FactorizedAffinity(Affinity):
             if self.edge.shape != (m1, m2):
                 raise ValueError(f"`edge` must have shape (m1, m2) = ({m1}, {m2}), the lengths of "
                                  f"`edges1` and `edges2`, got {self.edge.shape}")
-            _check_values(self.edge, "edge")
+            _check_values(self.edge, "edge", n1 * n2)
         ones1, ones2 = np.ones(m1), np.ones(m2)
         self._S1 = sp.csr_matrix((ones1, (self.edges1[:, 0], np.arange(m1))), shape=(n1, m1))
         self._S2T = sp.csc_matrix((ones2, (np.arange(m2), self.edges2[:, 0])), shape=(m2, n2))

@@ -50,6 +50,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._validation import (
+    check_affinity_magnitude,
     check_array,
     check_index_pairs,
     check_int,
@@ -755,6 +756,8 @@ class PairAffinities:
             sel = K[pairs[:, 0], pairs[:, 1]]
             if sel.size and sel.min() < 0:
                 raise ValueError(f"`{name}` must be non-negative, got minimum {sel.min():.6g}")
+            if sel.size:
+                check_affinity_magnitude(sel.max(), nn, name)
             if len(pairs) * nn * nn * 8 <= DENSE_BYTES:
                 return cls(_Dense(np.ascontiguousarray(sel), n, n), pairs)
             return cls(_Sparse.from_triplets([_triplets(b) for b in sel], n, n), pairs)

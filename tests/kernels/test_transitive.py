@@ -610,3 +610,12 @@ def test_gaussian_kernel_of_identical_graphs_is_psd(matcher):
     K = est.fit_transform([Graph(A), Graph(A)])
     np.testing.assert_allclose(K, np.ones((2, 2)), atol=1e-12)
     assert est.gamma_ == 1.0
+
+
+def test_median_gamma_sampling_seed_is_checked_by_name(rng):
+    """Above its sample size median_gamma draws pairs with ``rng``: a bad seed is named (numpy's
+    own message named nothing), a good one reproduces."""
+    X = aligned_features(_random_features(400, 2, rng), np.tile(np.arange(6), (400, 1)))
+    assert median_gamma(X, rng=3) == median_gamma(X, rng=3)
+    with pytest.raises(ValueError, match="`rng` must be None, a non-negative int seed"):
+        median_gamma(X, rng=-1)

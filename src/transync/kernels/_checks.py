@@ -15,7 +15,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .._validation import check_array, check_int_array as _check_int_array, check_positive
+from .._validation import check_array, check_nonnegative, check_positive
+from .._validation import check_int_array as _check_int_array
 from ..graphs import Graph
 
 __all__ = [
@@ -146,8 +147,7 @@ def check_adjacency(graph, name: str, *, n: int | None = None,
     if A.shape[0] != A.shape[1] or A.shape[0] == 0:
         raise ValueError(f"`{name}` must be a square (n, n) adjacency with n >= 1, got shape "
                          f"{A.shape}")
-    if A.min() < 0:
-        raise ValueError(f"`{name}` must be non-negative, got minimum {A.min():.6g}")
+    check_nonnegative(A, name)
     E = A != 0
     if not (np.array_equal(E, E.T) if edges_only else np.array_equal(A, A.T)):
         if edges_only or not np.allclose(A, A.T):

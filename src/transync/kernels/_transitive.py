@@ -24,7 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import check_array, check_choice, check_index_pairs, check_int, check_positive
+from .._validation import (as_generator, check_array, check_choice, check_index_pairs, check_int,
+                           check_positive)
 from ..permutations import solve_lap
 from ..synchronization import synchronize_permutations
 from ._checks import (check_feature_list, check_int_array, check_node_labels, check_width,
@@ -865,7 +866,7 @@ def median_gamma(aligned, *, rng=0) -> float:
     if n_pairs <= _GAMMA_SAMPLE_PAIRS:
         i, j = np.triu_indices(N, 1)
     else:
-        gen = np.random.default_rng(rng)
+        gen = as_generator(rng)
         i = gen.integers(0, N, _GAMMA_SAMPLE_PAIRS)
         j = (i + gen.integers(1, N, _GAMMA_SAMPLE_PAIRS)) % N
     return _inverse_median(X[i], X[j], "aligned")

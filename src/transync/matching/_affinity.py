@@ -50,6 +50,7 @@ from .._validation import (
     check_index_pairs,
     check_int,
     check_int_array,
+    check_nonnegative,
     check_positive,
 )
 from ..exceptions import DegenerateInputError
@@ -152,8 +153,7 @@ def _check_values(values: np.ndarray, name: str, n_candidates: int) -> None:
     if not np.all(np.isfinite(values)):
         bad = int(values.size - np.count_nonzero(np.isfinite(values)))
         raise ValueError(f"`{name}` must be finite, got {bad} NaN or infinite entries")
-    if values.size and values.min() < 0:
-        raise ValueError(f"`{name}` must be non-negative, got minimum {values.min():.6g}")
+    check_nonnegative(values, name)
     if values.size:
         check_affinity_magnitude(values.max(), n_candidates, name)
 

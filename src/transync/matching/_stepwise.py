@@ -32,7 +32,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from .._blas import blas_limit
-from .._validation import check_affinity_scale, check_array
+from .._validation import check_affinity_scale, check_array, check_nonnegative
 from ..exceptions import ConvergenceWarning
 from ..permutations import assignment_to_matrix, solve_lap
 from ._affinity import Affinity
@@ -132,8 +132,7 @@ class _BaseStepper:
         X = check_array(X, "X", ndim=2)
         if X.shape != (self.n1, self.n2):
             raise ValueError(f"`X` must have shape ({self.n1}, {self.n2}), got {X.shape}")
-        if X.size and X.min() < 0:
-            raise ValueError(f"`X` must be non-negative, got minimum {X.min():.6g}")
+        check_nonnegative(X, "X")
         return np.array(X, dtype=float)
 
     def set_iterate(self, X) -> None:

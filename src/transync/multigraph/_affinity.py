@@ -55,6 +55,7 @@ from .._validation import (
     check_index_pairs,
     check_int,
     check_int_array,
+    check_nonnegative,
     check_positive,
 )
 from ..graphs import Graph
@@ -754,8 +755,7 @@ class PairAffinities:
             _check_count(K.shape[0], n_graphs, name)
             pairs = check_pairs(pairs, K.shape[0])
             sel = K[pairs[:, 0], pairs[:, 1]]
-            if sel.size and sel.min() < 0:
-                raise ValueError(f"`{name}` must be non-negative, got minimum {sel.min():.6g}")
+            check_nonnegative(sel, name)
             if sel.size:
                 check_affinity_magnitude(sel.max(), nn, name)
             if len(pairs) * nn * nn * 8 <= DENSE_BYTES:

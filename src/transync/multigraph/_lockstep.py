@@ -47,6 +47,7 @@ from .._validation import (
     check_array,
     check_choice,
     check_int,
+    check_nonnegative,
     check_positive,
 )
 from ..matching import (
@@ -725,8 +726,7 @@ def doubly_stochastic_iterates(X, tol: float = 1e-10, max_iter: int = 200):
     True
     """
     X = check_array(X, "X", ndim=3)
-    if X.size and X.min() < 0:
-        raise ValueError(f"`X` must be non-negative, got minimum {X.min():.6g}")
+    check_nonnegative(X, "X")
     X = np.maximum(X, 1e-300)
     Y = sinkhorn_batch(X, slack="mass", tol=tol, max_iter=max_iter)[0]
     if Y.shape[1] != Y.shape[2]:

@@ -18,12 +18,11 @@ import warnings
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
-from scipy.optimize import linear_sum_assignment
 from scipy.sparse.csgraph import connected_components
 
 from .._validation import as_generator, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning, DegenerateInputError
-from ..permutations import MultiMatching, cycle_inconsistency_arrays
+from ..permutations import MultiMatching, cycle_inconsistency_arrays, solve_lap
 from . import _spectral as spec
 from ._linalg import RowBlockProduct, polar
 from ._pairwise_input import StackedPairs, check_universe, parse_pairwise
@@ -136,9 +135,7 @@ def _refine_labels(stk: StackedPairs, labels, d: int, max_sweeps: int, dobs=None
             cur = lab[g, :n_g]
             placed = np.flatnonzero(cur >= 0)
             S[placed, cur[placed]] += tie
-            r, c = linear_sum_assignment(S, maximize=True)
-            new = np.full(n_g, -1, dtype=np.int64)
-            new[r] = c
+            new = solve_lap(S)
             if not np.array_equal(new, cur):
                 lab[g, :n_g] = new
                 changed += 1

@@ -7,9 +7,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
-from ..permutations import MultiMatching
+from ..permutations import MultiMatching, solve_lap
 
 __all__ = ["PermutationSyncResult"]
 
@@ -63,12 +62,8 @@ class BlockRounding:
             return np.full(int(self.sizes[i]), -1, dtype=np.int64)
         off = self.offsets[ci]
         li, lj = int(self.local[i]), int(self.local[j])
-        S = V[off[li]:off[li + 1]] @ V[off[lj]:off[lj + 1]].T
-        r, c = linear_sum_assignment(S, maximize=True)
-        a = np.full(S.shape[0], -1, dtype=np.int64)
-        keep = S[r, c] >= self.threshold
-        a[r[keep]] = c[keep]
-        return a
+        return solve_lap(V[off[li]:off[li + 1]] @ V[off[lj]:off[lj + 1]].T,
+                         min_score=self.threshold)
 
 
 @dataclass(frozen=True)

@@ -15,8 +15,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
-from scipy.optimize import linear_sum_assignment
 
+from ..permutations import solve_lap
 from ._linalg import polar
 from ._pairwise_input import StackedPairs
 
@@ -223,11 +223,7 @@ def estimate_universe(vals: np.ndarray, n_max: int, *,
 def _hungarian_rows(S_blocks, sizes, off, d):
     labels = []
     for g in range(len(sizes)):
-        S = S_blocks[off[g]:off[g + 1]]
-        r, c = linear_sum_assignment(S, maximize=True)
-        lab = np.full(sizes[g], -1, dtype=np.int64)
-        lab[r] = c
-        labels.append(lab)
+        labels.append(solve_lap(S_blocks[off[g]:off[g + 1]]))
     return labels
 
 

@@ -2425,7 +2425,7 @@ def test_hunted_cases():
     contract; each failed on the code before its fix."""
     from transync import match_collection
     from transync.graphs import Graph
-    from transync.matching import ga, ipfp, pf, rrwm, sm, verify_assignment
+    from transync.matching import ga, ipfp, pf, rrwm, sinkhorn_batch, sm, verify_assignment
     from transync.multigraph import PairAffinities, cao, run_lockstep
     from transync.permutations import MultiMatching
 
@@ -2465,6 +2465,8 @@ def test_hunted_cases():
     check(call(synchronize_alignments, np.array([[1, 0, 2], [1, 2, 0], [2, 1, 0]]),
                np.array([[0, 1], [0, 2], [1, 2]]), 10**6, n=3) is REFUSED,
           "disconnected alignments accepted")
+    # a subnormal kernel in the scaling domain: 1 / (A v) overflowed with a RuntimeWarning
+    check(call(sinkhorn_batch, np.array([[[5e-324]]])) is REFUSED, "subnormal kernel accepted")
     # subnormal points: a divide-by-zero RuntimeWarning before the named refusal
     check(call(verify_assignment, np.zeros((1, 2)), np.array([[5e-324, 0.0], [0.0, 0.0]]),
                np.array([0])) is REFUSED, "subnormal points accepted")

@@ -42,7 +42,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import logsumexp
 
-from .._validation import check_array, check_choice, check_int, check_positive
+from .._validation import MIN_AFFINITY_SCALE, check_array, check_choice, check_int, check_positive
 
 __all__ = ["SinkhornBatchOutput", "SinkhornOutput", "sinkhorn_augmented_batch", "sinkhorn_batch",
            "sinkhorn_normalize"]
@@ -459,7 +459,7 @@ def sinkhorn_batch(A, *, slack: str = "mass", domain: str = "scaling", tol: floa
         return SinkhornBatchOutput(np.stack([o.X for o in outs]),
                                    np.array([o.n_sweeps for o in outs]),
                                    np.array([o.converged for o in outs]), None)
-    _check_kernels(A, "A")
+    _check_kernels(A, "A", "pass log-kernels with domain='log'")
     return _batch_slack(A, slack=slack, tol=tol, max_iter=max_iter, half_sweeps=half_sweeps,
                         check_every=check_every, v0=warm_start)
 
@@ -514,10 +514,16 @@ def sinkhorn_augmented_batch(M, *, tol: float, max_iter: int, which=None) -> Non
     _batch_augmented(M, tol=tol, max_iter=max_iter, which=which)
 
 
-def _check_kernels(A: np.ndarray, name: str) -> None:
-    """Non-negative, finite, and no all-zero row or column (they would give NaN)."""
+def _check_kernels(A: np.ndarray, name: str, hint: str = "rescale it") -> None:
+    """Non-negative, finite, no all-zero row or column (they would give NaN), and no row or
+    column whose largest entry is below MIN_AFFINITY_SCALE (its scaling 1 / (A v) would
+    overflow: the log domain takes such kernels as log-kernels)."""
     if not np.all(np.isfinite(A)) or A.min() < 0:
         raise ValueError(f"`{name}` must be finite and non-negative, got minimum {A.min():.3g}")
-    if not (A.max(2) > 0).all() or not (A.max(1) > 0).all():
+    top = min(float(A.max(2).min()), float(A.max(1).min())) if A.size else 1.0
+    if top <= 0:
         raise ValueError(f"`{name}` has an all-zero row or column in some matrix: Sinkhorn "
                          "cannot normalise it")
+    if top < MIN_AFFINITY_SCALE:
+        raise ValueError(f"`{name}` has a row or column whose largest entry is {top:.3g}, below "
+                         f"{MIN_AFFINITY_SCALE:g}: its scaling overflows; {hint}")

@@ -2479,6 +2479,9 @@ def test_hunted_cases():
     # a float64 image beyond float32's range: an 'overflow in cast' warning, then "not finite"
     check(call(segment_plane_evidence, [np.full((8, 8), 1e300)], np.eye(3)[None]) is REFUSED,
           "an image beyond float32 accepted")
+    from transync.homography import mean_warped_image
+    check(call(mean_warped_image, [np.array([[1e300]])], np.eye(3)[None], size=(16, 12))
+          is REFUSED, "mean_warped_image: an image beyond float32 accepted")
     # a homography sending a unit-square corner to infinity: the objective was inf (one
     # infinite corner residual in the mean) after an 'invalid value' RuntimeWarning
     T = np.ones((2, 2, 3, 3))

@@ -106,8 +106,10 @@ def refine_homography_ecc(template, image, H_init, *, mask=None, template_mask=N
     >>> ok, np.round(H[:2, 2] / H[2, 2], 1).tolist()     # back to the true shift (-4, -2)
     (True, [-4.0, -2.1])
     """
-    tpl = check_image(template, "template", min_size=1, grey=True).astype(np.float32)
-    img = check_image(image, "image", min_size=1, grey=True).astype(np.float32)
+    tpl = check_image(template, "template", min_size=1, grey=True,
+                      float32=True).astype(np.float32)
+    img = check_image(image, "image", min_size=1, grey=True,
+                      float32=True).astype(np.float32)
     H_init = check_homographies(H_init, "H_init", ndim=2)
     levels = check_int(levels, "levels", minimum=1, maximum=8)
     max_iter = check_int(max_iter, "max_iter", minimum=1)
@@ -258,7 +260,8 @@ def mean_warped_image(images, homographies, *, size, masks=None, offset=(0, 0),
     if images is None or isinstance(images, (str, bytes)):
         raise TypeError(f"`images` must be a list of (h, w) grey images, got "
                         f"{type(images).__name__}")
-    imgs = [check_image(im, f"images[{k}]", min_size=1, grey=True).astype(np.float32)
+    imgs = [check_image(im, f"images[{k}]", min_size=1, grey=True,
+                        float32=True).astype(np.float32)
             for k, im in enumerate(images)]
     N = len(imgs)
     if N < 1:

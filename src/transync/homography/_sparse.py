@@ -86,10 +86,14 @@ class PairwiseHomographies:
 _MIN_SIZE = 16
 
 
-def check_image(image, name: str, *, min_size: int = _MIN_SIZE, grey: bool = False
-                ) -> np.ndarray:
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def check_image(image, name: str, *, min_size: int = _MIN_SIZE, grey: bool = False,
+                float32: bool = False) -> np.ndarray:
     """One image array: (H, W) or (H, W, C) with C in (1, 3, 4) (``grey``: (H, W) only), real
-    numeric pixels (no float16), finite and non-negative, at least ``min_size`` pixels a side."""
+    numeric pixels (no float16), finite and non-negative, at least ``min_size`` pixels a side;
+    with ``float32`` (the caller computes on the pixels in single precision) within its range."""
     if image is None or isinstance(image, (str, bytes)) or np.iscomplexobj(image):
         raise TypeError(f"`{name}` must be an image array, got {type(image).__name__}")
     try:
@@ -111,6 +115,10 @@ def check_image(image, name: str, *, min_size: int = _MIN_SIZE, grey: bool = Fal
                          f"got shape {arr.shape}")
     if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
         raise ValueError(f"`{name}` must be finite, got NaN or infinite pixels")
+    big = float(np.abs(arr).max()) if float32 and arr.dtype.kind == "f" else 0.0
+    if big > _FLOAT32_MAX:
+        raise ValueError(f"`{name}` must have pixels within float32's range (+-3.4e38), got "
+                         f"up to {big:.3g}")
     if arr.dtype.kind == "i" and arr.min() < 0:
         raise ValueError(f"`{name}` must be non-negative, got minimum {int(arr.min())}")
     return arr

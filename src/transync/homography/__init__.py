@@ -7,10 +7,11 @@ from ..metrics import (
     brenner_focus,
     corner_accuracy,
     corner_error,
+    misclassification_error,
     pairwise_corner_error,
     segmentation_scores,
 )
-from ._multiplane import MultiPlaneResult, extract_planes, misclassification_error
+from ._multiplane import MultiPlaneResult, extract_planes
 from ._pipeline import (
     DenseOptions,
     PlaneAlignmentResult,

@@ -7,7 +7,8 @@
   *Synthetic protocols and evaluation measures*):
   :func:`constraint_violations` (CVR, CVVR, ACVV for capacity and transitivity).
 * Plane homographies (:mod:`._homography`): :func:`corner_error`, :func:`pairwise_corner_error`,
-  :func:`corner_accuracy`, :func:`brenner_focus`, :func:`segmentation_scores`.
+  :func:`corner_accuracy`, :func:`brenner_focus`, :func:`segmentation_scores`,
+  :func:`misclassification_error` (multi-plane labels).
 
 Examples
 --------
@@ -26,6 +27,7 @@ from ._homography import (
     brenner_focus,
     corner_accuracy,
     corner_error,
+    misclassification_error,
     pairwise_corner_error,
     segmentation_scores,
 )
@@ -50,6 +52,7 @@ __all__ = [
     "matching_accuracy",
     "matching_precision_recall",
     "multimatching_accuracy",
+    "misclassification_error",
     "multimatching_precision_recall",
     "pairwise_corner_error",
     "segmentation_scores",

@@ -7,7 +7,7 @@ import contextlib
 
 import numpy as np
 
-from .._validation import check_array, check_homographies, check_probability
+from .._validation import check_array, check_homographies, check_int_array, check_probability
 from ..geometry import image_corners as _corners
 from ..geometry import transfer_points as _transfer
 
@@ -317,3 +317,65 @@ def segmentation_scores(pred, truth, *, valid=None) -> dict:
     f1 = 2 * prec * rec / (prec + rec) if prec + rec else 0.0
     iou = tp / (tp + fp + fn) if tp + fp + fn else 1.0
     return {"precision": prec, "recall": rec, "f1": f1, "iou": iou}
+
+
+def misclassification_error(pred, truth) -> float:
+    """Fraction of points whose label differs from the ground truth under the best one-to-one
+    relabelling of the planes (label 0, outliers, maps to 0).
+
+    Parameters
+    ----------
+    pred : array_like of int
+        Predicted plane label of every point (0: outlier).
+    truth : array_like of int
+        True plane label of every point (0: outlier), the same size.
+
+    Returns
+    -------
+    float
+        Misclassified fraction in [0, 1].
+
+    Raises
+    ------
+    ValueError, TypeError
+        Labels that are not integer arrays of the same size.
+
+    Examples
+    --------
+    >>> misclassification_error([0, 1, 1, 2, 2], [0, 2, 2, 1, 1])
+    0.0
+    >>> misclassification_error([1, 1, 1, 1], [1, 1, 2, 2])
+    0.5
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    p = check_array(pred, "pred", dtype=None).ravel()
+    t = check_array(truth, "truth", dtype=None).ravel()
+    checked = []
+    for name, a in (("pred", p), ("truth", t)):
+        try:
+            a = check_int_array(a, name, integral_floats=True, allow_bool=True,
+                                what="integer labels")
+        except TypeError as exc:
+            if a.dtype.kind != "f":
+                raise
+            raise ValueError(str(exc)) from None     # here a fractional label is a wrong value
+        if a.size and a.min() < 0:
+            raise ValueError(f"`{name}` must hold labels >= 0 (0 = outlier), got {a.min()}")
+        checked.append(a)
+    p, t = checked
+    # compact labels (0 stays 0): the contingency table is as small as the labels used
+    p = np.unique(np.concatenate([[0], p]), return_inverse=True)[1][1:]
+    t = np.unique(np.concatenate([[0], t]), return_inverse=True)[1][1:]
+    if p.shape != t.shape:
+        raise ValueError(f"`pred` and `truth` must have the same length, got {p.size} and {t.size}")
+    if p.size == 0:
+        return 0.0
+    kp, kt = p.max() + 1, t.max() + 1
+    C = np.zeros((kp, kt))
+    np.add.at(C, (p, t), 1)
+    correct = C[0, 0]
+    if kp > 1 and kt > 1:
+        r, c = linear_sum_assignment(-C[1:, 1:])
+        correct += C[1:, 1:][r, c].sum()
+    return float(1.0 - correct / p.size)

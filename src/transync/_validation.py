@@ -14,6 +14,7 @@ import numpy as np
 __all__ = [
     "as_generator",
     "check_array",
+    "check_bool",
     "check_finite",
     "check_int",
     "check_int_array",
@@ -460,6 +461,20 @@ def _first(arr: np.ndarray, bad: np.ndarray) -> str:
     if not pos:
         return value
     return f"{value} at position {pos[0] if len(pos) == 1 else pos}"
+
+
+def check_bool(value, name: str) -> bool:
+    """``value`` as a bool; anything but ``bool`` / ``numpy.bool_`` (``1``, ``"yes"``, ``None``)
+    is a ``TypeError`` naming ``name``.
+
+    >>> check_bool(1, "progress")
+    Traceback (most recent call last):
+        ...
+    TypeError: `progress` must be a bool, got int 1
+    """
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"`{name}` must be a bool, got {type(value).__name__} {value!r}")
+    return bool(value)
 
 
 def check_positive(value, name: str, *, allow_zero: bool = False) -> float:

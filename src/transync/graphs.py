@@ -24,7 +24,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
-from ._validation import check_array, check_choice, check_int, check_int_array, check_shape
+from ._validation import (
+    check_array,
+    check_bool,
+    check_choice,
+    check_int,
+    check_int_array,
+    check_shape,
+)
 
 __all__ = ["Graph"]
 
@@ -80,9 +87,7 @@ class Graph:
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        if not isinstance(self.directed, (bool, np.bool_)):
-            raise TypeError(f"`directed` must be a bool, got {type(self.directed).__name__} "
-                            f"{self.directed!r}")
+        check_bool(self.directed, "directed")
         if not isinstance(self.meta, dict):
             raise TypeError(f"`meta` must be a dict, got {type(self.meta).__name__}")
         A = check_array(self.adjacency, "adjacency", ndim=2)

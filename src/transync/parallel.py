@@ -74,7 +74,7 @@ import numpy as np
 
 from ._malloc import tune_worker_allocator
 from ._progress import progress_bar
-from ._validation import check_int, check_positive
+from ._validation import check_bool, check_int, check_positive
 from .exceptions import ExecutorError
 
 __all__ = ["DEFAULT_TIMEOUT", "map_chunks", "split_chunks"]
@@ -154,8 +154,7 @@ def map_chunks(fn: Callable[[Any], Any], chunks: Iterable, *, executor=None,
         raise TypeError(f"`chunks` must be an iterable of chunks, got {type(chunks).__name__}")
     chunks = list(chunks)
     timeout = DEFAULT_TIMEOUT if timeout is None else check_positive(timeout, "timeout")
-    if not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"`progress` must be a bool, got {type(progress).__name__} {progress!r}")
+    check_bool(progress, "progress")
     kind, handle = _resolve(executor)
     if kind == "dask":
         _check_dask_client(handle, min(timeout, _DASK_LIVENESS_TIMEOUT))

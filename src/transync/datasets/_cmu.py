@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validation import as_generator, check_choice, check_int
+from .._validation import as_generator, check_bool, check_choice, check_int
 from ..graphs import Graph
 from ._graphs import GraphCollectionProblem
 from ._home import data_home
@@ -225,8 +225,7 @@ class LandmarkSequence:
         True
         """
         pos = self._positions(frames)
-        if not isinstance(shuffle, (bool, np.bool_)):
-            raise TypeError(f"`shuffle` must be a bool, got {type(shuffle).__name__} {shuffle!r}")
+        check_bool(shuffle, "shuffle")
         lo, hi = self._keep_range(keep)
         rng = as_generator(rng)
         P = self.normalized_points([int(self.frames[p]) for p in pos], normalize=normalize)

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._validation import as_generator, check_int, check_positive, check_probability
+from .._validation import as_generator, check_bool, check_int, check_positive, check_probability
 from ..graphs import Graph
 from ..permutations import MultiMatching
 
@@ -118,12 +118,6 @@ def _check_size(n_graphs: int, n_nodes: int,
                          f"{_MAX_ENTRIES:.0e}); use fewer nodes or graphs")
 
 
-def _check_bool(value, name: str) -> bool:
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"`{name}` must be a bool, got {type(value).__name__} {value!r}")
-    return bool(value)
-
-
 def _sym_uniform(rng, n):
     A = rng.random((n, n))
     A = np.triu(A, 1)
@@ -186,7 +180,7 @@ def make_pairwise_problem(n_inliers: int = 20, n_outliers: int = 0, deformation:
     """
     n_in, n_out, sigma = _check_pair_sizes(n_inliers, n_outliers, deformation)
     rho = check_probability(density, "density")
-    shuffle = _check_bool(shuffle, "shuffle")
+    shuffle = check_bool(shuffle, "shuffle")
     rng = as_generator(rng)
     n = n_in + n_out
     base = _sym_uniform(rng, n_in)
@@ -261,8 +255,8 @@ def make_point_matching_problem(n_inliers: int = 20, n_outliers: int = 0,
     ((8, 2), (8, 2))
     """
     n_in, n_out, sigma = _check_pair_sizes(n_inliers, n_outliers, deformation)
-    rotate = _check_bool(rotate, "rotate")
-    shuffle = _check_bool(shuffle, "shuffle")
+    rotate = check_bool(rotate, "rotate")
+    shuffle = check_bool(shuffle, "shuffle")
     rng = as_generator(rng)
     P = rng.random((n_in, 2))
     theta = rng.uniform(0, 2 * np.pi) if rotate else 0.0
@@ -334,7 +328,7 @@ def make_graph_collection(n_graphs: int = 8, n_inliers: int = 10, n_outliers: in
     sigma = check_positive(deformation, "deformation", allow_zero=True)
     rho = check_probability(density, "density")
     p_flip = check_probability(flip, "flip")
-    shuffle = _check_bool(shuffle, "shuffle")
+    shuffle = check_bool(shuffle, "shuffle")
     _check_size(N, n_in + n_out)
     rng = as_generator(rng)
     n = n_in + n_out

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_generator, check_int, check_probability
+from .._validation import as_generator, check_bool, check_int, check_probability
 from ..permutations import MultiMatching
 
 __all__ = ["PermutationCollection", "make_permutation_collection"]
@@ -163,9 +163,7 @@ def make_permutation_collection(n_objects: int, n_nodes: int, *, corruption: flo
         raise ValueError(f"`n_objects`={n_objects} and `n_nodes`={n_nodes} would generate "
                          f"{entries:.3g} assignment entries (more than {_MAX_ENTRIES:.0e}); "
                          "use fewer objects or nodes")
-    if not isinstance(ensure_connected, (bool, np.bool_)):
-        raise TypeError(f"`ensure_connected` must be a bool, got "
-                        f"{type(ensure_connected).__name__} {ensure_connected!r}")
+    check_bool(ensure_connected, "ensure_connected")
     gen = as_generator(rng)
 
     # node sets and orders

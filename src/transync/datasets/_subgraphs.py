@@ -25,9 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import as_generator, check_int, check_positive, check_probability
+from .._validation import as_generator, check_bool, check_int, check_positive, check_probability
 from ..graphs import Graph
-from ._graphs import GraphCollectionProblem, _check_bool, _check_size, _sym_mask, _sym_uniform
+from ._graphs import GraphCollectionProblem, _check_size, _sym_mask, _sym_uniform
 
 __all__ = ["SubgraphCollectionProblem", "make_subgraph_collection"]
 
@@ -168,7 +168,7 @@ def make_subgraph_collection(n_graphs: int = 8, n_universe: int = 20, p_keep=(0.
     sigma = check_positive(deformation, "deformation", allow_zero=True)
     rho = check_probability(density, "density")
     p_flip = check_probability(flip, "flip")
-    shuffle = _check_bool(shuffle, "shuffle")
+    shuffle = check_bool(shuffle, "shuffle")
     _check_size(N, d + n_out, "`n_universe` + `n_outliers`")
     rng = as_generator(rng)
     base = _sym_uniform(rng, d)

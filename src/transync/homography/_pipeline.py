@@ -19,7 +19,14 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_generator, check_array, check_choice, check_int, check_positive
+from .._validation import (
+    as_generator,
+    check_array,
+    check_bool,
+    check_choice,
+    check_int,
+    check_positive,
+)
 from ..exceptions import DegenerateInputError, UnlinkedViewsWarning
 from ..geometry import image_corners, normalize_determinant, transfer_points, translation
 from ..synchronization import synchronize_homographies
@@ -44,12 +51,6 @@ logger = logging.getLogger("transync.homography")
 #: Largest canvas margin (fraction of the reference frame on every side): the canvas of the
 #: segmentation and of the mean image is at most 5 x 5 reference frames.
 MAX_CANVAS_MARGIN = 2.0
-
-
-def _check_flag(value, name):
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"`{name}` must be True or False, got {type(value).__name__} {value!r}")
-    return bool(value)
 
 
 @dataclass(frozen=True)
@@ -122,7 +123,7 @@ class DenseOptions:
             raise ValueError(f"`canvas_margin` must lie in [0, {MAX_CANVAS_MARGIN:g}] "
                              f"(fraction of the reference frame), got {margin!r}")
         set_(self, "canvas_margin", margin)
-        set_(self, "dense_check", _check_flag(self.dense_check, "dense_check"))
+        set_(self, "dense_check", check_bool(self.dense_check, "dense_check"))
         set_(self, "sparse_tolerance", check_positive(self.sparse_tolerance, "sparse_tolerance",
                                                       allow_zero=True))
 
@@ -513,7 +514,7 @@ def _dense_options(dense, options) -> tuple[bool, DenseOptions]:
                         f"{unknown}; dense options accepted as keywords: {list(_DENSE_FIELDS)}")
     if isinstance(dense, DenseOptions):
         return True, dataclasses.replace(dense, **options)
-    return _check_flag(dense, "dense"), DenseOptions(**options)
+    return check_bool(dense, "dense"), DenseOptions(**options)
 
 
 def _check_pairs_input(pairs, n):
@@ -630,7 +631,7 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
     """
     t_start = time.perf_counter()
     use_dense, opts = _dense_options(dense, dense_options)
-    segment, rectify, robust = (_check_flag(v, k) for k, v in
+    segment, rectify, robust = (check_bool(v, k) for k, v in
                                 (("segment", segment), ("rectify", rectify), ("robust", robust)))
     sparse_kw = {"method": check_choice(method, "method", tuple(_METHODS)),
                  "threshold": check_positive(threshold, "threshold"),

@@ -80,7 +80,14 @@ import numpy as np
 
 from .._blas import blas_limit
 from .._progress import progress_bar
-from .._validation import as_generator, check_choice, check_index_pairs, check_int, check_positive
+from .._validation import (
+    as_generator,
+    check_bool,
+    check_choice,
+    check_index_pairs,
+    check_int,
+    check_positive,
+)
 from ..matching import sm as _sm_reference
 from ..multigraph import PairAffinities, run_lockstep
 from ..parallel import map_chunks, split_chunks
@@ -396,8 +403,7 @@ def match_pairs(features, adjacencies, pairs, *, n, matcher="rrwm", sigma2=None,
         dummy_affinity, "dummy_affinity", allow_zero=True)
     if chunk_size is not None:
         chunk_size = check_int(chunk_size, "chunk_size", minimum=1)
-    if not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"`progress` must be a bool, got {type(progress).__name__}")
+    check_bool(progress, "progress")
     P = len(pairs)
     out = np.empty((P, n), np.int32)
     if P == 0:

@@ -24,8 +24,15 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import (as_generator, check_array, check_choice, check_index_pairs, check_int,
-                           check_positive)
+from .._validation import (
+    as_generator,
+    check_array,
+    check_bool,
+    check_choice,
+    check_index_pairs,
+    check_int,
+    check_positive,
+)
 from ..permutations import solve_lap
 from ..synchronization import synchronize_permutations
 from ._checks import (check_feature_list, check_int_array, check_node_labels, check_width,
@@ -416,8 +423,7 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
     N = check_int(n_graphs, "n_graphs", minimum=1)
     n = check_int(n, "n", minimum=1)
     check_choice(method, "method", SYNC_METHODS)
-    if not isinstance(keep_embedding, (bool, np.bool_)):
-        raise TypeError(f"`keep_embedding` must be a bool, got {type(keep_embedding).__name__}")
+    check_bool(keep_embedding, "keep_embedding")
     A = check_int_array(assignments, "assignments", 2)
     pr = check_index_pairs(pairs, N, what="graph indices", distinct=True)
     if A.size == 0:
@@ -964,8 +970,7 @@ def assignment_kernel(aligned, other=None, *, kernel: str = "linear", gamma=None
     if Y.shape[1:] != X.shape[1:]:
         raise ValueError(f"`other` must have shape (M, {X.shape[1]}, {X.shape[2]}) like "
                          f"`aligned`, got shape {Y.shape}")
-    if not isinstance(normalize, (bool, np.bool_)):
-        raise TypeError(f"`normalize` must be a bool, got {type(normalize).__name__}")
+    check_bool(normalize, "normalize")
     if kernel == "gaussian":
         gamma = median_gamma(X) if gamma is None else check_width(gamma, "gamma", inverse=True)
         with np.errstate(over="ignore", invalid="ignore"):
@@ -1075,8 +1080,7 @@ def pairwise_assignment_kernel(features, assignments, pairs, *, kernel: str = "l
            [2., 3., 3.]])
     """
     check_choice(kernel, "kernel", ("linear", "gaussian"))
-    if not isinstance(normalize, (bool, np.bool_)):
-        raise TypeError(f"`normalize` must be a bool, got {type(normalize).__name__}")
+    check_bool(normalize, "normalize")
     feats = check_feature_list(features)
     N = len(feats)
     A = check_int_array(assignments, "assignments", 2)

@@ -19,7 +19,7 @@ import warnings
 import numpy as np
 import scipy.sparse as sp
 
-from .._validation import check_array, check_int, check_positive
+from .._validation import check_array, check_bool, check_int, check_positive
 from ..exceptions import ConvergenceWarning
 from ..permutations import assignment_to_matrix, solve_lap
 from ._affinity import Affinity, as_affinity
@@ -93,8 +93,7 @@ def hungarian(scores, *, n1: int | None = None, n2: int | None = None,
     >>> hungarian(np.array([[1.0, 5.0], [4.0, 2.0]])).assignment
     array([1, 0])
     """
-    if not isinstance(maximize, (bool, np.bool_)):
-        raise TypeError(f"`maximize` must be a bool, got {type(maximize).__name__} {maximize!r}")
+    check_bool(maximize, "maximize")
     S, aff = _score_matrix(scores, n1, n2)
     assignment = solve_lap(S, maximize=bool(maximize))
     return MatchingResult(assignment=assignment, soft=None,

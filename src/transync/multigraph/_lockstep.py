@@ -45,6 +45,7 @@ from .._progress import progress_bar
 from .._validation import (
     check_affinity_scale,
     check_array,
+    check_bool,
     check_choice,
     check_int,
     check_nonnegative,
@@ -639,8 +640,7 @@ def run_lockstep(affinities: PairAffinities, *, solver: str, sync=None,
     damping = check_positive(damping, "damping")
     if damping > 1:
         raise ValueError(f"`damping` must lie in (0, 1], got {damping!r}")
-    if not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"`progress` must be a bool, got {type(progress).__name__}")
+    check_bool(progress, "progress")
     aff = affinities
     n1, n2 = aff.n1, aff.n2
     t_solve = t_sync = 0.0

@@ -37,7 +37,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .._validation import check_array, check_choice, check_int, check_positive
+from .._validation import check_array, check_bool, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning, DegenerateInputError
 from ..geometry import normalization_matrix, normalize_determinant
 from ._pairwise_input import check_mask, observations
@@ -476,8 +476,7 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
     max_iter = check_int(max_iter, "max_iter", minimum=1)
     tol = check_positive(tol, "tol", allow_zero=True)
     residual_scale = check_positive(residual_scale, "residual_scale")
-    if not isinstance(robust, (bool, np.bool_)):
-        raise TypeError(f"`robust` must be a bool, got {type(robust).__name__} {robust!r}")
+    check_bool(robust, "robust")
     T, obs = _parse_input(T, mask, n_objects)
     n, d = T.shape[0], T.shape[-1]
     reference = check_int(reference, "reference", minimum=0, maximum=n - 1)

@@ -20,7 +20,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from .._validation import as_generator, check_choice, check_int, check_positive
+from .._validation import as_generator, check_bool, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning, DegenerateInputError
 from ..permutations import MultiMatching, cycle_inconsistency_arrays, solve_lap
 from . import _spectral as spec
@@ -461,9 +461,7 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
     opts = _check_options(method=method, solver=solver, disconnected=disconnected,
                           max_iter=max_iter, tol=tol, eig_tol=eig_tol, threshold=threshold,
                           refine=refine, min_score=min_score, max_triangles=max_triangles)
-    if not isinstance(keep_embedding, (bool, np.bool_)):
-        raise TypeError(f"`keep_embedding` must be a bool, got {type(keep_embedding).__name__} "
-                        f"{keep_embedding!r}")
+    check_bool(keep_embedding, "keep_embedding")
     gen = as_generator(rng)
     t_start = time.perf_counter()
     stk = parse_pairwise(pairwise, mask=mask, weights=weights, sizes=sizes)

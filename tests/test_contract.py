@@ -2467,6 +2467,10 @@ def test_hunted_cases():
           "disconnected alignments accepted")
     # a subnormal kernel in the scaling domain: 1 / (A v) overflowed with a RuntimeWarning
     check(call(sinkhorn_batch, np.array([[[5e-324]]])) is REFUSED, "subnormal kernel accepted")
+    # point sets 1e311 apart in scale: verified=True with an inf / NaN transform
+    q = np.random.default_rng(0).random((12, 2))
+    check(call(verify_assignment, q * 1e-300, q * 1e11, np.arange(12), rng=0) is REFUSED,
+          "a transform that overflows accepted")
     # subnormal points: a divide-by-zero RuntimeWarning before the named refusal
     check(call(verify_assignment, np.zeros((1, 2)), np.array([[5e-324, 0.0], [0.0, 0.0]]),
                np.array([0])) is REFUSED, "subnormal points accepted")

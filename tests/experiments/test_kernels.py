@@ -68,6 +68,9 @@ def test_resolve_sets_folder_parent_and_names(tmp_path, monkeypatch):
         kx.resolve_sets("NOPE")
     with pytest.raises(ValueError, match="`sets`: 'BBB' not found; available: AAA, MUTAG"):
         kx.resolve_sets(tmp_path / "tu", sets=["BBB"])
+    for empty in (",", [], [" "]):        # --sets , named an internal Sweep.values
+        with pytest.raises(ValueError, match="`sets` .* must name at least one data set"):
+            kx.resolve_sets(tmp_path / "tu", sets=empty)
     with pytest.raises(ValueError, match="holds no TU data set"):
         kx.resolve_sets(tmp_path / "tu" / "notes")
     with pytest.raises(FileNotFoundError, match="does not exist"):

@@ -249,6 +249,12 @@ def test_match_collection_verify_refusals():
     no_points = [Graph(np.ones((4, 4)) - np.eye(4)) for _ in range(3)]
     with pytest.raises(ValueError, match="graph 0 has no points"):
         match_collection(no_points, verify="affine", progress=False)
+    far = [Graph.from_points(np.random.default_rng(k).random((6, 2)) + 2e12, edges="full")
+           for k in range(3)]
+    weight = functools.partial(gaussian_edge_affinity, attribute="weight")
+    with pytest.raises(ValueError, match=r"cannot check the matches of graphs\[0\] and "
+                                         r"graphs\[1\] \(points1 = graphs\[0\]\.points"):
+        match_collection(far, verify="affine", affinity=weight, progress=False)
     three_d = [Graph.from_points(np.random.default_rng(k).random((5, 3)), edges="full") for k in range(3)]
     with pytest.raises(ValueError, match="graph 0 has 3-d points"):
         match_collection(three_d, verify="homography", progress=False)

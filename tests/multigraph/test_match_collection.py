@@ -254,10 +254,39 @@ def test_default_affinity_on_sparse_and_delaunay_graphs():
 
 def test_unconverged_pairs_warn_once():
     p = make_graph_collection(n_graphs=4, n_inliers=8, deformation=0.2, rng=0)
-    with pytest.warns(ConvergenceWarning, match="did not converge") as rec:
+    with pytest.warns(ConvergenceWarning, match="did not converge.*option 'max_iter'") as rec:
         res = match_collection(p.graphs, sync=None, affinity=AFF, options={"max_iter": 1},
                                progress=False)
     assert len(rec) == 1 and res.converged is False
+    # GA's budget is max_inner (the warning named 'max_iter', which GA refuses)
+    with pytest.warns(ConvergenceWarning, match="solver 'ga' .*option 'max_inner'"):
+        match_collection(p.graphs, solver="ga", sync=None, affinity=AFF,
+                         options={"max_inner": 1, "inner_tol": 1e-15}, progress=False)
+
+
+def test_points_of_different_dimensions_refused_on_every_path():
+    """The per-graph (separable) expansion of the default affinity skipped the dimension
+    check that the pairwise affinity makes: 2-d and 3-d points were matched on complete
+    graphs (refused on Delaunay graphs, which take the pairwise path)."""
+    rs = np.random.default_rng(0)
+    P = rs.random((12, 2))
+    g2 = Graph.from_points(P, edges="full")
+    g3 = Graph.from_points(np.c_[P, rs.random(12)], edges="full")
+    for kwargs in (dict(), dict(mode="offline", sync="spectral"), dict(sync=None)):
+        with pytest.raises(ValueError, match=r"`graphs\[0\]` and `graphs\[1\]` must have "
+                                             r"points of the same dimension"):
+            match_collection([g2, g3, g2], progress=False, **kwargs)
+
+
+def test_accuracy_names_a_truth_of_the_wrong_shape():
+    p = make_graph_collection(n_graphs=4, n_inliers=5, rng=0)
+    res = match_collection(p.graphs, progress=False)
+    labels = p.ground_truth.labels
+    for bad in ([], labels[:3], [lab[:3] for lab in labels]):
+        with pytest.raises(ValueError, match=r"`truth` must label the 4 graphs of this result"):
+            res.accuracy(bad)
+    with pytest.raises(TypeError, match="`truth` must be a MultiMatching"):
+        res.accuracy("x")
 
 
 @pytest.mark.parametrize("kwargs, exc, match", [

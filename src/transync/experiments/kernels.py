@@ -230,7 +230,11 @@ def resolve_sets(data=None, sets=None) -> dict[str, Path]:
                                  "DS_A.txt (with DS_graph_indicator.txt, DS_graph_labels.txt) "
                                  "or a folder of such folders")
     if sets is not None:
-        want = sets.split(",") if isinstance(sets, str) else list(sets)
+        want = [s.strip() for s in (sets.split(",") if isinstance(sets, str) else list(sets))]
+        want = [s for s in want if s]
+        if not want:
+            raise ValueError(f"`sets` (--sets) must name at least one data set, got {sets!r}; "
+                             f"available: {', '.join(found)}")
         missing = [s for s in want if s not in found]
         if missing:
             raise ValueError(f"`sets`: {', '.join(map(repr, missing))} not found; available: "

@@ -989,6 +989,14 @@ def gaussian_edge_factors(graphs, *, sigma2: float = DEFAULT_SIGMA2, attribute: 
         pairs = np.stack(np.triu_indices(N, 1), axis=1)
     else:
         pairs = check_index_pairs(pairs, N, what="graph indices")
+    if attribute == "length":           # as gaussian_edge_affinity refuses for every pair
+        dim = np.array([-1 if g.points is None else g.points.shape[1] for g in graphs])
+        bad = np.flatnonzero((dim[pairs[:, 0]] != dim[pairs[:, 1]])
+                             & (dim[pairs[:, 0]] >= 0) & (dim[pairs[:, 1]] >= 0))
+        if bad.size:
+            i, j = (int(x) for x in pairs[bad[0]])
+            raise ValueError(f"`graphs[{i}]` and `graphs[{j}]` must have points of the same "
+                             f"dimension for attribute='length', got {dim[i]} and {dim[j]}")
     nonempty = [v for v in vals if v.size]
     E = np.stack([np.where(m, a, 0.0) for a, m in zip(attrs, masks)])
     M = np.stack(masks)

@@ -82,6 +82,11 @@ class VerificationResult:
     n_rounds: int
 
 
+#: smallest ratio of the two point sets' scales a verification takes (and its inverse the
+#: largest): the transform between them, in the callers' units, must stay finite
+_MIN_SCALE_RATIO = 1e-280
+
+
 def _check_points(points, name: str) -> np.ndarray:
     P = check_array(points, name, ndim=2)
     if P.shape[1] != 2:
@@ -279,6 +284,12 @@ def verify_assignment(points1, points2, assignment, *, model: str = "affine",
     # Normalized coordinates: the fits and the gate do not depend on the units
     T1, x1 = _normalization(p1, "points1")
     T2, x2 = _normalization(p2, "points2")
+    with np.errstate(over="ignore", under="ignore"):
+        ratio = T1[0, 0] / T2[0, 0]           # spread of points2 / spread of points1
+    if not _MIN_SCALE_RATIO < ratio < 1.0 / _MIN_SCALE_RATIO:
+        raise ValueError(f"`points1` and `points2` differ too much in scale (the spread of "
+                         f"`points2` is {ratio:.3g} times that of `points1`): a transform "
+                         f"between them overflows float64; rescale one of them")
     g = threshold * _nearest_neighbour_scale(x2)
     with np.errstate(over="ignore"):
         gate = g / T2[0, 0]                   # the gate in the units of points2

@@ -286,10 +286,14 @@ def _run(graphs, lay, pairs, affinity, solver, sync, mode, executor, options, sy
     else:
         stage = _offline_stage(aff, solver, options, executor, progress, timings)
     assignments, soft, n_iter, unconverged = stage
-    if unconverged and mode == "offline":
+    if unconverged and (mode == "offline" or solver in CAO_VARIANTS):
+        # GA's budget is its inner loop per temperature; CAO's pairwise stage is RRWM
+        which = f"CAO's pairwise RRWM (solver={solver!r})" if solver in CAO_VARIANTS \
+            else f"solver {solver!r}"
+        budget = "max_inner" if solver == "ga" else "max_iter"
         warnings.warn(f"match_collection: {unconverged} of {len(pairs)} pairs did not converge "
-                      f"within the iteration budget of solver {solver!r} (see options "
-                      "'max_iter'); their last iterates are used", ConvergenceWarning,
+                      f"within the iteration budget of {which} (option {budget!r} of "
+                      f"`options`); their last iterates are used", ConvergenceWarning,
                       stacklevel=3)
     if soft is not None:
         info["soft"] = _real_blocks(doubly_stochastic_iterates(soft), pairs, lay.sizes)
@@ -565,8 +569,13 @@ def _verify_chunk(payload):
     verified = np.zeros(len(pairs), dtype=bool)
     for p, (i, j) in enumerate(pairs):
         ni = len(points[i])
-        res = verify_assignment(points[i], points[j], assignments[p, :ni], model=model,
-                                rng=int(seeds[p]), **gate)
+        try:
+            res = verify_assignment(points[i], points[j], assignments[p, :ni], model=model,
+                                    rng=int(seeds[p]), **gate)
+        except ValueError as exc:           # name the graphs, not verify_assignment's arguments
+            raise ValueError(f"`verify={model!r}` cannot check the matches of graphs[{i}] and "
+                             f"graphs[{j}] (points1 = graphs[{i}].points, points2 = "
+                             f"graphs[{j}].points): {exc}") from None
         out[p, :ni] = res.assignment
         n_inliers[p], verified[p] = res.n_inliers, res.verified
     return out, n_inliers, verified

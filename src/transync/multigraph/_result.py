@@ -171,7 +171,16 @@ class MultiMatchingResult:
         ``transync.metrics.multimatching_accuracy(self.pairwise_dict(), truth, pairs=self.pairs)``.
         """
         truth = getattr(truth, "ground_truth", truth)
-        return MultiMatching.from_labels(truth).accuracy(self.pairwise_dict(), pairs=self.pairs)
+        try:
+            m = MultiMatching.from_labels(truth)
+        except (TypeError, ValueError) as exc:
+            raise type(exc)(f"`truth` must be a MultiMatching or universe labels of the "
+                            f"{self.n_graphs} graphs: {exc}") from None
+        if m.n_objects != self.n_graphs or not np.array_equal(m.sizes, self.sizes):
+            raise ValueError(f"`truth` must label the {self.n_graphs} graphs of this result, of "
+                             f"{self.sizes.tolist()} nodes, got {m.n_objects} objects of "
+                             f"{m.sizes.tolist()} nodes")
+        return m.accuracy(self.pairwise_dict(), pairs=self.pairs)
 
     def __repr__(self) -> str:
         return (f"MultiMatchingResult(solver={self.solver!r}, sync={self.sync!r}, "

@@ -455,3 +455,15 @@ def test_collection_command_matches_point_sets_of_different_sizes(tmp_path, extr
         assert res["verify"] == extra[1] and res["verified_pairs"] == len(res["pairs"])
     else:
         assert res["verify"] == "none" and res["verified_pairs"] is None
+
+
+@pytest.mark.parametrize("argv", [["kernel", "NO_SUCH_SET"], ["homography", "a.png", "b.png"]])
+def test_an_output_path_that_is_a_file_is_refused_before_the_work(tmp_path, capsys, argv):
+    """`kernel` computed its Gram matrix and cross-validation (minutes) before saying that
+    --out was a file; both long commands now check it first (before even reading the input:
+    the error is the output's, not the missing data set's or images')."""
+    out = tmp_path / "taken"
+    out.write_text("x")
+    assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "exists and is not a folder" in err and err.count("\n") == 1

@@ -84,6 +84,15 @@ def emit(payload: dict, out: str | None) -> int:
     return 0
 
 
+def check_output_folder(path) -> Path:
+    """``path`` as a Path, refused when it exists and is not a folder: call it before a long
+    computation, so that its result is not lost to an output path that cannot take it."""
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"output folder {out} exists and is not a folder")
+    return out
+
+
 @contextlib.contextmanager
 def new_output_folder(path):
     """Create ``path`` for writing; on failure remove it again if this call created it.
@@ -91,9 +100,7 @@ def new_output_folder(path):
     Yields the folder as a :class:`~pathlib.Path`. A folder that already existed is left in
     place (only the files written into it stay behind).
     """
-    out = Path(path)
-    if out.exists() and not out.is_dir():
-        raise CLIError(f"output folder {out} exists and is not a folder")
+    out = check_output_folder(path)
     created = not out.exists()
     try:
         out.mkdir(parents=True, exist_ok=True)

@@ -8,7 +8,8 @@ import json
 import time
 from pathlib import Path
 
-from ._common import CLIError, new_output_folder, positive_float, positive_int
+from ._common import (CLIError, check_output_folder, new_output_folder, positive_float,
+                      positive_int)
 
 __all__ = ["add_parser"]
 
@@ -79,6 +80,7 @@ def _estimate(args):
 def _cmd_homography(args) -> int:
     import numpy as np
 
+    check_output_folder(args.out)             # before the estimate, not after
     _check_images(args.images)
     if not 0 <= args.reference < len(args.images):
         raise CLIError(f"--reference must be an image index in [0, {len(args.images) - 1}], got "

@@ -15,7 +15,8 @@ from __future__ import annotations
 import json
 import time
 
-from ._common import CLIError, int_at_least, new_output_folder, positive_int
+from ._common import (CLIError, check_output_folder, int_at_least, new_output_folder,
+                      positive_int)
 
 __all__ = ["add_parser"]
 
@@ -46,6 +47,7 @@ def _cmd_kernel(args) -> int:
     from ..kernels import TransitiveAssignmentKernel, repeated_cv, spectrum
 
     args.interrupt_hint = "nothing was written"
+    check_output_folder(args.out)             # before minutes of work, not after
     ds = _load(args.dataset)
     keep, rule = prune(ds.sizes, ds.y)
     sub = ds.subset(keep)

@@ -92,7 +92,8 @@ def multimatching_accuracy(prediction, truth, *, pairs=None) -> float:
     Returns
     -------
     float
-        Recovered fraction in [0, 1].
+        Recovered fraction in [0, 1]; 1.0 when ``truth`` has no correspondence on ``pairs``
+        (nothing to recover, as :func:`matching_accuracy` with no inliers).
 
     Raises
     ------

@@ -31,6 +31,9 @@ from ._result import BlockRounding, PermutationSyncResult
 __all__ = ["synchronize_permutations"]
 
 _METHODS = ("spectral", "orthogonal", "matcheig")
+#: eigenvalues below this fraction of the largest count as zero: their eigenvectors (an
+#: arbitrary basis of a null space) are not used as universe directions
+NULL_EIGENVALUE = 1e-6
 _SOLVERS = ("auto", "dense", "matrix_free")
 
 
@@ -226,7 +229,17 @@ def _spectral_embedding(stk, d, solver, tol, rng, info):
             U = U[:, ::-1]
     info["eigenvalues"] = np.asarray(vals[: max(k_vals, 1)])
     info["seconds_eigen"] = time.perf_counter() - t0
-    return U[:, : min(d, M)], d, n_prod, converged, A
+    k = min(d, M, U.shape[1])
+    lead = np.asarray(vals[:k], dtype=float)
+    if lead.size == k and k > 1 and lead[0] > 0:
+        # a given d above the slots the input uses: the extra eigenvectors span a null space
+        # (eigenvalue 0), an arbitrary basis whose entries are as large as the informative
+        # ones; in the row-normalized embedding they scrambled exactly consistent input. They
+        # are left out: their slots stay empty unless an object needs more of them
+        k = max(int(np.count_nonzero(lead > NULL_EIGENVALUE * lead[0])), 1)
+        if k < lead.size:
+            info["null_eigenvectors_dropped"] = int(lead.size - k)
+    return U[:, :k], d, n_prod, converged, A
 
 
 def _component_spectral(stk, d, solver, tol, rng, info, refine=0):

@@ -410,6 +410,8 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
         An ``(N, N, n)`` assignment or ``(N, N, n, n)`` block array is read where ``mask``.
     n_universe : int, optional
         Universe size ``d``: at least the largest object, at most the total number of nodes.
+        A ``d`` above the slots the input uses leaves the extra slots empty (their eigenvectors,
+        of eigenvalue 0, are not used; ``info["null_eigenvectors_dropped"]`` counts them).
     method : {"spectral", "orthogonal", "matcheig"}, default="spectral"
     mask : (N, N) bool array, optional
         Which pairs to use.

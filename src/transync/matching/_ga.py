@@ -56,8 +56,10 @@ class GAStepper(_BaseStepper):
     Each step runs the inner loop (gradient, softassign, slack Sinkhorn) up to ``max_inner`` times
     or until the matrix changes by less than ``inner_tol``, then multiplies ``beta`` by
     ``beta_rate``. The iterate is the real block of the slack-augmented matrix: non-negative with
-    row and column sums at most 1. :meth:`set_iterate` sets that block and fills the slack row and
-    column with the missing mass.
+    row and column sums at most 1 once the slack Sinkhorn has converged (with ``n1 != n2`` it
+    may not within ``sinkhorn_max_iter``: methods page *Pairwise matching*, GA's known
+    limitation). :meth:`set_iterate` sets that block and fills the slack row and column with
+    the missing mass.
 
     Parameters
     ----------

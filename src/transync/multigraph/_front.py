@@ -304,8 +304,8 @@ def _run(graphs, lay, pairs, affinity, solver, sync, mode, executor, options, sy
     matching = info.pop("matching", None)
     if verify is not None:
         t = time.perf_counter()
-        assignments = _verify_stage(graphs, pairs, assignments, verify, executor, gen, progress,
-                                        info)
+        assignments = _verify_stage(graphs, pairs, assignments, verify, executor, gen,
+                                    progress, info)
         timings["verify"] = time.perf_counter() - t
         soft, refine = None, False    # synchronize the verified maps (hard), as they are
     if sync is not None and matching is None:

@@ -394,3 +394,18 @@ def test_consistent_input_survives_a_universe_larger_than_it_uses(method, extra,
                                        n_universe=max(used, int(p.sizes.max())) + extra)
         for (i, j), a in p.pairwise.items():
             np.testing.assert_array_equal(res.pairwise(i, j), a)
+
+
+@pytest.mark.parametrize("method", ["spectral", "matcheig", "orthogonal"])
+def test_maps_that_match_nothing_keep_every_node_apart(method):
+    """Every observed map says "no correspondence": the spectrum is flat (all ones), and the
+    eigengap rule fell back to the largest object, matching every node of every object with
+    the others (precision 0; found by a metamorphic test). Every node is its own slot."""
+    pw = {(i, j): np.full(3, -1) for i in range(4) for j in range(i + 1, 4)}
+    res = synchronize_permutations(pw, method=method, sizes=[3] * 4)
+    assert res.n_universe == 12 and "no eigengap" in res.info["n_universe_rule"]
+    assert all(np.all(res.pairwise(i, j) == -1) for i, j in pw)
+    # one observed correspondence: the gap rule again (11 slots, that pair shares one)
+    pw[(0, 1)] = np.array([2, -1, -1])
+    res = synchronize_permutations(pw, method=method, sizes=[3] * 4)
+    assert res.n_universe == 11 and res.pairwise(0, 1).tolist() == [2, -1, -1]

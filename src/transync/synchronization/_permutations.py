@@ -215,6 +215,13 @@ def _spectral_embedding(stk, d, solver, tol, rng, info):
             vals, U2, n2, converged = _eigs(k_vals, k_vec, U)
             U = U2
             n_prod += n2
+        if vals.size >= M and vals[-1] > 0.5 * vals[0]:
+            # the whole spectrum computed and no drop anywhere: every node is its own cluster
+            # (the maps observe no correspondence); the gap rule alone fell back to n_max and
+            # matched nodes that the input leaves unmatched
+            d = M
+            rule = ("no eigengap: the whole spectrum stays above half its largest value (no "
+                    "node corresponds to another): every node its own slot, d = total nodes")
         info["n_universe_rule"] = rule
         info["n_universe_estimate"] = d
         info["n_universe_candidates"] = (n_max, int(vals.size - 1))

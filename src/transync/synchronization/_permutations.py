@@ -104,6 +104,38 @@ def _node_scores(stk: StackedPairs, labels, d: int, dobs=None):
     return scores
 
 
+def _free_unsupported(stk: StackedPairs, labels, d: int, dobs=None):
+    """Move nodes that no observation supports out of shared slots into empty ones.
+
+    A node whose output partners agree with none of its observed maps (support 0 in
+    :func:`_node_scores`) while some pair claims one adds only disagreements; in a slot no
+    object uses it claims nothing. The objective is unchanged (the node had no agreement), and
+    exactly consistent partial input is returned as given instead of a tie with spurious
+    matches. Returns ``(labels, number of nodes moved)``.
+    """
+    used = np.zeros(d, dtype=bool)
+    for lab in labels:
+        used[lab[lab >= 0]] = True
+    free = np.flatnonzero(~used).tolist()
+    if not free:
+        return labels, 0
+    ptr, dst, dmaps, dw = dobs if dobs is not None else spec.directed(stk)
+    matching = MultiMatching(labels, d)
+    out = [lab.copy() for lab in labels]
+    moved = 0
+    for g, score in enumerate(_node_scores(stk, labels, d, (ptr, dst, dmaps, dw))):
+        lo, hi = ptr[g], ptr[g + 1]
+        n_g = int(stk.sizes[g])
+        pairs = np.column_stack([np.full(hi - lo, g), dst[lo:hi]])
+        claims = (matching.pairwise_array(pairs)[:, :n_g] >= 0).any(0)
+        for u in np.flatnonzero((score == 0) & claims & (out[g] >= 0)):
+            if not free:
+                return out, moved
+            out[g][u] = free.pop(0)
+            moved += 1
+    return out, moved
+
+
 def _refine_labels(stk: StackedPairs, labels, d: int, max_sweeps: int, dobs=None):
     """Projected power method on the discrete objective (Chen & Candes 2016, block form).
 
@@ -263,7 +295,8 @@ def _component_spectral(stk, d, solver, tol, rng, info, refine=0):
     return labels, d, n_prod, ok, V
 
 
-def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, refine):
+def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, refine,
+                          free_unsupported=True):
     V, d, n_prod, ok_eig, _ = _spectral_embedding(stk, d, solver, tol, rng, info)
     sizes = stk.sizes
     off = stk.offsets
@@ -327,7 +360,10 @@ def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, re
             best = (name, score, lab)
     info["candidates"] = scores
     info["chosen"] = best[0]
-    return best[2], d, it, converged and ok_eig, stacked
+    labels = best[2]
+    if free_unsupported and not stk.is_full:     # partial maps: '-1' entries can tie
+        labels, info["unsupported_nodes_freed"] = _free_unsupported(stk, labels, d, dobs)
+    return labels, d, it, converged and ok_eig, stacked
 
 
 # --------------------------------------------------------------------------------------------
@@ -373,7 +409,10 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
       the discrete objective, at most ``refine`` sweeps, default ``max_iter``), and the one with
       the higher objective is returned (``info["candidates"]``, ``info["chosen"]``). Since every
       candidate is scored by the objective the method maximizes, this is a safeguard against a
-      poor local optimum of the polar iteration, not a change of objective.
+      poor local optimum of the polar iteration, not a change of objective. With partial maps,
+      a node that no observation supports then leaves a shared slot for an empty one when
+      there is one (the objective is unchanged: '-1' entries carry no weight, so the
+      spurious matches tied with none; ``info["unsupported_nodes_freed"]``).
     * ``"matcheig"`` (Maset, Arrigoni, Fusiello 2017), a fast baseline: the same eigenvectors,
       rows normalized, and each block ``U_i U_j^T`` rounded independently by Hungarian,
       dropping matches below ``threshold``. Its ``pairwise(i, j)`` need not be cycle-consistent
@@ -597,7 +636,7 @@ def _view_graph_universe(stk, opts, gen, info) -> int:
         warnings.simplefilter("ignore", ConvergenceWarning)
         lab, d0, *_ = _component_orthogonal(stk, None, opts["solver"], opts["eig_tol"], gen,
                                             tmp, opts["max_iter"], opts["tol"],
-                                            opts["max_iter"])
+                                            opts["max_iter"], free_unsupported=False)
     used = np.unique(np.concatenate([np.asarray(x)[np.asarray(x) >= 0] for x in lab]))
     d = max(int(stk.sizes.max()), int(used.size))
     info["n_universe_rule"] = (

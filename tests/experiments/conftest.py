@@ -1,5 +1,7 @@
 """Fixtures shared by the experiment tests."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -29,8 +31,6 @@ def run_twice():
     """``run(exp, folder, trials, plot) -> (first, again)``: an experiment run that must
     finish every trial, then its rerun, which must resume with nothing new to compute and
     report the very same stored metrics."""
-    import json
-
     def run(exp, folder, trials, plot):
         first = run_experiment(exp, folder, trials=trials, progress=False, plot=plot)
         assert first.n_failed == 0, [r["error"] for r in first.records if r["error"]][:1]

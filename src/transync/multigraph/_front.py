@@ -897,9 +897,10 @@ def _synchronize(pairs, assignments, soft, lay, n_universe, sync, gen, min_score
         est = estimate_universe(_by_pair(pairs, doubly_stochastic_iterates(soft), sizes),
                                 sizes=sizes)
         n_universe, rule = est.n_universe, f"soft {est.rule} (the pairwise solver's soft solutions)"
-    # In a universe larger than the data needs, the spectral rounding splits slots (exact
-    # partial input, d = 20 for a true 12: accuracy 0.64); projected-power sweeps merge them
-    # back (1.0 after 2 sweeps), as the orthogonal method always does.
+    # In a universe larger than the data needs, the spectral rounding split slots (exact
+    # partial input, d = 20 for a true 12: accuracy 0.64, before synchronize_permutations left
+    # out the null-space eigenvectors: now 1.0); on noisy maps the projected-power sweeps
+    # still merge slots that the rounding splits, as the orthogonal method always does.
     refine = UNIVERSE_REFINE if lay.kind == "universe" and method == "spectral" else None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)

@@ -79,6 +79,25 @@ def _agreement(stk: StackedPairs, labels, d: int):
     return agree, n_obs, n_ok
 
 
+def _observed_and_output(stk: StackedPairs, labels, d: int, dobs=None):
+    """Per object ``g``: ``(obs, out, w)``, its observed maps to its neighbours ``(deg, n_g)``,
+    the output's maps on the same pairs and the pairs' weights ``(deg, 1)``."""
+    ptr, dst, dmaps, dw = dobs if dobs is not None else spec.directed(stk)
+    matching = MultiMatching(labels, d)
+    for g in range(stk.n_objects):
+        lo, hi = ptr[g], ptr[g + 1]
+        n_g = int(stk.sizes[g])
+        pairs = np.column_stack([np.full(hi - lo, g), dst[lo:hi]])
+        yield dmaps[lo:hi, :n_g], matching.pairwise_array(pairs)[:, :n_g], dw[lo:hi, None]
+
+
+def _support(obs, out, w) -> np.ndarray:
+    """Weighted Jaccard agreement of the output maps ``out`` with ``obs``, per node."""
+    agree = (w * ((obs >= 0) & (out == obs))).sum(0)
+    claim = (w * ((obs >= 0) | (out >= 0))).sum(0)
+    return np.where(claim > 0, agree / np.where(claim > 0, claim, 1.0), 0.0)
+
+
 def _node_scores(stk: StackedPairs, labels, d: int, dobs=None):
     """Per-node support of the output: weighted Jaccard agreement with the observations.
 
@@ -87,21 +106,7 @@ def _node_scores(stk: StackedPairs, labels, d: int, dobs=None):
     slot; the score is (weight of pairs where both claim the same partner) / (weight of pairs
     where at least one claims a partner), 0 when nothing is claimed.
     """
-    sizes = stk.sizes
-    ptr, dst, dmaps, dw = dobs if dobs is not None else spec.directed(stk)
-    matching = MultiMatching(labels, d)
-    scores = []
-    for g in range(stk.n_objects):
-        lo, hi = ptr[g], ptr[g + 1]
-        n_g = int(sizes[g])
-        obs = dmaps[lo:hi, :n_g]                                    # (deg, n_g)
-        pairs = np.column_stack([np.full(hi - lo, g), dst[lo:hi]])
-        out = matching.pairwise_array(pairs)[:, :n_g]               # output maps g -> dst
-        w = dw[lo:hi, None]
-        agree = (w * ((obs >= 0) & (out == obs))).sum(0)
-        claim = (w * ((obs >= 0) | (out >= 0))).sum(0)
-        scores.append(np.where(claim > 0, agree / np.where(claim > 0, claim, 1.0), 0.0))
-    return scores
+    return [_support(obs, out, w) for obs, out, w in _observed_and_output(stk, labels, d, dobs)]
 
 
 def _free_unsupported(stk: StackedPairs, labels, d: int, dobs=None):
@@ -119,21 +124,16 @@ def _free_unsupported(stk: StackedPairs, labels, d: int, dobs=None):
     free = np.flatnonzero(~used).tolist()
     if not free:
         return labels, 0
-    ptr, dst, dmaps, dw = dobs if dobs is not None else spec.directed(stk)
-    matching = MultiMatching(labels, d)
-    out = [lab.copy() for lab in labels]
+    new = [lab.copy() for lab in labels]
     moved = 0
-    for g, score in enumerate(_node_scores(stk, labels, d, (ptr, dst, dmaps, dw))):
-        lo, hi = ptr[g], ptr[g + 1]
-        n_g = int(stk.sizes[g])
-        pairs = np.column_stack([np.full(hi - lo, g), dst[lo:hi]])
-        claims = (matching.pairwise_array(pairs)[:, :n_g] >= 0).any(0)
-        for u in np.flatnonzero((score == 0) & claims & (out[g] >= 0)):
+    for g, (obs, out, w) in enumerate(_observed_and_output(stk, labels, d, dobs)):
+        unsupported = (_support(obs, out, w) == 0) & (out >= 0).any(0) & (new[g] >= 0)
+        for u in np.flatnonzero(unsupported):
             if not free:
-                return out, moved
-            out[g][u] = free.pop(0)
+                return new, moved
+            new[g][u] = free.pop(0)
             moved += 1
-    return out, moved
+    return new, moved
 
 
 def _refine_labels(stk: StackedPairs, labels, d: int, max_sweeps: int, dobs=None):

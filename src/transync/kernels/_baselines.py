@@ -62,12 +62,11 @@ def _check_graphs(graphs) -> list[np.ndarray]:
     return out
 
 
-def _sq_dist(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
-    """Squared distances between the rows of ``X`` and ``Y`` (expanded, centered on ``Y``'s
-    mean, rounding noise 0)."""
-    center = Y.mean(0)
-    X, Y = X - center, Y - center
-    return expanded_squared_distances((X * X).sum(1)[:, None], (Y * Y).sum(1)[None, :], X @ Y.T)
+def _centered(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(X - mean, squared norms)``: the rows ready for :func:`expanded_squared_distances`
+    (centered once: the expansion's rounding grows with the norms, not with the distances)."""
+    Xc = X - X.mean(0)
+    return Xc, (Xc * Xc).sum(1)
 
 
 # --------------------------------------------------------------------------- 3-graphlets
@@ -166,15 +165,17 @@ def graphlet3_kernel(graphs, *, normalize: bool = True) -> np.ndarray:
 def _oa_chunk(pair_idx: np.ndarray, *, pairs: np.ndarray, features: list, offsets: np.ndarray,
               labels: np.ndarray | None, sigma2: float) -> np.ndarray:
     """Optimal-assignment values of the pairs ``pairs[pair_idx]`` (one LAP per pair)."""
-    X = np.concatenate(features, axis=0)
+    Xc, xx = _centered(np.concatenate(features, axis=0))
     out = np.empty(pair_idx.shape[0])
     P = pairs[pair_idx]
     for i in np.unique(P[:, 0]):
         rows = np.flatnonzero(P[:, 0] == i)
         js = P[rows, 1]
         cols = np.concatenate([np.arange(offsets[j], offsets[j + 1]) for j in js])
+        own = slice(offsets[i], offsets[i + 1])                 # features[i]'s rows
+        d2 = expanded_squared_distances(xx[own, None], xx[None, cols], Xc[own] @ Xc[cols].T)
         with np.errstate(over="ignore", under="ignore"):        # far nodes: exactly 0
-            S = np.exp(-_sq_dist(features[i], X[cols]) / sigma2)
+            S = np.exp(-d2 / sigma2)
         if labels is not None:
             S *= labels[offsets[i]:offsets[i + 1], None] == labels[None, cols]
         starts = np.concatenate([[0], np.cumsum(offsets[js + 1] - offsets[js])])
@@ -317,10 +318,12 @@ def hks_mean_kernel(features, *, kernel: str = "linear", gamma: float | None = N
         lab = None if labels is None else np.concatenate(labels)
         starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
         K = np.zeros((N, N))
+        Xc, xx = _centered(X)
         for s in range(0, X.shape[0], block_nodes):
             blk = slice(s, min(s + block_nodes, X.shape[0]))
+            d2 = expanded_squared_distances(xx[blk, None], xx[None, :], Xc[blk] @ Xc.T)
             with np.errstate(over="ignore", under="ignore"):    # far nodes: exactly 0
-                S = np.exp(-g * _sq_dist(X[blk], X))
+                S = np.exp(-g * d2)
             if lab is not None:
                 S *= lab[blk, None] == lab[None, :]
             col_sums = np.add.reduceat(S, starts, axis=1)          # (block, N)

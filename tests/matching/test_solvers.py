@@ -430,8 +430,7 @@ def test_ga_on_graphs_of_different_sizes_finds_the_best_node_whatever_the_order(
     stopped with a row sum of 2.04 and every column near 1, and the rounding picked by node
     order ([1], and [2] after relabelling graph 2; metamorphic test). Different sizes now get
     a budget that converges (RECT_SINKHORN)."""
-    from transync.matching import ga
-    from transync.matching._ga import RECT_SINKHORN
+    from transync.matching import GAStepper, ga
 
     d = np.array([0.2, 0.75, 0.98, 0.5, 0.3])
     for perm in ([0, 1, 2, 3, 4], [2, 0, 1, 3, 4], [4, 3, 2, 1, 0]):
@@ -439,9 +438,9 @@ def test_ga_on_graphs_of_different_sizes_finds_the_best_node_whatever_the_order(
         res = ga(np.diag(d[perm]), n1=1, n2=5)
         assert perm[res.assignment].tolist() == [2]
         assert res.soft.sum() <= 1.05
-    assert RECT_SINKHORN == {"sinkhorn_max_iter": 100, "sinkhorn_tol": 1e-3}
-    # equal sizes keep Gold & Rangarajan's values, also in the lock-step solvers
-    from transync.multigraph._lockstep import _resolve_options
-
-    opts = _resolve_options("ga", None)
-    assert (opts["sinkhorn_max_iter"], opts["sinkhorn_tol"]) == (30, 0.05)
+    rect = GAStepper(np.eye(2), n1=1, n2=2)
+    assert (rect.sinkhorn_max_iter, rect.sinkhorn_tol) == (100, 1e-3)
+    # equal sizes keep Gold & Rangarajan's values (the lock-step solvers read their defaults
+    # from a 1 x 1 stepper and pad every pair to one size)
+    square = GAStepper(np.eye(1), n1=1, n2=1)
+    assert (square.sinkhorn_max_iter, square.sinkhorn_tol) == (30, 0.05)

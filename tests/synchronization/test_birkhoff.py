@@ -312,3 +312,28 @@ def test_estimate_universe_bad_input():
         estimate_universe({})
     est = estimate_universe({(0, 1): X}, sizes=[2, 2, 3])     # object 2 in no pair
     assert est.n_universe >= 3
+
+
+@pytest.mark.parametrize("scale", [1e-300, 0.01, 0.05, 0.2, 1e300])
+def test_universe_estimate_ignores_a_uniform_weight_scale(scale):
+    # consistent partial input: one eigenvalue 1 per universe node whatever the weights; the
+    # identity blocks once weighed 1 against the pairs' c, and at c = 0.05 the spectrum after
+    # the ones (0.905, 0.826, ...) split the gap and the estimate became 9 instead of 8
+    from transync.synchronization import estimate_universe
+
+    rng = np.random.default_rng(8)
+    N, d = 5, 8
+    labs = []
+    for _ in range(N):
+        keep = rng.random(d) < 0.7
+        if keep.sum() < 2:
+            keep[:2] = True
+        labs.append(rng.permutation(np.flatnonzero(keep)))
+    X = {(i, j): (labs[i][:, None] == labs[j][None, :]).astype(float)
+         for i in range(N) for j in range(i + 1, N)}
+    W = np.full((N, N), scale)
+    assert estimate_universe(X, weights=W).n_universe == 8
+    res = synchronize_doubly_stochastic(X, weights=W)
+    assert res.n_universe == 8
+    for (i, j), blk in X.items():
+        np.testing.assert_allclose(res.block(i, j), blk, atol=1e-9)

@@ -155,6 +155,24 @@ def test_weights_downweight_a_bad_pair():
     np.testing.assert_array_equal(res2.pairwise(0, 2), data.true_pairwise(0, 2))
 
 
+@pytest.mark.parametrize("method", ["spectral", "orthogonal", "matcheig"])
+@pytest.mark.parametrize("scale", [1e-300, 1e-3, 0.1, 7.0, 1e300])
+def test_uniform_weights_change_nothing(method, scale):
+    # the objective sum w_ij <P_ij, X_i X_j^T> does not change when every weight is scaled; the
+    # identity blocks once weighed 1 whatever the weights, and at weights 0.1 exactly consistent
+    # partial input came back with d = every node and no match (found by a metamorphic test)
+    data = make_permutation_collection(8, 5, visibility=0.8, n_universe=7, rng=0)
+    N = 8
+    ref = synchronize_permutations(data.pairwise, method=method, sizes=data.ground_truth.sizes)
+    res = synchronize_permutations(data.pairwise, weights=np.full((N, N), scale), method=method,
+                                   sizes=data.ground_truth.sizes)
+    assert ref.n_universe == res.n_universe == 7
+    assert data.accuracy(res.labels) == 1.0
+    for i in range(N):
+        for j in range(N):
+            np.testing.assert_array_equal(res.pairwise(i, j), ref.pairwise(i, j))
+
+
 def test_mask_and_block_array_input():
     data = make_permutation_collection(5, 4, rng=11)
     arr = np.zeros((5, 5, 4, 4))

@@ -310,3 +310,26 @@ def test_birkhoff_von_neumann_tol_only_absorbs_round_off():
         birkhoff_von_neumann(X, tol=0.5)       # would have returned no term at all
     w, P = birkhoff_von_neumann(X, tol=1e-6)
     np.testing.assert_allclose(w.sum(), 1.0)
+
+
+@pytest.mark.parametrize("fn", ["permutations", "soft", "universe", "linear", "homographies"])
+def test_weights_that_would_overflow_the_objective_are_refused(data, fn):
+    # weights of 1e308 overflowed the objective with a RuntimeWarning; only their ratios matter
+    from transync.synchronization import estimate_universe
+
+    N = data.n_objects
+    W = np.full((N, N), 1e308)
+    maps = make_noisy_linear_maps(4, dim=3, noise=0.0, rng=0)
+    calls = {
+        "permutations": lambda: synchronize_permutations(data.pairwise, weights=W),
+        "soft": lambda: synchronize_doubly_stochastic(_soft(data), weights=W),
+        "universe": lambda: estimate_universe(_soft(data), weights=W),
+        "linear": lambda: synchronize_linear_maps(maps.observed, mask=maps.mask,
+                                                  weights=np.full((4, 4), 1e308)),
+        "homographies": lambda: synchronize_homographies(maps.observed, mask=maps.mask,
+                                                         weights=np.full((4, 4), 1e308)),
+    }
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match=r"`weights` are too large.*rescale them"):
+            calls[fn]()

@@ -40,7 +40,7 @@ from scipy.sparse.csgraph import connected_components
 from .._validation import check_array, check_bool, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning, DegenerateInputError
 from ..geometry import normalization_matrix, normalize_determinant
-from ._pairwise_input import check_mask, observations
+from ._pairwise_input import check_mask, check_weight_magnitude, observations
 
 __all__ = [
     "LinearMapSyncResult",
@@ -540,6 +540,7 @@ def _prepare_observations(T, obs, weights, group, *, mask_given):
         if weights.size and weights.min() < 0:
             raise ValueError(f"`weights` must be non-negative, got {float(weights.min())}")
         obs = obs & (weights > 0)
+        check_weight_magnitude(weights[obs], d * d)
     if not obs.any():
         what = "`mask` and `weights` select" if mask_given or weights is not None else "it holds"
         raise ValueError(f"`T` must hold at least one observed pair i != j, but {what} none "

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import check_array, check_int, check_int_array
+from .._validation import MAX_AFFINITY_SCALE, check_array, check_int, check_int_array
 from ..permutations import (
     MAX_NODES,
     assignment_to_matrix,
@@ -214,6 +214,7 @@ def parse_pairwise(pairwise, *, mask=None, weights=None, sizes=None, soft: bool 
     ws = _pair_weights(weights, ki, kj)
     n_obj = _count_objects(ki, kj, fixed, mask, name)
     sizes_out = _infer_sizes(ki, kj, vals, fixed, n_obj, name)
+    check_weight_magnitude(ws, int(sizes_out.max(initial=1)))
     pairs = np.column_stack([np.minimum(ki, kj), np.maximum(ki, kj)])
     if soft:
         maps, blocks = None, _stack_soft(ki, kj, vals, sizes_out)
@@ -361,6 +362,18 @@ def _pair_weights(weights, ki, kj) -> np.ndarray:
         raise ValueError(f"`weights` must be finite and >= 0, got {float(ws[q])} for pair "
                          f"{(int(ki[q]), int(kj[q]))}")
     return ws
+
+
+def check_weight_magnitude(ws: np.ndarray, per_pair: int) -> None:
+    """Refuse pair weights ``ws`` whose largest times the observed entries (``per_pair`` per
+    pair: a bound on every objective and block-matrix row sum) overflows float64; only the
+    weights' ratios matter, so rescaling them is free."""
+    top = float(ws.max()) if ws.size else 0.0
+    entries = max(ws.size * max(per_pair, 1), 1)
+    if top > MAX_AFFINITY_SCALE / entries:
+        raise ValueError(f"`weights` are too large: the largest, {top:.3g}, times the {entries} "
+                         f"observed entries exceeds {MAX_AFFINITY_SCALE:g} (the objective would "
+                         f"overflow float64); only their ratios matter, so rescale them")
 
 
 def _count_objects(ki, kj, fixed, mask, name) -> int:

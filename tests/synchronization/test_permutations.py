@@ -173,6 +173,21 @@ def test_uniform_weights_change_nothing(method, scale):
             np.testing.assert_array_equal(res.pairwise(i, j), ref.pairwise(i, j))
 
 
+@pytest.mark.parametrize("method", ["spectral", "orthogonal", "matcheig"])
+@pytest.mark.parametrize("odd", [1e-9, 1e-3, 10.0, 100.0])
+def test_one_odd_weight_keeps_consistent_input_exact(method, odd):
+    # the identity blocks must not outweigh the observations: with the largest (or each
+    # object's mean) weight on them, one pair of weight 100 among weights 1 gave d = 28 slots
+    # for 7 and accuracy 0.02 (spectral, matcheig) on exactly consistent partial input
+    data = make_permutation_collection(8, 5, visibility=0.8, n_universe=7, rng=0)
+    W = np.ones((8, 8))
+    W[0, 1] = W[1, 0] = odd
+    res = synchronize_permutations(data.pairwise, weights=W, method=method,
+                                   sizes=data.ground_truth.sizes)
+    assert res.n_universe == 7
+    assert data.accuracy(res.labels) == 1.0
+
+
 def test_mask_and_block_array_input():
     data = make_permutation_collection(5, 4, rng=11)
     arr = np.zeros((5, 5, 4, 4))

@@ -805,15 +805,13 @@ def _choose_universe(n_universe, full, X, w, pairs, sizes, info) -> int:
 
 
 def _estimate_universe_soft(X, w, pairs, sizes):
-    """Eigengap of the degree-normalized soft block matrix (identity diagonal blocks; the pairs'
-    weights relative to the largest, as in the permutation synchronization's block matrix, so
+    """Eigengap of the degree-normalized soft block matrix (identity diagonal blocks of the
+    smallest positive pair weight, as in the permutation synchronization's block matrix, so
     that scaling every weight changes nothing)."""
     n_max = int(sizes.max())
     off = np.concatenate([[0], np.cumsum(sizes)])
     M = int(off[-1])
-    B = np.eye(M)
-    top = float(np.max(w)) if len(w) else 0.0
-    w = np.asarray(w, dtype=float) / top if top > 0 else w
+    B = spec.identity_weight(np.asarray(w, dtype=float)) * np.eye(M)
     for q, (i, j) in enumerate(pairs):
         blk = w[q] * X[q][: sizes[i], : sizes[j]]
         B[off[i]:off[i + 1], off[j]:off[j + 1]] += blk

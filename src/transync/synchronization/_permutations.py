@@ -465,7 +465,7 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
         Non-negative confidence of each pair (default 1): ``weights[i, j]`` (or the dict's
         ``(i, j)`` entry, else its ``(j, i)`` one) for the observation given as ``(i, j)``.
         Only their ratios matter: multiplying every weight by one constant changes nothing
-        (the identity blocks of the block matrix carry the largest weight).
+        (the identity blocks of the block matrix carry the smallest positive weight).
     sizes : (N,) int array, optional
         Object sizes when they cannot be read from the maps (default: assignment lengths,
         matrix shapes and the largest target).

@@ -44,6 +44,21 @@ def directed(stk: StackedPairs):
     return ptr, dst, maps, w
 
 
+def identity_weight(w: np.ndarray) -> float:
+    """Weight of the identity diagonal blocks: the smallest positive pair weight (1 without).
+
+    Uniform weights ``c`` are then all one problem (the normalized block matrix does not depend
+    on ``c``), and no identity block outweighs an observation: a universe node held by ``m``
+    objects of pair weight ``c`` gets the normalized eigenvalues ``1`` and
+    ``(a - c) / (a + c (m - 1))`` for identity weight ``a``, ``<= 0`` for ``a <= c`` but close
+    to 1 when ``a >> c``, where no eigengap is left. With ``a = 1`` whatever the weights,
+    uniform weights of 0.1 made exactly consistent partial input lose every match; with the
+    largest or each object's mean weight, one pair of weight 100 among weights 1 did.
+    """
+    pos = w[w > 0]
+    return float(pos.min()) if pos.size else 1.0
+
+
 def block_matrix(stk: StackedPairs, *, normalize: bool = True, dtype=np.float64,
                  directed_obs=None) -> sp.csr_matrix:
     """Sparse ``(M, M)`` block matrix ``T`` (identity diagonal blocks), optionally normalized.
@@ -52,18 +67,15 @@ def block_matrix(stk: StackedPairs, *, normalize: bool = True, dtype=np.float64,
     stack of its directed maps (one gather per observed pair), so no COO sort is needed. With
     ``normalize`` the result is ``D^-1/2 T D^-1/2``, ``D`` the row sums of ``T``.
 
-    The off-diagonal blocks carry the pairs' weights *relative to the largest* (which the
-    identity blocks carry): multiplying every weight by one constant leaves ``T`` unchanged.
-    With absolute weights, uniform weights ``c`` gave a universe node seen by ``m`` objects the
-    normalized eigenvalues ``1`` and ``(1 - c) / (1 + c (m - 1))`` instead of ``1`` and ``0``:
-    below about ``c = 1/3`` no eigengap was left and exactly consistent input lost every match.
+    The identity blocks carry :func:`identity_weight` (the smallest positive pair weight), so
+    multiplying every weight by one constant scales ``T`` and leaves the normalized matrix
+    unchanged.
     """
     off = stk.offsets
     M = int(off[-1])
     idx_dtype = np.int32 if M < 2**31 - 1 else np.int64
     ptr, dst, maps, w = directed_obs if directed_obs is not None else directed(stk)
-    top = float(w.max()) if w.size else 0.0
-    w = w / top if top > 0 else w
+    ident = identity_weight(w)
     indptr = np.zeros(M + 1, dtype=np.int64)
     ind_parts = []
     dat_parts = []
@@ -75,7 +87,7 @@ def block_matrix(stk: StackedPairs, *, normalize: bool = True, dtype=np.float64,
         cols[:, 0] = off[g] + np.arange(n_g)                      # diagonal (identity block)
         cols[:, 1:] = off[dst[lo:hi]][None, :] + a
         vals = np.empty((n_g, hi - lo + 1), dtype=np.float64)
-        vals[:, 0] = 1.0
+        vals[:, 0] = ident
         vals[:, 1:] = w[lo:hi][None, :]
         valid = np.ones_like(cols, dtype=bool)
         valid[:, 1:] = a >= 0

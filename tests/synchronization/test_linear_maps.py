@@ -210,3 +210,40 @@ def test_so_pairwise_maps_do_not_depend_on_the_reference():
     np.testing.assert_allclose(np.linalg.det(rot), 1.0)
     np.testing.assert_allclose(np.einsum("iab,icb->iac", rot, rot),
                                np.broadcast_to(np.eye(3), (N, 3, 3)), atol=1e-12)
+
+
+def test_homography_residuals_are_pixels_of_each_view_with_mixed_sizes():
+    # a pair's corner residual lives in its first view; one mean scale for all views reported
+    # 2x the pixels of a 320 x 240 view and 0.5x those of a 1280 x 960 one beside it
+    from transync.geometry import normalization_matrix, transfer_points
+
+    rng = np.random.default_rng(0)
+    sizes = np.array([[320, 240], [320, 240], [1280, 960]])
+    Nm = np.stack([normalization_matrix(s) for s in sizes])
+    G = [np.eye(3)] + [np.eye(3) + 0.05 * rng.normal(size=(3, 3)) for _ in range(2)]
+    Tn = np.array([[np.linalg.inv(G[i]) @ G[j] for j in range(3)] for i in range(3)])
+    Tn[0, 1] = Tn[0, 1] @ (np.eye(3) + 1e-3 * rng.normal(size=(3, 3)))
+    Tn[1, 0] = np.linalg.inv(Tn[0, 1])
+    H = np.einsum("iab,ijbc,jcd->ijad", np.linalg.inv(Nm), Tn, Nm)
+    res = synchronize_homographies(H, image_size=sizes)
+    square = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1.0]])
+    for i, j in [(0, 1), (1, 0), (0, 2), (2, 0), (1, 2)]:
+        est = np.linalg.solve(res.maps[i], res.maps[j])
+        corners = transfer_points(np.linalg.inv(Nm[j]), square)
+        pixels = np.linalg.norm(transfer_points(H[i, j], corners)
+                                - transfer_points(est, corners), axis=1).mean()
+        np.testing.assert_allclose(res.residuals[i, j], pixels, rtol=1e-9)
+
+
+def test_per_object_residual_scale_is_checked():
+    data = make_noisy_linear_maps(4, noise=0.01, rng=0)
+    res1 = synchronize_linear_maps(data.observed, mask=data.mask)
+    res2 = synchronize_linear_maps(data.observed, mask=data.mask,
+                                   residual_scale=np.array([1.0, 2.0, 3.0, 4.0]))
+    ok = np.isfinite(res1.residuals)
+    np.testing.assert_allclose(res2.residuals[ok],
+                               (res1.residuals * np.arange(1, 5)[:, None])[ok])
+    with pytest.raises(ValueError, match="one factor per object"):
+        synchronize_linear_maps(data.observed, mask=data.mask, residual_scale=np.ones(3))
+    with pytest.raises(ValueError, match="must be positive"):
+        synchronize_linear_maps(data.observed, mask=data.mask, residual_scale=np.zeros(4))

@@ -446,8 +446,10 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
         component and give NaN maps to the other objects (listed in ``info["excluded"]``).
     n_objects : int, default=None
         Number of objects when ``T`` is a dict (default: largest index + 1).
-    residual_scale : float, default=1.0
-        Factor applied to the reported residuals (e.g. pixels per normalized unit).
+    residual_scale : float or array of shape (N,), default=1.0
+        Factor applied to the reported residuals (e.g. pixels per normalized unit); an array
+        gives one factor per object, applied to the residuals of the pairs ``(i, j)`` of row
+        ``i`` (a pair's residual lives in object ``i``).
 
     Returns
     -------
@@ -485,10 +487,20 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
     disconnected = check_choice(disconnected, "disconnected", ("raise", "component"))
     max_iter = check_int(max_iter, "max_iter", minimum=1)
     tol = check_positive(tol, "tol", allow_zero=True)
-    residual_scale = check_positive(residual_scale, "residual_scale")
+    per_object = np.ndim(residual_scale) > 0
+    if per_object:
+        residual_scale = check_array(residual_scale, "residual_scale", ndim=1)
+        if residual_scale.size and residual_scale.min() <= 0:
+            raise ValueError(f"`residual_scale` must be positive, got "
+                             f"{float(residual_scale.min())!r}")
+    else:
+        residual_scale = check_positive(residual_scale, "residual_scale")
     check_bool(robust, "robust")
     T, obs = _parse_input(T, mask, n_objects)
     n, d = T.shape[0], T.shape[-1]
+    if per_object and residual_scale.shape != (n,):
+        raise ValueError(f"`residual_scale` must be a number or hold one factor per object "
+                         f"({n}), got shape {residual_scale.shape}")
     reference = check_int(reference, "reference", minimum=0, maximum=n - 1)
     if group == "SO" and d not in (2, 3):
         raise ValueError(f"`group='SO'` needs d = 2 or 3, got d = {d}")
@@ -506,7 +518,8 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
         max_iter=max_iter, tol=tol)
     maps = np.full((n, d, d), np.nan)
     maps[keep] = maps_k
-    r_k = _pair_residuals(Tk, ok, maps_k, residual) * residual_scale
+    r_k = _pair_residuals(Tk, ok, maps_k, residual) * (
+        residual_scale[keep][:, None] if per_object else residual_scale)
     residuals = np.full((n, n), np.nan)
     residuals[np.ix_(keep, keep)] = r_k
     weights_out = np.zeros((n, n))
@@ -714,7 +727,8 @@ def synchronize_homographies(H, *, mask=None, weights=None, reference=0, robust=
                 raise ValueError(f"`H` must have shape (N, N, 3, 3), got shape {H.shape}")
             Hn = np.einsum("iab,ijbc,jcd->ijad", Nm, np.nan_to_num(H), Ninv)
             Hn = np.where(np.isfinite(H).all(axis=(-2, -1))[..., None, None], Hn, np.nan)
-        scale = float(np.mean(np.max(sizes, axis=1)) / 2.0)
+        # pair (i, j)'s corner residual lives in view i: its pixels per normalized unit
+        scale = np.max(sizes, axis=1) / 2.0
     else:
         Hn = H
         if not isinstance(H, Mapping) and H.shape[1:] != (n, 3, 3):

@@ -422,3 +422,28 @@ def test_dense_edge_weight_relative_to_the_views_sparse_pairs():
     # 2 against exact sparse pairs, all views with 3 pairs) puts view 2 at 3/7 px
     assert e[1.0] == pytest.approx(3 / 7, rel=1e-6)
     assert run(7 * 50.0, 1.0) == pytest.approx(e[1.0], rel=1e-6)
+
+
+def test_dense_stage_refines_precomputed_pairs_without_matches():
+    # pairs given without inlier matches (PairwiseHomographies' default): the dense check had
+    # nothing to compare with, NaN <= x was False, and every update was silently rejected
+    from transync.geometry import translation
+    from transync.homography import PairwiseHomographies
+
+    scene = make_planar_scene(5, image_size=(240, 180), difficulty="easy", noise=0.0, rng=0)
+    rng = np.random.default_rng(0)
+    T = np.einsum("iab,jbc->ijac", np.linalg.inv(scene.homographies), scene.homographies)
+    H = np.full_like(T, np.nan)
+    for i in range(5):
+        for j in range(i + 1, 5):                         # coarse pairs: ~2 px off
+            H[i, j] = T[i, j] @ translation(*rng.normal(0, 2, 2))
+            H[j, i] = np.linalg.inv(H[i, j])
+    mask = ~np.eye(5, dtype=bool)
+    pw = PairwiseHomographies(H=H, mask=mask, weights=mask * 100.0, failed=[])
+    res = estimate_plane_homographies(scene.images, pairs=pw, max_iter=3, rng=0)
+    views = res.info["history"][0]["dense_views"]
+    assert all(v["status"] == "accepted" and v["sparse_check"] == "no inlier matches"
+               for v in views.values())
+    sparse = corner_error(res.sparse_homographies, scene.homographies, image_size=(240, 180))
+    final = corner_error(res.homographies, scene.homographies, image_size=(240, 180))
+    assert final[1:].mean() < 0.75 * sparse[1:].mean()

@@ -83,7 +83,9 @@ class DenseOptions:
     dense_check : bool, default=True
         Accept a view's ECC update only if the median distance between its sparse inlier
         matches and their partners stays within ``1 + sparse_tolerance`` times that of the
-        synchronized sparse solution.
+        synchronized sparse solution. A view without inlier matches (precomputed ``pairs``
+        given without ``matches``) cannot be checked: its update is accepted, and its record in
+        ``info["history"][k]["dense_views"]`` says ``"sparse_check": "no inlier matches"``.
     sparse_tolerance : float, default=0.25
         Relative slack of the ``dense_check`` (see above).
 
@@ -476,8 +478,14 @@ def _dense_view(i, gray, H, H_sparse, masks, sizes, tpl_data, corr, *, first, ta
         # safeguard: the update must stay consistent with the sparse inliers
         rec["sparse_before"] = _sparse_residual(i, H_sparse[i], H_sparse, corr)
         rec["sparse_after"] = _sparse_residual(i, Hi, H, corr)
-        ok = rec["sparse_after"] <= (1.0 + opts.sparse_tolerance) * rec["sparse_before"]
-        rec["status"] = "accepted" if ok else "rejected_sparse"
+        if np.isnan(rec["sparse_before"]) or np.isnan(rec["sparse_after"]):
+            # no inlier matches to check against (precomputed pairs without `matches`): NaN
+            # compared False and every update of such a view was silently rejected
+            rec["sparse_check"] = "no inlier matches"
+            rec["status"] = "accepted"
+        else:
+            ok = rec["sparse_after"] <= (1.0 + opts.sparse_tolerance) * rec["sparse_before"]
+            rec["status"] = "accepted" if ok else "rejected_sparse"
     else:
         rec["status"] = "accepted"
     return Hi, rec

@@ -547,9 +547,11 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
               \\frac{U_j[v, k]}{\\sqrt{d_j(v)}},
 
     ``c_t(u)`` the number of correspondences of ``u`` that vote. A copy of a fitted graph (its
-    maps to the others, and the identity to itself) gets that graph's rows back exactly, on
-    any input; its labels come back when they are a fixed point of the rule (the refinement of
-    :func:`synchronize_alignments` makes them one).
+    maps to the others, and the identity to itself) gets that graph's spectral rows back
+    exactly, on any input, and its orthogonal rows to the accuracy of the polar sweeps that
+    fitted them (a fixed point of ``polar(sum_j P_tj Q_j)`` only at convergence: 2e-3 after
+    100 unconverged sweeps, 2e-7 after 5000); its labels come back when they are a fixed point
+    of the rule (the refinement of :func:`synchronize_alignments` makes them one).
 
     Parameters
     ----------

@@ -82,6 +82,40 @@ def test_auto_never_materializes_and_picks_separable_for_full_graphs(rng):
     assert isinstance(gaussian_edge_affinity(d1, d2), (SeparableAffinity, FactorizedAffinity))
 
 
+@pytest.mark.parametrize("n1, n2", [(5, 5), (2, 2), (3, 6)])
+def test_separable_expansion_of_one_attribute_value_is_exact(n1, n2):
+    # unweighted graphs with attribute="weight": every edge attribute is 1.0; the interpolation
+    # interval was widened by 1e-21, which rounds away, all Chebyshev nodes coincided and every
+    # edge-pair entry came out as p = 12 (144 for two such graphs) instead of exp(0) = 1
+    from transync.matching import gaussian_edge_factors
+
+    g1 = Graph(np.ones((n1, n1)) - np.eye(n1))
+    g2 = Graph(np.ones((n2, n2)) - np.eye(n2))
+    exact = gaussian_edge_affinity(g1, g2, attribute="weight", backend="dense").to_dense()
+    for backend in ("auto", "separable"):
+        aff = gaussian_edge_affinity(g1, g2, attribute="weight", backend=backend)
+        err = np.abs(aff.to_dense() - exact).max()
+        assert err <= max(aff.max_error, 1e-12) if backend == "separable" else err < 1e-8
+        assert getattr(aff, "max_error", 0.0) < 1e-8
+    fac = gaussian_edge_factors([g1, g1], attribute="weight")
+    assert fac.max_error < 1e-8
+    K = np.einsum("rij,rab->aibj", fac.F[0], fac.G[1]).reshape(n1 * n1, n1 * n1)
+    np.testing.assert_allclose(K, gaussian_edge_affinity(g1, g1, attribute="weight",
+                                                         backend="dense").to_dense(), atol=1e-8)
+
+
+def test_auto_uses_no_coarse_expansion():
+    # attributes over thousands of kernel widths: 200 interpolation points cannot follow the
+    # Gaussian, so "auto" builds the exact factorized form; "separable" reports its error
+    rng = np.random.default_rng(0)
+    W = np.triu(rng.uniform(0, 1000, (12, 12)), 1)
+    g = Graph(W + W.T)
+    auto = gaussian_edge_affinity(g, g, attribute="weight", sigma2=0.01)
+    sep = gaussian_edge_affinity(g, g, attribute="weight", sigma2=0.01, backend="separable")
+    assert sep.max_error > 1e-6
+    assert isinstance(auto, FactorizedAffinity)
+
+
 def test_drop_conflicts_dense_and_sparse(rng):
     n1, n2 = 3, 4
     K = rng.random((n1 * n2, n1 * n2))

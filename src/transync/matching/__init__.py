@@ -2,6 +2,7 @@
 
 from ._affinity import (
     DEFAULT_SIGMA2,
+    MAX_SEPARABLE_ERROR,
     Affinity,
     DenseAffinity,
     FactorizedAffinity,
@@ -27,6 +28,7 @@ from ._verify import VERIFY_MODELS, VerificationResult, verify_assignment
 
 __all__ = [
     "DEFAULT_SIGMA2",
+    "MAX_SEPARABLE_ERROR",
     "Affinity",
     "DenseAffinity",
     "FactorizedAffinity",

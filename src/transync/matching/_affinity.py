@@ -687,7 +687,8 @@ def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = DEFAULT_SIGM
         Unary term on the diagonal of ``K``.
     backend : {"auto", "separable", "factorized", "sparse", "dense"}, default="auto"
         ``"auto"`` picks the separable expansion when it is cheaper than the factorized form (dense
-        graphs, scalar attributes), else the factorized form. Neither forms ``K``.
+        graphs, scalar attributes) and its achieved error is at most
+        :data:`MAX_SEPARABLE_ERROR` (1e-6), else the factorized form. Neither forms ``K``.
     tol : float, default=1e-10
         Target entrywise accuracy of the separable expansion.
 
@@ -763,12 +764,16 @@ def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = DEFAULT_SIGM
         separable_cost = 16 * (n1 * n1 * n2 + n1 * n2 * n2)
         # one factorized entry (fancy indexing + sparse products) costs about as much as 16 GEMM
         # flops of the separable product (measured on 2 cores, n = 10..50, full graphs)
-        backend = "separable" if scalar and separable_cost < 16 * m1 * m2 else "factorized"
-    if backend == "separable":
+        backend = ("auto-separable" if scalar and separable_cost < 16 * m1 * m2
+                   else "factorized")
+    if backend in ("separable", "auto-separable"):
         if attribute == "length+angle":
             raise ValueError("`backend='separable'` supports scalar edge attributes only "
                              "('length', 'weight' or 'features'), got attribute='length+angle'")
-        return _separable_gaussian(a1[0], a2[0], M1, M2, sigma2, node_affinity, tol)
+        sep = _separable_gaussian(a1[0], a2[0], M1, M2, sigma2, node_affinity, tol)
+        if backend == "separable" or sep.max_error <= MAX_SEPARABLE_ERROR:
+            return sep
+        backend = "factorized"         # "auto": an expansion too coarse is not used as is
     e1, e2 = np.argwhere(M1), np.argwhere(M2)
     d2 = (a1[0][M1][:, None] - a2[0][M2][None, :]) ** 2
     if attribute == "length+angle":
@@ -794,6 +799,27 @@ def _chebyshev_nodes(lo: float, hi: float, p: int) -> np.ndarray:
     k = np.arange(p)
     x = np.cos(np.pi * (2 * k + 1) / (2 * p))
     return 0.5 * (lo + hi) + 0.5 * (hi - lo) * x
+
+
+#: largest entrywise error of a separable expansion that ``backend="auto"`` uses as is; above it
+#: the exact factorized form is built instead (``backend="separable"`` returns it, reported)
+MAX_SEPARABLE_ERROR = 1e-6
+
+
+def _interpolation_interval(lo: float, hi: float, sigma2: float) -> tuple[float, float]:
+    """``[lo, hi]`` widened so that the Chebyshev nodes on it are distinct in float64.
+
+    Relative to the values' magnitude (and the kernel's width), not absolute: a range of one
+    value (every edge attribute equal, e.g. unweighted graphs with ``attribute="weight"``) was
+    widened by 1e-21, which rounds away at 1.0; all nodes then coincided, every basis function
+    was 1 at every value and the expansion summed ``p`` of them (an edge affinity of 144 instead
+    of 1 for ``p = 12``). A width of at least 2e-10 of the magnitude keeps the nodes at least
+    2e-14 of it apart (``p <= 200``: about 100 units in the last place); ranges wider than a
+    tenth of the magnitude keep their old padding, and their expansions bit for bit.
+    """
+    scale = max(abs(lo), abs(hi), float(np.sqrt(sigma2)))
+    pad = max((hi - lo) * 1e-9, scale * 1e-10)
+    return lo - pad, hi + pad
 
 
 def _lagrange_basis(x: np.ndarray, nodes: np.ndarray) -> np.ndarray:
@@ -826,11 +852,8 @@ def _separable_gaussian(E1, E2, M1, M2, sigma2, node, tol):
         F = np.zeros((1,) + E1.shape)
         G = np.zeros((1,) + E2.shape)
         return SeparableAffinity(node, F, G, max_error=0.0)
-    lo1, hi1 = float(x.min()), float(x.max())
-    lo2, hi2 = float(y.min()), float(y.max())
-    pad1 = max(hi1 - lo1, 1e-12) * 1e-9
-    pad2 = max(hi2 - lo2, 1e-12) * 1e-9
-    lo1, hi1, lo2, hi2 = lo1 - pad1, hi1 + pad1, lo2 - pad2, hi2 + pad2
+    lo1, hi1 = _interpolation_interval(float(x.min()), float(x.max()), sigma2)
+    lo2, hi2 = _interpolation_interval(float(y.min()), float(y.max()), sigma2)
     span = max(hi1, hi2) - min(lo1, lo2)
     # points per axis: enough for the Gaussian's width over the span (analytic, fast convergence)
     p = int(np.clip(np.ceil(8 + 4.0 * span / np.sqrt(sigma2)), 12, 200))
@@ -1004,10 +1027,8 @@ def gaussian_edge_factors(graphs, *, sigma2: float = DEFAULT_SIGMA2, attribute: 
         return GaussianEdgeFactors(np.zeros((N, 1, n, n)), np.zeros((N, 1, n, n)), 0.0, E, M,
                                    sigma2, attribute)
     _check_underflow(vals, pairs, sigma2, attribute)
-    lo = float(min(v.min() for v in nonempty))
-    hi = float(max(v.max() for v in nonempty))
-    pad = max(hi - lo, 1e-12) * 1e-9
-    lo, hi = lo - pad, hi + pad
+    lo, hi = _interpolation_interval(float(min(v.min() for v in nonempty)),
+                                     float(max(v.max() for v in nonempty)), sigma2)
     span = hi - lo
     p = int(np.clip(np.ceil(8 + 4.0 * span / np.sqrt(sigma2)), 12, 200))
     c = _chebyshev_nodes(lo, hi, p)

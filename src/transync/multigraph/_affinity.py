@@ -61,6 +61,7 @@ from .._validation import (
 from ..graphs import Graph
 from ..matching import (
     DEFAULT_SIGMA2,
+    MAX_SEPARABLE_ERROR,
     Affinity,
     DenseAffinity,
     FactorizedAffinity,
@@ -114,9 +115,6 @@ def _unvec_batch(x: np.ndarray, n1: int, n2: int) -> np.ndarray:
 # --------------------------------------------------------------------------- per-graph factors
 
 
-#: largest entrywise error of the per-graph separable expansion used as is; above it the
-#: default affinity is built exactly (factorized) pair by pair
-MAX_SEPARABLE_ERROR = 1e-6
 
 _FAST_KEYWORDS = {"sigma2", "attribute", "tol", "backend", "angle_weight"}
 

@@ -396,7 +396,18 @@ class _PF(_Batch):
         allpos = pos.all((1, 2)) & (vmax > 0)
         with np.errstate(divide="ignore", invalid="ignore"):
             cw = np.where(pos, Kv / np.where(pos, v, 1.0), -np.inf).max((1, 2))
-        self.mu = np.maximum(np.where(allpos, cw, 1.05 * np.abs(lam) + 1e-12), lam)
+        bad = np.flatnonzero(~allpos)
+        if bad.size:
+            # as PFStepper: a reducible or bipartite K (trees, paths, isolated nodes) leaves
+            # zeros in the unconverged v, and 1.05 |lam| was no bound on lambda_max there;
+            # Collatz-Wielandt on the shifted operator's positive vector, or the largest column
+            # sum, is
+            shift = np.where(lam[bad] != 0, np.abs(lam[bad]), 1.0)
+            _, vb = self._power(200, 1e-8, idx=bad, shift=shift)
+            wb = np.maximum(np.abs(vb), 1e-3 * np.abs(vb).max((1, 2))[:, None, None]) + 1e-300
+            colsum = self.K(np.ones((bad.size, n1, n2)), bad).max((1, 2))
+            cw[bad] = np.minimum((self.K(wb, bad) / wb).max((1, 2)), colsum)
+        self.mu = np.maximum(cw, lam)
         self.lam = np.zeros(P)
         self.dlam = np.full(P, self.max_step)
         self.sc = np.sqrt(min(n1, n2))
@@ -409,14 +420,19 @@ class _PF(_Batch):
         # without the jump test and leaves the increment as it is
         self.after_sync = np.zeros(P, bool)
 
-    def _power(self, max_iter, tol):
-        P, n1, n2 = self.P, self.n1, self.n2
+    def _power(self, max_iter, tol, idx=None, shift=None):
+        """Leading eigenpairs of the pairs ``idx`` (default all), of ``K + shift I`` when given."""
+        n1, n2 = self.n1, self.n2
+        idx = np.arange(self.P) if idx is None else np.asarray(idx)
+        P = len(idx)
         v = np.full((P, n1, n2), 1.0 / np.sqrt(n1 * n2))
         lam = np.zeros(P)
         act = np.arange(P)
         va = v.copy()
         for _ in range(max_iter):
-            w = self.K(va, act)
+            w = self.K(va, idx[act])
+            if shift is not None:
+                w = w + shift[act][:, None, None] * va
             lam[act] = np.einsum("pij,pij->p", va, w)
             nrm = np.sqrt((w * w).sum((1, 2)))
             zero = nrm == 0

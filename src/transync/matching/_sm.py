@@ -20,7 +20,7 @@ import numpy as np
 from .._validation import check_int, check_positive
 from ._affinity import as_affinity
 from ._result import MatchingResult
-from ._stepwise import _BaseStepper, _moderate, _run
+from ._stepwise import _BaseStepper, _moderate, _run, _symmetric
 
 __all__ = ["SMStepper", "sm"]
 
@@ -64,7 +64,9 @@ class SMStepper(_BaseStepper):
         self.tol = check_positive(tol, "tol")
         self._X = np.full((self.n1, self.n2), 1.0 / (self.n1 * self.n2))
         self.eigenvalue = 0.0
-        self._K = _moderate(aff)            # aff itself unless its scale would overflow
+        # x^T K x only sees the symmetric part: the eigenvector of (K + K^T) / 2 is the maximizer
+        # (aff itself when symmetric, and unless its scale would overflow)
+        self._K = _moderate(_symmetric(aff))
 
     def step(self) -> bool:
         if self.done:
@@ -95,7 +97,9 @@ def sm(K, *, n1: int | None = None, n2: int | None = None, max_iter: int = _DEFA
               X = \\mathrm{Hungarian}(\\mathrm{reshape}(x^\\star))
 
     Power iteration ``v <- K v / ||K v||`` from the uniform vector (as in pygmtools), stopped when
-    ``||v_new - v|| < tol``.
+    ``||v_new - v|| < tol``. A non-symmetric ``K`` (directed graphs) is iterated as its symmetric
+    part ``(K + K^T) / 2``, which has the same ``x^T K x``: its eigenvector is the maximizer
+    above (pygmtools iterates ``K`` itself and differs there; ipfp, ga and pf symmetrize too).
 
     Parameters
     ----------

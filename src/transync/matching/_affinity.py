@@ -127,7 +127,8 @@ class Affinity(ABC):
         """Affinity with the entries linking conflicting candidates set to zero.
 
         Conflicting candidates share a node of one graph (``(i, a)`` and ``(i, b)``, ``a != b``).
-        Edge-based backends have none by construction (no self-loops), so they return ``self``.
+        Edge-based backends have none unless a self-loop pairs with an edge (a self-loop in an
+        edge list, a non-zero diagonal in a separable factor); without one they return ``self``.
         """
         return self
 
@@ -387,6 +388,17 @@ class FactorizedAffinity(Affinity):
     def diag(self):
         return np.zeros((self.n1, self.n2)) if self.node is None else self.node.copy()
 
+    def drop_conflicts(self) -> Affinity:
+        """``self``, or a copy without the edge pairs that join a self-loop of one graph to an
+        edge of the other (their entries link conflicting candidates)."""
+        loop1 = self.edges1[:, 0] == self.edges1[:, 1]
+        loop2 = self.edges2[:, 0] == self.edges2[:, 1]
+        conflict = loop1[:, None] != loop2[None, :]
+        if not (conflict & (self.edge != 0)).any():
+            return self
+        return FactorizedAffinity(self.node, np.where(conflict, 0.0, self.edge), self.edges1,
+                                  self.edges2, self.n1, self.n2)
+
     def to_dense(self):
         n1 = self.n1
         K = np.zeros((n1 * self.n2, n1 * self.n2))
@@ -482,6 +494,19 @@ class SeparableAffinity(Affinity):
     def diag(self):
         d = np.einsum("rii,raa->ia", self.F, self.G)
         return d if self.node is None else d + self.node
+
+    def drop_conflicts(self) -> Affinity:
+        """``self``, or the expansion without the products of a factor's diagonal with the other
+        factor's off-diagonal part (the entries linking conflicting candidates): rank ``2R``,
+        ``sum_r offdiag(F_r) (x) offdiag(G_r) + diag(F_r) (x) diag(G_r)``."""
+        dF = np.diagonal(self.F, axis1=1, axis2=2)
+        dG = np.diagonal(self.G, axis1=1, axis2=2)
+        if not (dF.any() or dG.any()):
+            return self
+        eye1, eye2 = np.eye(self.n1, dtype=bool), np.eye(self.n2, dtype=bool)
+        F = np.concatenate([np.where(eye1, 0.0, self.F), np.where(eye1, self.F, 0.0)])
+        G = np.concatenate([np.where(eye2, 0.0, self.G), np.where(eye2, self.G, 0.0)])
+        return SeparableAffinity(self.node, F, G, max_error=self.max_error)
 
     def to_dense(self):
         """The full matrix; entries an expansion (``max_error > 0``) puts below zero by less

@@ -277,6 +277,26 @@ def test_precomputed_blocks_of_different_sizes_give_the_callables_result(kw):
     assert multimatching_precision_recall(a, c.ground_truth)["f1"] == 1.0
 
 
+@pytest.mark.parametrize("kw", [{"partial": "universe"}, {"partial": "dummies"},
+                                {"partial": "dummies", "solver": "cao"}])
+def test_one_array_of_blocks_with_a_larger_universe(kw):
+    # graphs of one size with n_universe > n: the (N, N, n*n, n*n) array the docstring accepts
+    # for graphs of one size was refused (the same blocks in a dict were not)
+    from transync.datasets import make_graph_collection
+
+    p = make_graph_collection(n_graphs=3, n_inliers=4, deformation=0.0, rng=0)
+    exact = functools.partial(gaussian_edge_affinity, sigma2=0.05, backend="dense")
+    arr = np.zeros((3, 3, 16, 16))
+    for i in range(3):
+        for j in range(3):
+            if i != j:
+                arr[i, j] = exact(p.graphs[i], p.graphs[j]).to_dense()
+    a = match_collection(p.graphs, affinity=arr, n_universe=6, progress=False, rng=0, **kw)
+    b = match_collection(p.graphs, affinity=exact, n_universe=6, progress=False, rng=0, **kw)
+    assert np.array_equal(a.assignments, b.assignments)
+    assert a.accuracy(p) == 1.0
+
+
 def test_blocks_for_different_sizes_are_checked_by_name():
     c = _problem(seed=10, n_graphs=3, d=8)
     with pytest.raises(ValueError, match=r"affinity\[0\]\[1\]"):

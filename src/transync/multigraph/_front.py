@@ -460,7 +460,7 @@ def _check_layout(graphs, n_universe, partial, solver, affinity) -> _Layout:
         raise ValueError(f"`partial` must be 'dummies' with solver={solver!r}: CAO composes "
                          f"full permutations; {what} need the dummy-node padding, got "
                          f"partial={partial!r}")
-    if isinstance(affinity, np.ndarray) and affinity.dtype != object:
+    if isinstance(affinity, np.ndarray) and affinity.dtype != object and not equal:
         raise ValueError(f"`affinity` as one (N, N, n*n, n*n) array holds graphs of one size n; "
                          f"{what} need a dict {{(i, j): K_ij}} of (n_i n_j, n_i n_j) blocks or "
                          "a callable (g_i, g_j) -> Affinity")
@@ -611,6 +611,11 @@ def _pair_affinities(graphs, pairs, affinity, n) -> PairAffinities:
         return PairAffinities.from_graphs(graphs, pairs, affinity, n_pad=n)
     if isinstance(affinity, (Mapping, list, tuple, np.ndarray)):
         sizes = np.array([g.n_nodes for g in graphs])
+        if (isinstance(affinity, np.ndarray) and affinity.dtype != object
+                and affinity.ndim >= 2 and not np.all(sizes == n)):
+            # graphs of one size padded with dummies (n_universe > n): the array's blocks,
+            # as the (N, N) nested blocks that the padding takes (views, no copy)
+            affinity = [list(row) for row in affinity]
         return PairAffinities.from_blocks(affinity, pairs, n, n_graphs=len(graphs),
                                           sizes=None if np.all(sizes == n) else sizes,
                                           name="affinity")

@@ -103,12 +103,14 @@ class PFStepper(_BaseStepper):
             # stops far from the Perron vector. 1.05 |Rayleigh quotient| was no bound there (24 %
             # low on two 8-node trees). The shifted operator K + |lam| I has a dominant Perron
             # root, and Collatz-Wielandt on any positive w bounds lambda_max, as does the largest
-            # column sum: the smaller of the two
+            # column sum. 1.05 |lam| is kept where it is at least that bound (a converged
+            # iteration on a reducible K: the same path as before)
             shift = abs(lam) if lam else 1.0
             _, v, _, _ = _power_iteration(lambda X: self._K.matvec(X) + shift * X, self.n1,
                                           self.n2, max_iter=200, tol=1e-8)
             w = np.maximum(np.abs(v), 1e-3 * float(np.abs(v).max(initial=0.0))) + 1e-300
-            self.mu = min(float(np.max(self._K.matvec(w) / w)), self._K.max_column_sum())
+            bound = min(float(np.max(self._K.matvec(w) / w)), self._K.max_column_sum())
+            self.mu = max(1.05 * abs(lam) + 1e-12, bound)
         self.mu = max(self.mu, lam)
         self.lam = 0.0
         self.dlam = self.max_step

@@ -399,14 +399,15 @@ class _PF(_Batch):
         bad = np.flatnonzero(~allpos)
         if bad.size:
             # as PFStepper: a reducible or bipartite K (trees, paths, isolated nodes) leaves
-            # zeros in the unconverged v, and 1.05 |lam| was no bound on lambda_max there;
-            # Collatz-Wielandt on the shifted operator's positive vector, or the largest column
-            # sum, is
+            # zeros in v, and 1.05 |lam| was no bound on lambda_max where the iteration
+            # oscillated; Collatz-Wielandt on the shifted operator's positive vector, or the
+            # largest column sum, is (1.05 |lam| kept where it is at least that bound)
             shift = np.where(lam[bad] != 0, np.abs(lam[bad]), 1.0)
             _, vb = self._power(200, 1e-8, idx=bad, shift=shift)
             wb = np.maximum(np.abs(vb), 1e-3 * np.abs(vb).max((1, 2))[:, None, None]) + 1e-300
             colsum = self.K(np.ones((bad.size, n1, n2)), bad).max((1, 2))
-            cw[bad] = np.minimum((self.K(wb, bad) / wb).max((1, 2)), colsum)
+            bound = np.minimum((self.K(wb, bad) / wb).max((1, 2)), colsum)
+            cw[bad] = np.maximum(1.05 * np.abs(lam[bad]) + 1e-12, bound)
         self.mu = np.maximum(cw, lam)
         self.lam = np.zeros(P)
         self.dlam = np.full(P, self.max_step)

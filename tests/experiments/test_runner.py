@@ -63,6 +63,35 @@ def test_failures_are_recorded_not_fatal(tmp_path):
     assert row["n"] == 0 and row["failed"] == 4
 
 
+_FLAKY = {"fail": True}
+
+
+def flaky_trial(config, rng):
+    if _FLAKY["fail"] and config["x"] == 2:
+        raise RuntimeError("transient failure")
+    return {"value": float(config["x"])}
+
+
+def test_a_rerun_retries_the_failed_trials(tmp_path):
+    # failed trials were stored like finished ones and never run again, although the CLI says
+    # "rerun to retry"; a rerun reported 0 new trials and exit status 0
+    exp = Experiment(name="f", trial=flaky_trial, trials=3, sweeps=[
+        Sweep(name="s", variable="x", values=[1, 2], methods=["a"], metrics=("value",))])
+    _FLAKY["fail"] = True
+    try:
+        first = run_experiment(exp, tmp_path, progress=False, plot=False)
+        assert (first.n_new, first.n_failed) == (6, 3)
+        _FLAKY["fail"] = False
+        second = run_experiment(exp, tmp_path, progress=False, plot=False)
+        assert (second.n_new, second.n_failed) == (3, 0)
+        assert not any(r["error"] for r in second.records) and len(second.records) == 6
+        row = [r for r in second.summary if r["value"] == 2 and r["metric"] == "value"][0]
+        assert row["n"] == 3 and row["failed"] == 0
+        assert run_experiment(exp, tmp_path, progress=False, plot=False).n_new == 0
+    finally:
+        _FLAKY["fail"] = True
+
+
 def test_process_pool_gives_the_same_numbers(tmp_path):
     serial = run_experiment(_experiment(trials=2), tmp_path / "a", progress=False, plot=False)
     pooled = run_experiment(_experiment(trials=2), tmp_path / "b", workers=2, progress=False,

@@ -350,9 +350,12 @@ class ExperimentStore:
                 + _SALVAGE.format(path=self.path)) from exc
 
     def done(self, experiment: str) -> set[tuple[str, int]]:
+        """The (configuration, trial) keys stored *without* an error: a failed trial is run
+        again by the next run (its row is replaced), as the CLI's "rerun to retry" says."""
         with self._guard():
             rows = self._con.execute(
-                "SELECT config_hash, trial FROM trials WHERE experiment = ?", (experiment,))
+                "SELECT config_hash, trial FROM trials WHERE experiment = ? AND error IS NULL",
+                (experiment,))
             return {(h, int(t)) for h, t in rows}
 
     def add(self, experiment: str, key: str, trial: int, sweep: str, config: Mapping,

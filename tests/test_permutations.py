@@ -134,3 +134,30 @@ def test_full_permutations_count_as_before():
     maps = np.array([[0, 1, 2], [0, 1, 2], [1, 0, 2]])
     rep = cycle_inconsistency_arrays(pairs, maps, [3, 3, 3])
     assert rep["cycle_error"] == pytest.approx(2 / 3)
+
+
+def test_cycle_inconsistency_sizes_make_the_direction_irrelevant():
+    # a partial map given only as (j, i) leaves node 1 of object 0 unseen: its inferred size was
+    # 1 and the error doubled (0.5 -> 1.0); with `sizes` both directions agree
+    from transync.permutations import cycle_inconsistency, invert
+
+    sizes = [2, 1, 1, 4]
+    p = {(0, 1): np.array([-1, -1]), (0, 2): np.array([0, -1]), (1, 2): np.array([0]),
+         (2, 3): np.array([3])}
+    rev = {(j, i): invert(a, sizes[j]) for (i, j), a in p.items()}
+    assert cycle_inconsistency(p)["cycle_error"] == 0.5
+    assert cycle_inconsistency(rev, sizes=sizes) == cycle_inconsistency(p, sizes=sizes) \
+        == cycle_inconsistency(p)
+    with pytest.raises(ValueError, match="`sizes` gives object 0 1 nodes"):
+        cycle_inconsistency({(0, 1): np.array([0, 1])}, sizes=[1, 2])
+    with pytest.raises(ValueError, match=r"keys must be pairs .* got \(-1, 2\)"):
+        cycle_inconsistency({(-1, 2): np.array([0])})
+
+
+def test_cycle_inconsistency_of_maps_into_empty_objects():
+    # the last object seen only through empty maps was not counted, and an internal `pairs`
+    # argument was named in the error
+    from transync.permutations import MultiMatching, cycle_inconsistency
+
+    m = MultiMatching([np.array([], dtype=int), np.array([], dtype=int), np.array([0, 1])], 3)
+    assert cycle_inconsistency(m.pairwise_dict())["cycle_error"] == 0.0

@@ -406,7 +406,8 @@ def solve_lap(score, *, maximize: bool = True, min_score: float | None = None,
 
 
 def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
-                        max_triangles: int = 200_000, rng=None) -> dict[str, float]:
+                        max_triangles: int = 200_000, rng=None,
+                        sizes=None) -> dict[str, float]:
     """How far a collection of pairwise assignments is from cycle consistency.
 
     ``pairwise[(i, j)]`` maps the nodes of object ``i`` into object ``j``. For every triangle
@@ -435,6 +436,11 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
         Largest number of triples checked exhaustively.
     rng : None, int or numpy.random.Generator, optional
         Draws the triples when sampling.
+    sizes : sequence of int, optional
+        Number of nodes of every object. Without it, an object's size is read off the maps: the
+        length of its maps as a source, else its largest target + 1. A partial map given only
+        as ``(j, i)`` may leave nodes of ``i`` unseen, and the inverse then drops them; give
+        ``sizes`` to count every node.
 
     Returns
     -------
@@ -459,22 +465,43 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
         raise TypeError(f"`pairwise` must be a dict {{(i, j): assignment}}, got "
                         f"{type(pairwise).__name__}")
     check_int(max_triangles, "max_triangles", minimum=1)
+    given = None
+    if sizes is not None:
+        given = check_int_array(sizes, "sizes", ndim=1, integral_floats=True)
+        if given.size and given.min() < 0:
+            raise ValueError(f"`sizes` must be non-negative node counts, got {given.tolist()}")
     arrays: dict[tuple[int, int], np.ndarray] = {}
-    sizes: dict[int, int] = {}
-    for (i, j), a in pairwise.items():
-        i, j = int(i), int(j)
-        a = check_assignment(a, f"pairwise[{(i, j)}]")
+    seen: dict[int, int] = {}
+    n_obj = 0
+    for key, a in pairwise.items():
+        if (not isinstance(key, tuple) or len(key) != 2
+                or not all(isinstance(k, (int, np.integer)) and not isinstance(k, bool)
+                           for k in key) or min(key) < 0):
+            raise ValueError(f"`pairwise` keys must be pairs (i, j) of non-negative object "
+                             f"indices, got {key!r}")
+        i, j = int(key[0]), int(key[1])
+        if given is not None and not (0 <= i < given.size and 0 <= j < given.size):
+            raise ValueError(f"`pairwise` has the pair {(i, j)}, but `sizes` gives "
+                             f"{given.size} objects")
+        n2 = None if given is None else int(given[j])
+        a = check_assignment(a, f"pairwise[{(i, j)}]", n2=n2)
+        if given is not None and a.shape[0] != given[i]:
+            raise ValueError(f"`pairwise[{(i, j)}]` has {a.shape[0]} entries, but `sizes` "
+                             f"gives object {i} {int(given[i])} nodes")
         arrays[(i, j)] = a
-        sizes[i] = max(sizes.get(i, 0), a.shape[0])
-        if a.size:
-            sizes[j] = max(sizes.get(j, 0), int(a.max()) + 1)
+        n_obj = max(n_obj, i + 1, j + 1)      # an object seen only through empty maps too
+        seen[i] = max(seen.get(i, 0), a.shape[0])
+        if a.size and a.max() >= 0:
+            seen[j] = max(seen.get(j, 0), int(a.max()) + 1)
     if not arrays:
         return {"n_triangles": 0, "inconsistent_triangles": 0.0, "cycle_error": 0.0,
                 "sampled": False}
-    n_obj = max(sizes) + 1
-    size_arr = np.zeros(n_obj, dtype=np.int64)
-    for g, n in sizes.items():
-        size_arr[g] = n
+    if given is not None:
+        size_arr = given.astype(np.int64)
+    else:
+        size_arr = np.zeros(n_obj, dtype=np.int64)
+        for g, n in seen.items():
+            size_arr[g] = n
     n_max = int(size_arr.max())
     canon: dict[tuple[int, int], np.ndarray] = {}
     for (i, j), a in arrays.items():

@@ -85,3 +85,13 @@ def test_normalization_matrix_maps_image_to_unit_box():
     N = normalization_matrix((640, 480))
     c = transfer_points(N, image_corners((640, 480)))
     assert np.abs(c).max() <= 1.0 + 1e-12
+
+
+def test_hartley_normalization_of_tiny_point_sets():
+    # the squared distances of a 1e-165 square underflowed: d = 0, T = identity, unnormalized
+    from transync.geometry import hartley_normalization
+
+    square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+    for scale in (1e-165, 1e-200, 1.0, 1e100):
+        _, x = hartley_normalization(square * scale)
+        np.testing.assert_allclose(np.hypot(x[:, 0], x[:, 1]).mean(), np.sqrt(2.0), rtol=1e-12)

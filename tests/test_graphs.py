@@ -92,3 +92,30 @@ def test_graph_attribute_shapes():
         Graph.from_points(np.zeros((4, 2)), edges="ring")
     with pytest.raises(ValueError, match="at least one"):
         Graph.from_points(np.zeros((0, 2)))
+
+
+@pytest.mark.parametrize("scale", [1e-300, 1e-180, 1e-100, 1.0, 1e80, 1e300])
+def test_delaunay_edges_do_not_depend_on_units(scale):
+    # Qhull's tolerances are absolute: points at 1e80 were refused, at 1e-180 triangulated
+    # differently (joggled)
+    P = np.random.default_rng(0).random((12, 2))
+    ref = Graph.from_points(P).mask
+    np.testing.assert_array_equal(Graph.from_points(P * scale).mask, ref)
+    np.testing.assert_allclose(Graph.from_points(P * scale, weighted=True).adjacency / scale,
+                               Graph.from_points(P, weighted=True).adjacency, rtol=1e-12)
+
+
+def test_delaunay_gives_a_repeated_point_edges():
+    # Qhull keeps one copy of a repeated point and leaves the other out of every triangle: it
+    # was an isolated node
+    P = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [0.5, 0.4], [0.5, 0.4]])
+    assert np.all(Graph.from_points(P).mask.sum(1) > 0)
+
+
+def test_tiny_distances_and_angles_of_1d_points():
+    g = Graph.from_points(np.array([[0.0, 0.0], [3.0, 4.0], [6.0, 0.0]]) * 1e-170,
+                          edges="full", weighted=True)
+    assert g.n_edges == 3                                  # squares underflowed: 0 edges
+    np.testing.assert_allclose(g.distances()[0, 1], 5e-170, rtol=1e-12)
+    with pytest.raises(ValueError, match="angles need points of at least 2 coordinates"):
+        Graph.from_points(np.array([[0.0], [1.0], [3.0]]), edges="full").angles()

@@ -151,12 +151,15 @@ class Graph:
 
     def distances(self) -> np.ndarray:
         """Euclidean distance matrix between node points, shape (n, n)."""
-        P = self._require_points()
-        return np.linalg.norm(P[:, None, :] - P[None, :, :], axis=-1)
+        return _distances(self._require_points())
 
     def angles(self) -> np.ndarray:
-        """Angle of each node-to-node vector with the x axis, shape (n, n), radians."""
+        """Angle of each node-to-node vector with the x axis, shape (n, n), radians (the first
+        two coordinates)."""
         P = self._require_points()
+        if P.shape[1] < 2:
+            raise ValueError(f"angles need points of at least 2 coordinates, this Graph's have "
+                             f"{P.shape[1]}")
         d = P[None, :, :2] - P[:, None, :2]
         return np.arctan2(d[..., 1], d[..., 0])
 
@@ -231,7 +234,7 @@ class Graph:
         np.fill_diagonal(M, False)
         A = M.astype(float)
         if weighted:
-            A = A * np.linalg.norm(P[:, None, :] - P[None, :, :], axis=-1)
+            A = A * _distances(P)
         return cls(A, points=P, node_features=node_features, node_labels=node_labels)
 
     @classmethod
@@ -273,11 +276,35 @@ class Graph:
         return G
 
 
+def _distances(P: np.ndarray) -> np.ndarray:
+    """Euclidean distances between the rows of ``P``, computed on coordinates scaled by a power
+    of two (exact) so that differences of 1e-170 do not square to 0 nor of 1e170 to inf."""
+    D = P[:, None, :] - P[None, :, :]
+    top = float(np.abs(D).max(initial=0.0))
+    if not top > 0 or not np.isfinite(top):
+        return np.linalg.norm(D, axis=-1)
+    scale = 2.0 ** -np.frexp(top)[1]
+    return np.linalg.norm(D * scale, axis=-1) / scale
+
+
 def _delaunay(P: np.ndarray) -> np.ndarray:
     """Delaunay simplices; degenerate sets (collinear or repeated points) are joggled (``QJ``);
-    a set that not even joggling triangulates (e.g. all points at one place) is refused."""
+    a set that not even joggling triangulates (e.g. all points at one place) is refused.
+
+    The points are first moved to the origin of their bounding box and scaled by a power of two
+    to about unit size: the triangulation does not depend on the units (Qhull's tolerances are
+    absolute: points at 1e80 were refused, at 1e-180 triangulated otherwise). A point that the
+    plain triangulation leaves out (a repeated point: Qhull keeps one copy) also joggles, so
+    that every node gets edges.
+    """
+    lo = P.min(axis=0)
+    span = float((P.max(axis=0) - lo).max())
+    if span > 0 and np.isfinite(span):
+        P = (P - lo) * 2.0 ** -np.frexp(span)[1]
     try:
-        return Delaunay(P).simplices
+        tri = Delaunay(P)
+        if not len(tri.coplanar):
+            return tri.simplices
     except QhullError:
         pass
     try:

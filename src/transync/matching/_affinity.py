@@ -639,6 +639,9 @@ DEFAULT_SIGMA2 = 0.15
 # exp(-t) for t above this is below 1e-300: the Gaussian kernel has underflowed
 _UNDERFLOW = 690.0
 
+# largest edge length whose square (and a Gaussian width for it) float64 still holds
+_MAX_LENGTH = 1e150
+
 
 def _refuse_underflow(alive: int, needed: int, sigma2: float, what: str, scale: float,
                       how: str) -> None:
@@ -679,8 +682,9 @@ def _edge_attributes(g: Graph, attribute: str, name: str) -> list[np.ndarray]:
                          "(use attribute='weight' or 'features')")
     with np.errstate(over="ignore", invalid="ignore"):
         D = g.distances()
-    if not np.all(np.isfinite(D)):
-        raise ValueError(f"the edge lengths of `{name}` overflow (points of magnitude up to "
+    if not np.all(np.isfinite(D)) or D.max(initial=0.0) > _MAX_LENGTH:
+        raise ValueError(f"the edge lengths of `{name}` overflow when squared (lengths up to "
+                         f"{D.max(initial=0.0):.3g}, points of magnitude up to "
                          f"{np.abs(g.points).max():.3g}); rescale the points")
     return [D] if attribute == "length" else [D, g.angles()]
 

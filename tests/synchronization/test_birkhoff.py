@@ -314,7 +314,7 @@ def test_estimate_universe_bad_input():
     assert est.n_universe >= 3
 
 
-@pytest.mark.parametrize("scale", [1e-300, 0.01, 0.05, 0.2, 1e290])
+@pytest.mark.parametrize("scale", [5e-324, 1e-310, 1e-300, 0.01, 0.05, 0.2, 1e290])
 def test_universe_estimate_ignores_a_uniform_weight_scale(scale):
     # consistent partial input: one eigenvalue 1 per universe node whatever the weights; the
     # identity blocks once weighed 1 against the pairs' c, and at c = 0.05 the spectrum after

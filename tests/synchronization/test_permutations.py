@@ -156,7 +156,7 @@ def test_weights_downweight_a_bad_pair():
 
 
 @pytest.mark.parametrize("method", ["spectral", "orthogonal", "matcheig"])
-@pytest.mark.parametrize("scale", [1e-300, 1e-3, 0.1, 7.0, 1e290])
+@pytest.mark.parametrize("scale", [5e-324, 1e-310, 1e-300, 1e-3, 0.1, 7.0, 1e290])
 def test_uniform_weights_change_nothing(method, scale):
     # the objective sum w_ij <P_ij, X_i X_j^T> does not change when every weight is scaled; the
     # identity blocks once weighed 1 whatever the weights, and at weights 0.1 exactly consistent

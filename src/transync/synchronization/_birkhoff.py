@@ -811,7 +811,8 @@ def _estimate_universe_soft(X, w, pairs, sizes):
     n_max = int(sizes.max())
     off = np.concatenate([[0], np.cumsum(sizes)])
     M = int(off[-1])
-    B = spec.identity_weight(np.asarray(w, dtype=float)) * np.eye(M)
+    w = spec.relative_weights(np.asarray(w, dtype=float))
+    B = spec.identity_weight(w) * np.eye(M)
     for q, (i, j) in enumerate(pairs):
         blk = w[q] * X[q][: sizes[i], : sizes[j]]
         B[off[i]:off[i + 1], off[j]:off[j + 1]] += blk

@@ -44,6 +44,14 @@ def directed(stk: StackedPairs):
     return ptr, dst, maps, w
 
 
+def relative_weights(w: np.ndarray) -> np.ndarray:
+    """The pair weights divided by the largest (unchanged when none is positive): every
+    synchronizer's block matrix is built from these, so a scale of 1e-310 (whose degrees fell
+    below the normalization's 1e-300 floor) or 1e290 is the same problem as 1."""
+    top = float(np.max(w, initial=0.0))
+    return w / top if top > 0 else w
+
+
 def identity_weight(w: np.ndarray) -> float:
     """Weight of the identity diagonal blocks: the smallest positive pair weight (1 without).
 
@@ -67,14 +75,15 @@ def block_matrix(stk: StackedPairs, *, normalize: bool = True, dtype=np.float64,
     stack of its directed maps (one gather per observed pair), so no COO sort is needed. With
     ``normalize`` the result is ``D^-1/2 T D^-1/2``, ``D`` the row sums of ``T``.
 
-    The identity blocks carry :func:`identity_weight` (the smallest positive pair weight), so
-    multiplying every weight by one constant scales ``T`` and leaves the normalized matrix
-    unchanged.
+    The off-diagonal blocks carry the pairs' :func:`relative_weights` and the identity blocks
+    :func:`identity_weight` of those (the smallest positive one), so multiplying every weight
+    by one constant leaves ``T`` unchanged.
     """
     off = stk.offsets
     M = int(off[-1])
     idx_dtype = np.int32 if M < 2**31 - 1 else np.int64
     ptr, dst, maps, w = directed_obs if directed_obs is not None else directed(stk)
+    w = relative_weights(w)
     ident = identity_weight(w)
     indptr = np.zeros(M + 1, dtype=np.int64)
     ind_parts = []

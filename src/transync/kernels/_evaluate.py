@@ -12,6 +12,7 @@ labels ``y`` and ``random_state``, so every kernel evaluated with the same ``y``
 from __future__ import annotations
 
 import hashlib
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -201,9 +202,9 @@ class CVResult:
     mean : float
         Mean of ``per_repeat`` (equal to the mean over all folds).
     std : float
-        Standard deviation (``ddof=0``) of ``per_repeat``, the spread *between repetitions*
-        (the field's convention for "mean ± std over 10 runs"); the fold-level spread is
-        ``accuracies.std()``.
+        Sample standard deviation (``ddof=1``; 0 for one repetition) of ``per_repeat``, the
+        spread *between repetitions* ("mean ± std over 10 runs", as the experiment's tables);
+        the fold-level spread is ``accuracies.std()``.
     chosen_C : ndarray of shape (n_repeats, n_splits)
         The ``C`` picked by the inner cross-validation for each outer fold.
     chosen_kernel : ndarray of shape (n_repeats, n_splits)
@@ -289,13 +290,19 @@ def _stratified_folds(y: np.ndarray, n_splits: int, rng: np.random.Generator) ->
     return fold
 
 
-def _fit_score(K: np.ndarray, y: np.ndarray, train: np.ndarray, test: np.ndarray,
-               C: float) -> float:
+def _fit_correct(K: np.ndarray, y: np.ndarray, train: np.ndarray, test: np.ndarray,
+                 C: float) -> int:
+    """Number of ``test`` samples an SVM trained on ``train`` classifies right."""
     from sklearn.svm import SVC
 
     clf = SVC(kernel="precomputed", C=C)
     clf.fit(K[np.ix_(train, train)], y[train])
-    return float(np.mean(clf.predict(K[np.ix_(test, train)]) == y[test]))
+    return int(np.count_nonzero(clf.predict(K[np.ix_(test, train)]) == y[test]))
+
+
+def _fit_score(K: np.ndarray, y: np.ndarray, train: np.ndarray, test: np.ndarray,
+               C: float) -> float:
+    return _fit_correct(K, y, train, test, C) / len(test)
 
 
 def _select_C(K_train: np.ndarray, y_train: np.ndarray, C_grid: np.ndarray,
@@ -306,14 +313,22 @@ def _select_C(K_train: np.ndarray, y_train: np.ndarray, C_grid: np.ndarray,
     smallest ``C``.
     """
     fold = _stratified_folds(y_train, inner_splits, rng)
-    scores = np.zeros((K_train.shape[0], C_grid.shape[0]))
+    # the mean inner accuracy, exactly: sum_k correct_k / n_k on the common denominator
+    # lcm(n_k), an integer; float sums broke exact ties by rounding (C = 1000 over an equal
+    # C = 100 on one PTC_MR fold)
+    sizes = [int(np.count_nonzero(fold == k)) for k in range(inner_splits)]
+    lcm = math.lcm(*[max(n, 1) for n in sizes])
+    scores = np.zeros((K_train.shape[0], C_grid.shape[0]), dtype=object)
     for k in range(inner_splits):
         tr = np.flatnonzero(fold != k)
         va = np.flatnonzero(fold == k)
+        if not va.size:
+            continue
         for q, Kq in enumerate(K_train):
             for c, C in enumerate(C_grid):
-                scores[q, c] += _fit_score(Kq, y_train, tr, va, float(C))
-    q, c = np.unravel_index(int(np.argmax(scores)), scores.shape)   # first maximum on ties
+                scores[q, c] += _fit_correct(Kq, y_train, tr, va, float(C)) * (lcm // va.size)
+    flat = scores.ravel().tolist()
+    q, c = np.unravel_index(flat.index(max(flat)), scores.shape)   # first maximum on ties
     return int(q), float(C_grid[c])
 
 
@@ -427,7 +442,8 @@ def repeated_cv(K, y, *, n_splits: int = 10, n_repeats: int = 10, C_grid=None,
                 bar.update(1)
     per_repeat = acc.mean(axis=1)
     return CVResult(accuracies=acc, per_repeat=per_repeat, mean=float(per_repeat.mean()),
-                    std=float(per_repeat.std()), chosen_C=chosen, chosen_kernel=chosen_k,
+                    std=float(per_repeat.std(ddof=1)) if n_repeats > 1 else 0.0,
+                    chosen_C=chosen, chosen_kernel=chosen_k,
                     folds=folds,
                     fingerprint=_fingerprint(folds), C_grid=C_grid,
                     info={"inner_splits": inner_splits, "random_state": random_state})

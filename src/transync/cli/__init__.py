@@ -6,7 +6,7 @@ its public names and writes plain files (JSON, CSV, PNG) that other tools can re
 libraries (OpenCV, matplotlib) are imported only inside the commands that need them.
 
 Every error prints one line, ``transync: error: ...``, on stderr and exits with status 2
-(``--debug`` shows the traceback instead); Ctrl-C exits with status 130.
+(``--debug`` prints the traceback before it); Ctrl-C exits with status 130.
 
 >>> build_parser().parse_args(["sync", "pairs.json", "--method", "spectral"]).command
 'sync'
@@ -33,8 +33,8 @@ Run `transync COMMAND --help` for a command's options (each shows its default)."
 _EPILOG = """\
 exit status: 0 success; 1 finished, but some trials failed (experiment, demo: rerun to retry)
 or no data folder was found (datasets); 2 an error (one line on stderr: `transync: error: ...`;
---debug shows the traceback); 130 interrupted (Ctrl-C; stored experiment trials are kept, rerun
-to resume).
+--debug also prints the traceback); 130 interrupted (Ctrl-C; stored experiment trials are kept,
+rerun to resume).
 Warnings (e.g. a solver stopped at its iteration budget) print one line each on stderr:
 `transync: warning: ...`."""
 

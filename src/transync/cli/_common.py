@@ -58,6 +58,10 @@ def int_at_least(minimum: int):
 #: ``argparse`` type: an integer >= 1.
 positive_int = int_at_least(1)
 
+#: ``argparse`` type of every ``--seed``: an integer >= 0 (refused at parse time, naming the
+#: option, instead of by the library naming its ``rng`` argument)
+seed_int = int_at_least(0)
+
 
 def positive_float(text: str) -> float:
     """``argparse`` type: a finite float > 0."""

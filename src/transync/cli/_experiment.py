@@ -8,7 +8,7 @@ import inspect
 import time
 from pathlib import Path
 
-from ._common import CLIError, positive_int
+from ._common import CLIError, positive_int, seed_int
 
 __all__ = ["add_parsers"]
 
@@ -160,7 +160,7 @@ def add_parsers(sub) -> None:
                         "every stored trial is reported)")
     p.add_argument("--workers", type=positive_int, default=1,
                    help="worker processes for the trials (1 = in this process)")
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=seed_int, default=0,
                    help="base seed of every trial's random problem (stored apart from other "
                         "seeds: a new seed adds trials, it never overwrites)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 from ._common import (CLIError, check_output_folder, new_output_folder, positive_float,
-                      positive_int)
+                      positive_int, seed_int)
 
 __all__ = ["add_parser"]
 
@@ -212,7 +212,7 @@ def add_parser(sub) -> None:
     p.add_argument("--dense-target", default="auto", choices=["auto", "mean", "reference"],
                    help="what the dense step aligns each view to: the mean of the warped views, "
                         "the reference image, or auto (the mean from 4 views on)")
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=seed_int, default=0,
                    help="seed of the random stages (RANSAC, segmentation); same seed, same "
                         "answer")
     p.add_argument("--no-progress", action="store_true",

@@ -16,7 +16,7 @@ import json
 import time
 
 from ._common import (CLIError, check_output_folder, int_at_least, new_output_folder,
-                      positive_int)
+                      positive_int, seed_int)
 
 __all__ = ["add_parser"]
 
@@ -26,7 +26,6 @@ KERNEL_VARIANTS = ("linear", "gaussian", "relaxed")
 
 
 _at_least_2 = int_at_least(2)
-_seed = int_at_least(0)
 
 
 def _load(spec: str):
@@ -147,7 +146,7 @@ def add_parser(sub) -> None:
                    help="outer stratified folds (default: 10)")
     p.add_argument("--repeats", type=positive_int, default=10,
                    help="repetitions of the cross-validation (default: 10)")
-    p.add_argument("--seed", type=_seed, default=0,
+    p.add_argument("--seed", type=seed_int, default=0,
                    help="seed of the matcher and of the folds (default: 0)")
     p.add_argument("--workers", type=positive_int, default=1,
                    help="processes for the pairwise matching (default: 1)")

@@ -7,7 +7,7 @@ import json
 import math
 from pathlib import Path
 
-from ._common import CLIError, emit, positive_float, positive_int
+from ._common import CLIError, emit, positive_float, positive_int, seed_int
 
 __all__ = ["add_parsers", "read_points"]
 
@@ -247,7 +247,8 @@ def _cmd_sync(args) -> int:
 
     pairs = _read_pairs(args.pairwise)
     try:
-        res = synchronize_permutations(pairs, method=args.method, n_universe=args.n_universe)
+        res = synchronize_permutations(pairs, method=args.method, n_universe=args.n_universe,
+                                       rng=args.seed)
     except (ValueError, TypeError) as exc:
         raise CLIError(f"{args.pairwise}: {exc}") from exc
     payload = {"method": args.method, "labels": [np.asarray(lab).tolist() for lab in res.labels],
@@ -314,7 +315,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--verify-threshold", type=positive_float, default=None,
                    help="verification gate, as a fraction of the median nearest-neighbour "
                         "distance of the points (default 0.5)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the randomized steps")
+    p.add_argument("--seed", type=seed_int, default=0, help="seed of the randomized steps")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--out", help="JSON output file (default: print)")
     p.set_defaults(func=_cmd_collection)
@@ -329,5 +330,8 @@ def add_parsers(sub) -> None:
                    help="size of the universe of nodes (default: estimated from the spectrum; "
                         "the number of nodes when every object has the same size and every "
                         "map is a full permutation)")
+    p.add_argument("--seed", type=seed_int, default=0,
+                   help="seed of the randomized steps (the eigensolver's start above 2000 "
+                        "nodes)")
     p.add_argument("--out", help="JSON output file (default: print)")
     p.set_defaults(func=_cmd_sync)

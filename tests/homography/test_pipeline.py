@@ -447,3 +447,14 @@ def test_dense_stage_refines_precomputed_pairs_without_matches():
     sparse = corner_error(res.sparse_homographies, scene.homographies, image_size=(240, 180))
     final = corner_error(res.homographies, scene.homographies, image_size=(240, 180))
     assert final[1:].mean() < 0.75 * sparse[1:].mean()
+
+
+def test_unlinked_view_has_an_empty_mask_and_its_failed_pairs_are_kept():
+    # a view no pair links kept an all-plane mask (the CLI report said "empty mask"), and the
+    # rectified second pass replaced the pairwise result, dropping the first pass's failures
+    scene = make_planar_scene(n_views=2, image_size=(320, 240), rng=0)
+    images = list(scene.images) + [np.full((240, 320), 128, np.uint8)]
+    with pytest.warns(UnlinkedViewsWarning):
+        res = estimate_plane_homographies(images, dense=False, rng=0)
+    assert not res.masks[2].any() and res.masks[0].any()
+    assert {(i, j) for i, j, _ in res.pairwise.failed} == {(0, 2), (1, 2)}

@@ -143,7 +143,8 @@ class PlaneAlignmentResult:
         ``homographies[i]`` maps pixel coordinates of view ``i`` into the reference view
         (determinant 1; NaN for views that could not be registered).
     masks : list of (h_i, w_i) bool arrays
-        Plane mask of every view (all True when ``segment=False``).
+        Plane mask of every view (all True when ``segment=False``; all False for a view that
+        could not be registered).
     mean_image : ndarray (h, w) float32
         Mean of the plane pixels of all views warped into the reference view.
     reference : int
@@ -159,8 +160,9 @@ class PlaneAlignmentResult:
     info : dict
         ``history``: per-iteration diagnostics (``max_corner_change`` of the round's update in
         pixels, ``mask_change``: fraction of pixels whose plane label the round's segmentation
-        flipped, against all-plane in the first round; ``plane_fraction``, per-view dense
-        outcomes, stage times); ``seconds``: timing per stage; ``sync``: the sparse
+        flipped, against all-plane in the first round; ``plane_fraction`` of the registered
+        views, per-view dense outcomes, stage times); ``seconds``: timing per stage; ``sync``:
+        the sparse
         :class:`LinearMapSyncResult`; ``options``: the :class:`DenseOptions` used.
 
     Examples
@@ -418,6 +420,9 @@ def _rectified_pass(gray, pw, sync, *, reference, robust, n_features, method, rn
     maps = np.full_like(sync.maps, np.nan)
     for i in np.flatnonzero(ok_r):
         maps[i] = normalize_determinant(np.linalg.inv(Tc) @ sync_r.maps[i] @ Tc @ sync.maps[i])
+    # the pass re-estimates only the pairs the first pass linked: the pairs that failed there
+    # stay failed (they were dropped from the result and the CLI's report)
+    pw_r = dataclasses.replace(pw_r, failed=list(pw.failed) + list(pw_r.failed))
     return maps, pw_r, sync_r
 
 
@@ -725,7 +730,10 @@ def _refine_rounds(gray, sizes, H_sparse, pw, corr, idx, *, reference, dense, se
     ``converged``."""
     r_sub = int(np.flatnonzero(idx == reference)[0])
     H = H_sparse.copy()
-    masks = [np.ones(g.shape, bool) for g in gray]
+    linked = np.zeros(len(gray), bool)
+    linked[idx] = True
+    # a view that could not be registered has no plane region (its homography is NaN)
+    masks = [np.full(g.shape, bool(linked[i])) for i, g in enumerate(gray)]
     history = []
     converged, change, it = True, 0.0, 0
     rounds = range(1, (opts.max_iter if (dense or segment) else 0) + 1)
@@ -750,7 +758,7 @@ def _refine_rounds(gray, sizes, H_sparse, pw, corr, idx, *, reference, dense, se
         change = float(_corner_change(H_new[idx], H[idx], [sizes[i] for i in idx]).max())
         history.append({"iteration": it, "max_corner_change": change, "seconds_segment": t_seg,
                         "seconds_dense": t_dense, "rejected_dense": rejected, "dense_views": views,
-                        "plane_fraction": float(np.mean([m.mean() for m in masks])),
+                        "plane_fraction": float(np.mean([masks[i].mean() for i in idx])),
                         "mask_change": mask_change})
         _log_round(it, change, t_seg + t_dense)
         H = H_new

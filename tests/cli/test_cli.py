@@ -152,16 +152,16 @@ def bad_inputs(tmp_path):
     (["collection", "{d}/p2.txt", "{d}/p3.txt"], r"different dimensions: .*p3\.txt has 3"),
     (["collection", "{d}/p2.txt", "{d}/header.csv"], r"header\.csv, line 1"),
     (["collection", "{d}/p2.txt", "{d}/near.txt", "--n-universe", "3"],
-     r"`n_universe` must be >= the largest graph's size 5"),
+     r"`--n-universe` must be >= the largest graph's size 5"),
     (["collection", "{d}/p2.txt", "{d}/near.txt", "--solver", "cao", "--sync", "none"],
-     r"`partial` must be 'dummies' .* CAO composes full permutations"),
+     r"`--partial` must be 'dummies' .* CAO composes full permutations"),
     (["collection", "{d}/p3.txt", "{d}/p3.txt", "--affinity", "length+angle", "--edges",
       "full"],
      r"length\+angle needs 2-d points"),
     (["collection", "{d}/p3.txt", "{d}/p3.txt", "--edges", "full", "--verify", "affine"],
-     r"`verify='affine'` fits plane transforms .* graph 0 has 3-d points"),
+     r"`--verify affine` fits plane transforms .* graph 0 has 3-d points"),
     (["collection", "{d}/p2.txt", "{d}/near.txt", "--verify", "affine", "--partial",
-      "dummies"], r"`verify` checks matches between the graphs' points"),
+      "dummies"], r"`--verify` checks matches between the graphs' points"),
 ])
 def test_errors_are_one_line_and_exit_2(bad_inputs, capsys, argv, expected):
     import re
@@ -499,3 +499,24 @@ def test_a_negative_seed_is_a_usage_error_naming_the_option(cmd, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "argument --seed: expected an integer >= 0, got -1" in err
+
+
+def test_library_errors_name_the_commands_options(tmp_path, capsys):
+    # the messages named match_collection's arguments (`n_universe`, verify='affine') and
+    # suggested library calls (gaussian_edge_affinity) instead of the options
+    a, b = tmp_path / "a.txt", tmp_path / "b.txt"
+    c, d = tmp_path / "c.txt", tmp_path / "d.txt"
+    a.write_text("0 0\n1 0\n0 1\n1 1\n2 3\n")
+    b.write_text("0 0\n1 0\n0 1\n1 1\n2 2\n")
+    c.write_text("0.13 0.71\n0.92 0.05\n0.44 0.38\n0.67 0.99\n")   # no two equal lengths
+    d.write_text("0.21 0.64\n0.83 0.17\n0.49 0.31\n0.58 0.93\n")
+    cases = [(["collection", str(a), str(b), "--n-universe", "3", "--quiet"],
+              "`--n-universe` must be >="),
+             (["collection", str(a), str(b), "--verify-threshold", "0.3", "--quiet"],
+              "pass --verify affine"),
+             (["match", str(c), str(d), "--sigma2", "1e-300"], "increase --sigma2")]
+    for argv, want in cases:
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and want in err, err
+        assert "gaussian_edge_affinity" not in err and "n_universe" not in err

@@ -58,6 +58,31 @@ def int_at_least(minimum: int):
 #: ``argparse`` type: an integer >= 1.
 positive_int = int_at_least(1)
 
+def cli_message(exc: BaseException, options=()) -> str:
+    """The first line of a library error, with the library's argument names that are this
+    command's options written as options (a quoted ``n_universe`` becomes ``--n-universe``,
+    ``verify='affine'`` becomes ``--verify affine``).
+
+    >>> cli_message(ValueError("`n_universe` must be >= 5"), ["n_universe"])
+    '`--n-universe` must be >= 5'
+    >>> cli_message(ValueError("pass verify='affine' (or 'similarity')"), ["verify"])
+    "pass --verify affine (or 'similarity')"
+    >>> cli_message(ValueError("verify=None runs no check, got verify_threshold=0.3"),
+    ...             ["verify_threshold", "verify"])
+    '--verify none runs no check, got --verify-threshold 0.3'
+    """
+    import re
+
+    msg = (str(exc).splitlines() or [""])[0] or type(exc).__name__
+    for name in options:
+        flag = "--" + name.replace("_", "-")
+        msg = msg.replace(f"`{name}`", f"`{flag}`")
+        msg = re.sub(rf"\b{name}=(?:'([^']*)'|([^\s,;)']+))",
+                     lambda m, f=flag: f"{f} {m.group(1) or m.group(2).replace('None', 'none')}",
+                     msg)
+    return msg
+
+
 #: ``argparse`` type of every ``--seed``: an integer >= 0 (refused at parse time, naming the
 #: option, instead of by the library naming its ``rng`` argument)
 seed_int = int_at_least(0)

@@ -7,9 +7,13 @@ import json
 import math
 from pathlib import Path
 
-from ._common import CLIError, emit, positive_float, positive_int, seed_int
+from ._common import CLIError, cli_message, emit, positive_float, positive_int, seed_int
 
 __all__ = ["add_parsers", "read_points"]
+
+#: match_collection's arguments that ``collection`` has as options (named so in its errors)
+_COLLECTION_OPTIONS = ("n_universe", "verify_threshold", "verify", "solver", "sync", "mode",
+                       "partial", "sigma2", "affinity", "edges", "seed")
 
 METHODS = ("hungarian", "sinkhorn", "sm", "rrwm", "ipfp", "ga", "pf")
 LINEAR = ("hungarian", "sinkhorn")
@@ -97,6 +101,7 @@ def _read_text_points(p: Path):
 def _cmd_match(args) -> int:
     import numpy as np
 
+    from ..exceptions import DegenerateInputError
     from ..graphs import Graph
     from ..matching import gaussian_edge_affinity, match_graphs
 
@@ -109,14 +114,17 @@ def _cmd_match(args) -> int:
         scale = 1.0                      # every point identical: nothing to rescale
     g1 = Graph.from_points(P1 / scale, edges=args.edges)
     g2 = Graph.from_points(P2 / scale, edges=args.edges)
-    aff = gaussian_edge_affinity(g1, g2, sigma2=args.sigma2)
-    # first-order linearization of the edge affinity, (K 1)[i, a]: how well the edges around
-    # i and a agree. All zero: every solver would return an arbitrary assignment.
-    linear = aff.matvec(np.ones((aff.n1, aff.n2)))
-    top = float(linear.max()) if linear.size else 0.0
     if min(len(P1), len(P2)) < 2:
         raise CLIError(f"need at least 2 points in each set to compare edges, got {len(P1)} and "
                        f"{len(P2)}")
+    try:
+        aff = gaussian_edge_affinity(g1, g2, sigma2=args.sigma2)
+    except DegenerateInputError:        # every edge pair's affinity underflows
+        aff = None
+    # first-order linearization of the edge affinity, (K 1)[i, a]: how well the edges around
+    # i and a agree. All zero: every solver would return an arbitrary assignment.
+    linear = None if aff is None else aff.matvec(np.ones((aff.n1, aff.n2)))
+    top = float(linear.max()) if linear is not None and linear.size else 0.0
     if not top > 0:
         raise CLIError(f"the edge affinity is zero for every candidate pair (no edges, or "
                        f"--sigma2 {args.sigma2} too small for these point sets); increase "
@@ -177,7 +185,7 @@ def _cmd_collection(args) -> int:
                                verify_threshold=args.verify_threshold,
                                rng=args.seed, progress=not args.quiet)
     except (ValueError, TypeError) as exc:
-        raise CLIError(str(exc).splitlines()[0]) from exc
+        raise CLIError(cli_message(exc, _COLLECTION_OPTIONS)) from exc
     payload = {
         "files": [str(p) for p in args.points], "sizes": res.sizes.tolist(),
         "solver": res.solver, "sync": res.sync, "mode": res.mode, "partial": args.partial,
@@ -250,7 +258,7 @@ def _cmd_sync(args) -> int:
         res = synchronize_permutations(pairs, method=args.method, n_universe=args.n_universe,
                                        rng=args.seed)
     except (ValueError, TypeError) as exc:
-        raise CLIError(f"{args.pairwise}: {exc}") from exc
+        raise CLIError(f"{args.pairwise}: {cli_message(exc, ('n_universe', 'method'))}") from exc
     payload = {"method": args.method, "labels": [np.asarray(lab).tolist() for lab in res.labels],
                "objective": float(res.objective), "converged": bool(res.converged),
                "n_iter": int(res.n_iter)}

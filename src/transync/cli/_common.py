@@ -58,6 +58,7 @@ def int_at_least(minimum: int):
 #: ``argparse`` type: an integer >= 1.
 positive_int = int_at_least(1)
 
+
 def cli_message(exc: BaseException, options=()) -> str:
     """The first line of a library error, with the library's argument names that are this
     command's options written as options (a quoted ``n_universe`` becomes ``--n-universe``,

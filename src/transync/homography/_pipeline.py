@@ -162,8 +162,7 @@ class PlaneAlignmentResult:
         pixels, ``mask_change``: fraction of pixels whose plane label the round's segmentation
         flipped, against all-plane in the first round; ``plane_fraction`` of the registered
         views, per-view dense outcomes, stage times); ``seconds``: timing per stage; ``sync``:
-        the sparse
-        :class:`LinearMapSyncResult`; ``options``: the :class:`DenseOptions` used.
+        the sparse :class:`LinearMapSyncResult`; ``options``: the :class:`DenseOptions` used.
 
     Examples
     --------

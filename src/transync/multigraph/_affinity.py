@@ -115,7 +115,6 @@ def _unvec_batch(x: np.ndarray, n1: int, n2: int) -> np.ndarray:
 # --------------------------------------------------------------------------- per-graph factors
 
 
-
 _FAST_KEYWORDS = {"sigma2", "attribute", "tol", "backend", "angle_weight"}
 
 

@@ -166,7 +166,6 @@ def test_finish_hook_files_listed_and_skipped_without_plot(tmp_path):
     assert seen == [(12, len(rep.summary))]
 
 
-
 def _returns(value):
     def trial(config, rng):
         return value

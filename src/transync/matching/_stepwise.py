@@ -35,7 +35,7 @@ from .._blas import blas_limit
 from .._validation import check_affinity_scale, check_array, check_nonnegative
 from ..exceptions import ConvergenceWarning
 from ..permutations import assignment_to_matrix, solve_lap
-from ._affinity import Affinity
+from ._affinity import Affinity, SeparableAffinity
 from ._result import MatchingResult
 
 __all__ = ["Stepper"]
@@ -229,8 +229,12 @@ def _moderate(affinity: Affinity, *, limit: float = 1e100) -> Affinity:
 
 
 def _symmetric(affinity: Affinity, *, rtol: float = 1e-10) -> Affinity:
-    """``affinity`` itself if it is symmetric (checked on one random probe), else its symmetric
-    part."""
+    """``affinity`` itself if it is symmetric (checked on one random probe, or on the factors of
+    a separable expansion: symmetric factors give a symmetric K), else its symmetric part."""
+    if isinstance(affinity, SeparableAffinity) and (
+            np.array_equal(affinity.F, np.swapaxes(affinity.F, 1, 2))
+            and np.array_equal(affinity.G, np.swapaxes(affinity.G, 1, 2))):
+        return affinity           # undirected graphs: no two products (20 % of sm at n = 100)
     probe = np.random.default_rng(12345).random((affinity.n1, affinity.n2))
     a, b = affinity.matvec(probe), affinity.rmatvec(probe)
     scale = max(float(np.abs(a).max(initial=0.0)), 1e-300)

@@ -128,7 +128,8 @@ def add_parser(sub) -> None:
                        "cross-validated SVM accuracy")
     p.add_argument("dataset", metavar="DATASET",
                    help="TU data set: a name in the data home's tu/ folder (e.g. MUTAG) or a "
-                        "folder holding DS_A.txt, DS_graph_indicator.txt, DS_graph_labels.txt")
+                        "folder holding DS_A.txt, DS_graph_indicator.txt, DS_graph_labels.txt "
+                        "(a path: with a separator or a leading . or ~, e.g. ./MYSET)")
     p.add_argument("--out", default="transync-kernel",
                    help="output folder (default: transync-kernel; created only on success)")
     p.add_argument("--matcher", choices=MATCHERS, default="rrwm",

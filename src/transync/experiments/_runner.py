@@ -804,8 +804,9 @@ def mean_se(values) -> tuple[float, float, int]:
 METRIC_LABELS = {
     "accuracy": "accuracy (fraction of true matches)",
     "objective": "affinity score / ground truth's\n(> 1: the solver beats the truth)",
-    "consistency": "output cycle consistency\n(fraction of consistent triangles)",
-    "input_consistency": "input cycle consistency\n(fraction of consistent triangles)",
+    "consistency": "output cycle consistency\n(1 - fraction of nodes disagreeing on triangles)",
+    "input_consistency": "input cycle consistency\n(1 - fraction of nodes disagreeing on "
+                         "triangles)",
     "cycle_error": "cycle error\n(fraction of inconsistent triangles)",
     "seconds": "time per trial (s)",
     "time": "time (s)",

@@ -204,7 +204,8 @@ def build(*, quick: bool = False) -> Experiment:
               metrics=metrics, xlabel="data set (Fig. 5.3a, Tables 5.1-5.5, Fig. 5.5)"),
         Sweep(name="init_error", variable="init_error", values=errors,
               methods=("ransac_to_reference", "sync", "sync_dense"), base=base,
-              metrics=metrics, xlabel="corner error of the initial pairwise homographies (px)"),
+              metrics=metrics,
+              xlabel="corner noise of the initial pairwise homographies (std, px)"),
         Sweep(name="angle", variable="max_angle", values=angles, methods=METHODS, base=base,
               metrics=metrics, xlabel="maximum view angle (degrees)"),
         Sweep(name="clutter", variable="clutter", values=clutters, methods=METHODS, base=base,
@@ -260,7 +261,9 @@ _COLUMNS = (("RANSAC to reference", "ransac_to_reference", ""),
 
 def _write_tables(data, path) -> Path:
     intro = ("Brenner focus measure of the mean of all views warped into the reference view "
-             "with the estimated homographies, divided by the same measure with the true "
+             "(each view's gain and bias fitted to the running mean first, "
+             "`mean_warped_image(normalize=True)`) with the estimated homographies, divided by "
+             "the same measure with the true "
              "homographies (over the true plane pixels; 1 = as sharp as the truth). \"before\" "
              "is the synchronized sparse estimate, \"after\" the same run after segmentation + "
              "dense refinement. Mean ± standard error over trials.")

@@ -461,6 +461,7 @@ class SeparableAffinity(Affinity):
                                           .reshape(self.n2, R * self.n2))
         self._Fcat = np.ascontiguousarray(self.F.transpose(1, 0, 2).reshape(self.n1, R * self.n1))
         self._transposed = None  # factors of K^T, built on the first rmatvec
+        self._symmetric = None   # `symmetric`, computed on first use
 
     @property
     def rank(self) -> int:
@@ -478,11 +479,19 @@ class SeparableAffinity(Affinity):
     def matvec(self, X):
         return self._product(X, self._Fcat, self._Gcat)
 
+    @property
+    def symmetric(self) -> bool:
+        """Whether ``K`` is symmetric, read off the factors (symmetric ``F_r`` and ``G_r``, as
+        undirected graphs give); computed once."""
+        if self._symmetric is None:
+            self._symmetric = bool(np.array_equal(self.F, np.swapaxes(self.F, 1, 2))
+                                   and np.array_equal(self.G, np.swapaxes(self.G, 1, 2)))
+        return self._symmetric
+
     def rmatvec(self, X):
         if self._transposed is None:
             R = self.F.shape[0]
-            if (np.array_equal(self.F, np.swapaxes(self.F, 1, 2))
-                    and np.array_equal(self.G, np.swapaxes(self.G, 1, 2))):
+            if self.symmetric:
                 self._transposed = (self._Fcat, self._Gcat)   # undirected: K is symmetric
             else:
                 self._transposed = (

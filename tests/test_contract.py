@@ -2130,7 +2130,8 @@ def test_match_collection(gs, data, solver, sync, mode, partial, n_universe):
         {"executor": "serial"}, {"rng": -1}, {"progress": "no"},
         {"verify": "affine"}, {"verify": "similarity"}, {"verify": "homography"},
         {"verify": "affine", "verify_threshold": 3.0}, {"verify": "x"},
-        {"verify": "affine", "verify_threshold": 0.0}, {"verify_threshold": 0.5}]))
+        {"verify": "affine", "verify_threshold": 0.0}, {"verify_threshold": 0.5},
+        {"verify": None}, {"verify": None, "verify_threshold": 0.5}, {"verify": "auto"}]))
     if affinity is None and data.draw(st.integers(0, 9)) == 0 and len(set(sizes)) == 1:
         m = sizes[0] ** 2
         affinity = np.abs(data.draw(float_arrays((len(sizes), len(sizes), m, m))))

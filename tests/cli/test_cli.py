@@ -453,8 +453,12 @@ def test_collection_command_matches_point_sets_of_different_sizes(tmp_path, extr
         assert res["n_universe"] == 15 and "estimated" in res["n_universe_rule"]
     if "--verify" in extra:
         assert res["verify"] == extra[1] and res["verified_pairs"] == len(res["pairs"])
-    else:
-        assert res["verify"] == "none" and res["verified_pairs"] is None
+    elif "dummies" in extra:            # auto: the dummy-node baseline verifies nothing
+        assert res["verify"] == "auto" and res["verified_pairs"] is None
+        assert not res["verification_used"]
+    else:                               # auto: sets of different sizes are verified
+        assert res["verify"] == "auto" and res["verified_pairs"] == len(res["pairs"])
+    assert res["verification_used"] == (res["verified_pairs"] is not None)
 
 
 @pytest.mark.parametrize("argv", [["kernel", "NO_SUCH_SET"], ["homography", "a.png", "b.png"]])

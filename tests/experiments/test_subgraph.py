@@ -12,6 +12,7 @@ import pytest
 from transync.datasets import make_subgraph_collection
 from transync.experiments import REGISTRY
 from transync.experiments.subgraph import (
+    DEFAULT_METHOD,
     DUMMY_PAIRS,
     FIGURES,
     GRAPH_METHODS,
@@ -64,9 +65,13 @@ def test_figures_and_pairs_name_known_methods_and_sweeps():
     assert "RRWM" not in SYNCHRONIZED and len(SYNCHRONIZED) == len(METHODS) - 1
     assert VERIFIED and set(VERIFIED) <= set(SYNCHRONIZED)
     assert set(GRAPH_METHODS) | set(VERIFIED) == set(METHODS)
+    def unverified(kw):
+        return {k: v for k, v in kw.items() if k != "verify"}
+
+    for m in GRAPH_METHODS:               # verification off explicitly ("auto" would run it)
+        assert "verify" in METHODS[m] and METHODS[m]["verify"] is None
     for m in VERIFIED:                    # each is a graph method with the verification added
-        kw = {k: v for k, v in METHODS[m].items() if k != "verify"}
-        assert kw in [METHODS[g] for g in GRAPH_METHODS]
+        assert unverified(METHODS[m]) in [unverified(METHODS[g]) for g in GRAPH_METHODS]
 
 
 def test_unknown_method_and_missing_universe_are_refused():
@@ -187,6 +192,27 @@ def test_cmu_keep_range_and_sweep_on_a_written_sequence(tmp_path, write_sequence
     # translated, jittered copies: the affine verification keeps exactly the shared landmarks
     assert out["f1"] == 1.0 and out["universe_ok"] == 1.0
     assert build(data=seq).sweeps[-1].values == [8]        # 20 frames asked, 8 in the sequence
+
+
+@pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
+def test_the_default_line_is_match_collection_with_its_defaults(tmp_path, write_sequence):
+    """The targets table calls DEFAULT_METHOD the library's defaults: on the cmu sweep's
+    graphs (different sizes, 2-d points) it gives exactly what match_collection gives when
+    nothing but the affinity is passed."""
+    from transync import match_collection
+    from transync.datasets import LANDMARK_AFFINITY
+    from transync.experiments.subgraph import _cmu_problem
+
+    seq = write_sequence(tmp_path / "seq", n_landmarks=12)
+    cmu = {s.name: s for s in build(quick=True, data=seq).sweeps}["cmu"]
+    prob = _cmu_problem(dict(cmu.base, n_frames=5), np.random.default_rng(2), str(seq))
+    assert len({g.n_nodes for g in prob.graphs}) > 1
+    aff = functools.partial(gaussian_edge_affinity, **LANDMARK_AFFINITY)
+    res, _ = run_method(DEFAULT_METHOD, prob.graphs, aff, np.random.default_rng(3))
+    seed = int(np.random.default_rng(3).integers(2**31))        # run_method's draw
+    plain = match_collection(prob.graphs, affinity=aff, rng=seed, progress=False)
+    np.testing.assert_array_equal(res.assignments, plain.assignments)
+    assert plain.info["verify"]["auto"] and plain.info["verify"]["used"]
 
 
 def test_missing_data_folder_given_is_an_error(tmp_path, capsys):

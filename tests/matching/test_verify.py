@@ -3,11 +3,13 @@
 missed ones recovered, failures reported, relabelling invariance, the input contract."""
 
 import functools
+import pickle
 
 import numpy as np
 import pytest
 
 from transync import match_collection
+from transync.datasets import make_subgraph_collection
 from transync.graphs import Graph
 from transync.matching import (
     VERIFY_MODELS,
@@ -190,7 +192,8 @@ def test_match_collection_verified_recovers_planted_views(kwargs):
     info = res.info["verify"]
     assert info["model"] == "affine" and info["verified"].mean() > 0.8   # poor pairs fail
     assert info["n_inliers"].shape == (len(res.pairs),) and "verify" in res.timings
-    plain = match_collection(graphs, affinity=_AFFINITY, rng=0, progress=False, **kwargs)
+    plain = match_collection(graphs, affinity=_AFFINITY, verify=None, rng=0, progress=False,
+                             **kwargs)
     assert multimatching_precision_recall(plain, truth)["f1"] < 0.9
 
 
@@ -220,7 +223,8 @@ def test_match_collection_verified_pairwise_only():
     graphs, truth = _landmark_collection(keep=(18, 22))
     res = match_collection(graphs, affinity=_AFFINITY, sync=None, verify="affine", rng=0,
                            progress=False)
-    plain = match_collection(graphs, affinity=_AFFINITY, sync=None, rng=0, progress=False)
+    plain = match_collection(graphs, affinity=_AFFINITY, sync=None, verify=None, rng=0,
+                             progress=False)
     got = multimatching_precision_recall(res, truth)
     assert got["f1"] > multimatching_precision_recall(plain, truth)["f1"] + 0.15
     assert got["precision"] > 0.9 and res.matching is None
@@ -238,14 +242,20 @@ def test_match_collection_verified_equal_sizes():
 
 def test_match_collection_verify_refusals():
     graphs, _ = _landmark_collection(n_graphs=3)
-    with pytest.raises(ValueError, match="`verify` must be one of"):
+    with pytest.raises(ValueError, match="`verify` must be .auto., one of"):
         match_collection(graphs, verify="rigid", progress=False)
     with pytest.raises(ValueError, match="verify_threshold"):
         match_collection(graphs, verify="affine", verify_threshold=-1.0, progress=False)
     with pytest.raises(ValueError, match="partial='dummies'"):
         match_collection(graphs, verify="affine", partial="dummies", progress=False)
     with pytest.raises(ValueError, match="`verify_threshold` sets the gate"):
-        match_collection(graphs, verify_threshold=0.5, progress=False)
+        match_collection(graphs, verify=None, verify_threshold=0.5, progress=False)
+    equal, _ = _landmark_collection(n_graphs=3, keep=(24, 24))
+    with pytest.raises(ValueError, match=r"verify='auto' runs none of here \(the graphs are "
+                                         r"not partial views"):
+        match_collection(equal, verify_threshold=0.5, progress=False)
+    with pytest.raises(ValueError, match="`verify` must be 'auto', one of"):
+        match_collection(graphs, verify="Auto", progress=False)
     no_points = [Graph(np.ones((4, 4)) - np.eye(4)) for _ in range(3)]
     with pytest.raises(ValueError, match="graph 0 has no points"):
         match_collection(no_points, verify="affine", progress=False)
@@ -302,3 +312,71 @@ def test_extreme_scales_and_a_far_point():
         assert res.verified and res.n_inliers == 21
     with pytest.raises(ValueError, match="`threshold` times the spacing"):
         verify_assignment(p * 1e11, p * 1e11, np.arange(20), threshold=1e300)
+
+
+# ------------------------------------------------------------------ verify="auto" (the default)
+
+@pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
+@pytest.mark.parametrize("kwargs", [dict(), dict(sync="spectral", mode="offline"),
+                                    dict(sync=None)])
+def test_default_verifies_partial_views_with_points(kwargs):
+    """Graphs of different sizes with 2-d points: the default is the affine verification,
+    exactly as if asked for (same seeds, same maps), and says so."""
+    graphs, truth = _landmark_collection(keep=(18, 22))
+    auto = match_collection(graphs, affinity=_AFFINITY, rng=0, progress=False, **kwargs)
+    asked = match_collection(graphs, affinity=_AFFINITY, verify="affine", rng=0,
+                             progress=False, **kwargs)
+    np.testing.assert_array_equal(auto.assignments, asked.assignments)
+    info = auto.info["verify"]
+    assert info["model"] == "affine" and info["auto"] and info["used"]
+    assert not asked.info["verify"]["auto"] and asked.info["verify"]["used"]
+    assert multimatching_precision_recall(auto, truth)["f1"] > 0.9
+    if kwargs.get("sync", "auto") is not None:
+        assert auto.n_universe == 24 and auto.consistency == 1.0
+        assert auto.info["n_universe_rule"].startswith("estimated from the verified maps")
+    pickle.loads(pickle.dumps(auto))          # nothing unpicklable left in info
+
+
+@pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
+@pytest.mark.parametrize("case", ["equal sizes", "no points", "dummies"])
+def test_default_verifies_nothing_outside_partial_views_with_points(case):
+    """Equal sizes (where the quadratic model alone is exact on CMU House), graphs without
+    points and the dummy-node baseline: the default runs no verification at all."""
+    kwargs = {}
+    if case == "equal sizes":
+        graphs, _ = _landmark_collection(n_graphs=5, keep=(24, 24), seed=3)
+    elif case == "no points":
+        graphs = make_subgraph_collection(n_graphs=5, n_universe=10, p_keep=(0.6, 1.0),
+                                          rng=0).graphs
+    else:
+        graphs, _ = _landmark_collection(n_graphs=5, keep=(18, 22))
+        kwargs = dict(partial="dummies")
+    auto = match_collection(graphs, rng=0, progress=False, **kwargs)
+    off = match_collection(graphs, verify=None, rng=0, progress=False, **kwargs)
+    assert "verify" not in auto.info and "verify" not in auto.timings
+    np.testing.assert_array_equal(auto.assignments, off.assignments)
+
+
+@pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
+@pytest.mark.parametrize("kwargs", [dict(), dict(sync="spectral", mode="offline"),
+                                    dict(sync=None)])
+def test_default_drops_a_verification_the_geometry_does_not_support(kwargs):
+    """Partial graphs whose points are unrelated between graphs (not one rigid or planar
+    scene): no pair verifies, so the default keeps the unverified pipeline's output, exactly
+    (the random stream is rewound), instead of leaving every node unplaced."""
+    c = make_subgraph_collection(n_graphs=6, n_universe=12, p_keep=(0.6, 1.0),
+                                 deformation=0.02, rng=1)
+    rng = np.random.default_rng(0)
+    graphs = [Graph(g.adjacency, edge_features=g.edge_features,
+                    points=rng.random((g.n_nodes, 2))) for g in c.graphs]
+    auto = match_collection(graphs, rng=3, progress=False, **kwargs)
+    off = match_collection(graphs, verify=None, rng=3, progress=False, **kwargs)
+    info = auto.info["verify"]
+    assert info["auto"] and not info["used"] and info["verified"].mean() < 0.5
+    np.testing.assert_array_equal(auto.assignments, off.assignments)
+    assert np.mean(auto.assignments >= 0) > 0.5               # not every node unplaced
+    if auto.matching is not None:
+        assert auto.n_universe == off.n_universe
+        assert auto.info["n_universe_rule"] == off.info["n_universe_rule"]
+        assert auto.accuracy(c.ground_truth) == off.accuracy(c.ground_truth) > 0.8
+    pickle.loads(pickle.dumps(auto))

@@ -201,6 +201,7 @@ def _cmd_collection(args) -> int:
         "coordinate_scale": scale, "verify": args.verify,
         "verified_pairs": (None if "verify" not in res.info
                            else int(np.sum(res.info["verify"]["verified"]))),
+        "verification_used": res.info.get("verify", {}).get("used", False),
     }
     return emit(payload, args.out)
 
@@ -316,10 +317,12 @@ def add_parsers(sub) -> None:
     p.add_argument("--sigma2", type=positive_float, default=0.05,
                    help="width of the Gaussian edge affinity, after scaling all point sets by "
                         "one factor to unit size")
-    p.add_argument("--verify", default="none",
-                   choices=["none", "affine", "similarity", "homography"],
+    p.add_argument("--verify", default="auto",
+                   choices=["auto", "none", "affine", "similarity", "homography"],
                    help="geometric verification of every pair's matches before the "
-                        "synchronization (2-d points of one rigid or planar object)")
+                        "synchronization (2-d points of one rigid or planar object); auto: "
+                        "affine for point sets of different sizes, kept when at least half "
+                        "the pairs verify, none for equal sizes")
     p.add_argument("--verify-threshold", type=positive_float, default=None,
                    help="verification gate, as a fraction of the median nearest-neighbour "
                         "distance of the points (default 0.5)")

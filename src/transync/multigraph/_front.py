@@ -50,13 +50,18 @@ VERIFY_MIN_SCORE = 1e-9
 #: up to this many nodes in all, a universe size to estimate comes from the pairwise stage's
 #: soft solutions (one dense eigenproblem of that size); above, from its rounded maps
 SOFT_UNIVERSE_MAX = 2000
+#: ``verify="auto"``: the plane model it verifies with (graphs of different sizes with 2-d points)
+AUTO_VERIFY_MODEL = "affine"
+#: ``verify="auto"``: below this share of verified pairs the collection is not taken for views
+#: of one rigid or planar scene, and the unverified pipeline's output is kept
+AUTO_VERIFY_MIN_SHARE = 0.5
 
 
 def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
                      mode: str = "online", affinity=None, pairs=None, executor=None,
                      options: dict | None = None, sync_every: int | None = None,
                      damping: float = 1.0, refine: bool = True, n_universe: int | None = None,
-                     partial: str = "universe", verify: str | None = None,
+                     partial: str = "universe", verify: str | None = "auto",
                      verify_threshold: float | None = None, rng=None,
                      progress: bool = True) -> MultiMatchingResult:
     """Match ``N`` graphs at once; synchronized methods return cycle-consistent maps.
@@ -114,7 +119,11 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
     as for graphs of different sizes: a universe estimated from an unsynchronized pre-run), a
     pair that failed its verification counts as unobserved when the universe is estimated, and
     a node whose slot no verified match supports is left unplaced (label ``-1``, unmatched in
-    every pair) instead of given an arbitrary partner.
+    every pair) instead of given an arbitrary partner. By default (``verify="auto"``) graphs of
+    different sizes with 2-d points are verified with an affine model, and the verification is
+    dropped again when fewer than half the pairs pass (not one rigid or planar scene); equal
+    sizes are not verified (there the quadratic model alone is exact on CMU House, and one
+    affine map between far views costs up to 0.09 F1: ``docs/methods/subgraphs.md``).
 
     Parameters
     ----------
@@ -167,11 +176,16 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
     partial : {"universe", "dummies"}, default="universe"
         How graphs of different sizes (or ``d > n``) are matched (see above). CAO composes full
         permutations and needs ``"dummies"`` there.
-    verify : {"affine", "similarity", "homography"} or None, default=None
+    verify : {"auto", "affine", "similarity", "homography"} or None, default="auto"
         Geometric verification of the pairwise maps (see above; every graph needs 2-d
         ``points``); not with ``partial="dummies"`` on graphs of different sizes (dummy nodes
-        have no points). ``res.info["verify"]``: each pair's verified matches and whether it
-        verified.
+        have no points). ``"auto"``: ``"affine"`` when the graphs are partial views of a
+        universe (different sizes, or ``n_universe`` above their size, with
+        ``partial="universe"``) and every graph has 2-d points, kept only when at least half
+        the pairs verify (otherwise the unverified pipeline's output is returned); no
+        verification otherwise. ``None``: never.
+        ``res.info["verify"]``, when one ran: each pair's verified matches, whether it
+        verified, ``"auto"`` and whether the verified maps were ``"used"``.
     verify_threshold : float, optional
         The verification's gate, as a fraction of the median nearest-neighbour distance among
         the second graph's points; default that of
@@ -302,12 +316,22 @@ def _run(graphs, lay, pairs, affinity, solver, sync, mode, executor, options, sy
     input_consistency = _consistency(pairs, input_assignments, lay.sync_sizes, gen)
 
     matching = info.pop("matching", None)
+    build_output = info.pop("build_output", None)
     if verify is not None:
         t = time.perf_counter()
-        assignments = _verify_stage(graphs, pairs, assignments, verify, executor, gen,
-                                    progress, info)
+        state = gen.bit_generator.state       # verify="auto" may drop the verification again
+        verified_maps = _verify_stage(graphs, pairs, assignments, verify, executor, gen,
+                                      progress, info)
         timings["verify"] = time.perf_counter() - t
-        soft, refine = None, False    # synchronize the verified maps (hard), as they are
+        share = float(np.mean(info["verify"]["verified"]))
+        info["verify"]["used"] = used = not verify[2] or share >= AUTO_VERIFY_MIN_SHARE
+        if used:     # synchronize the verified maps (hard), as they are
+            assignments, soft, refine, matching = verified_maps, None, False, None
+        else:        # verify="auto": one plane transform explains too few pairs
+            verify, gen.bit_generator.state = None, state     # as if it had not run
+            if build_output is not None:                # the online output, as unverified
+                build_output()
+                matching = info.pop("matching")
     if sync is not None and matching is None:
         t = time.perf_counter()
         if verify is None:
@@ -530,9 +554,29 @@ def _check_pairs(pairs, N: int, *, need_all: bool, need_connected: bool) -> np.n
 
 
 def _check_verify(verify, threshold, graphs, lay: "_Layout"):
-    """``(model, threshold)`` of the geometric verification, or None."""
+    """``(model, threshold, auto)`` of the geometric verification, or None.
+
+    ``verify="auto"`` resolves to ``"affine"`` when the graphs are partial views of a universe
+    (``lay.kind == "universe"``: different sizes, or ``n_universe`` above their size) and every
+    graph has 2-d points, and to None otherwise; ``auto`` is then True (see :func:`_run`).
+    """
     from ..matching import VERIFY_MODELS
 
+    auto = isinstance(verify, str) and verify == "auto"
+    if auto:
+        if lay.kind == "universe" and all(g.points is not None and g.points.shape[1] == 2
+                                          for g in graphs):
+            verify = AUTO_VERIFY_MODEL
+        elif threshold is not None:
+            why = ("the graphs are not partial views of one universe: equal sizes and no "
+                   "larger `n_universe`, or partial='dummies'"
+                   if lay.kind != "universe" else "not every graph has 2-d points")
+            raise ValueError(f"`verify_threshold` sets the gate of the geometric verification, "
+                             f"which verify='auto' runs none of here ({why}): pass "
+                             f"verify='affine' (or 'similarity', 'homography') to force one, got "
+                             f"verify_threshold={threshold!r}")
+        else:
+            return None
     if verify is None:
         if threshold is not None:
             raise ValueError(f"`verify_threshold` sets the gate of the geometric verification, "
@@ -540,8 +584,8 @@ def _check_verify(verify, threshold, graphs, lay: "_Layout"):
                              f"'similarity', 'homography'), got verify_threshold={threshold!r}")
         return None
     if not isinstance(verify, str) or verify not in VERIFY_MODELS:
-        raise ValueError(f"`verify` must be one of {', '.join(map(repr, VERIFY_MODELS))} or "
-                         f"None, got {verify!r}")
+        raise ValueError(f"`verify` must be 'auto', one of "
+                         f"{', '.join(map(repr, VERIFY_MODELS))} or None, got {verify!r}")
     if threshold is not None:
         threshold = check_positive(threshold, "verify_threshold")
     if lay.kind == "dummies":
@@ -553,7 +597,7 @@ def _check_verify(verify, threshold, graphs, lay: "_Layout"):
             what = "no points" if g.points is None else f"{g.points.shape[1]}-d points"
             raise ValueError(f"`verify={verify!r}` fits plane transforms between the graphs' "
                              f"2-d points; graph {k} has {what}")
-    return verify, threshold
+    return verify, threshold, auto
 
 
 # --------------------------------------------------------------------------- stages
@@ -587,7 +631,7 @@ def _verify_stage(graphs, pairs, assignments, verify, executor, gen, progress,
 
     Each pair has its own seed, drawn here, so the result does not depend on ``executor``.
     """
-    model, threshold = verify
+    model, threshold, auto = verify
     gate = {} if threshold is None else {"threshold": threshold}
     A = np.asarray(assignments, dtype=np.int64)
     seeds = gen.integers(2**63, size=len(pairs))
@@ -602,7 +646,7 @@ def _verify_stage(graphs, pairs, assignments, verify, executor, gen, progress,
     for idx, (o, n_in, ok) in zip(chunks, outs):
         out[idx], n_inliers[idx], verified[idx] = o, n_in, ok
     info["verify"] = {"model": model, "threshold": threshold, "n_inliers": n_inliers,
-                      "verified": verified}        # threshold None: verify_assignment's
+                      "verified": verified, "auto": auto}   # threshold None: verify_assignment's
     return out
 
 
@@ -756,7 +800,9 @@ def _with_slack(Y, pairs, sizes, n) -> np.ndarray:
 def _online_stage(aff, N, lay, solver, sync, options, sync_every, damping, gen, progress,
                   timings, info, *, build_output: bool = True):
     """The lock-step solvers with synchronization points. ``build_output``: also build and
-    score the consistent output candidates (not when a verification replaces them)."""
+    score the consistent output candidates; ``False`` (a verification may replace them): the
+    builder is left in ``info["build_output"]``, to call if it does not (the caller pops it:
+    a closure, not picklable)."""
     point = _SyncPoint(aff.pairs, lay, sync, gen)
     rule, candidates = "", {}
     if lay.kind == "universe" and lay.n_universe is None:
@@ -784,30 +830,35 @@ def _online_stage(aff, N, lay, solver, sync, options, sync_every, damping, gen, 
                            damping=damping, options=options, progress=progress)
     timings["pairwise"] = time.perf_counter() - t - point.seconds
     first_rounding, seconds_at_points = point.first_rounding, point.seconds
-    t = time.perf_counter()
     final = out.assignments          # the solvers' own rounding (as transync.matching's)
     first = first_rounding if first_rounding is not None else final
-    if not build_output:
-        timings["sync"] = seconds_at_points
-        info.update({"n_sync": out.n_sync, "input_assignments": first})
-        return final, out.soft, out.n_iter, int(np.sum(~out.converged))
-    method = "spectral" if sync == "birkhoff" else sync
-    perm = _synchronize(aff.pairs, lay.strip(aff.pairs, final), None, lay, point.n_universe,
-                        method, gen)
-    candidates["permutation_sync"] = perm.matching
-    if sync == "birkhoff":
-        point(doubly_stochastic_iterates(out.soft))     # one last warm-started synchronization
-        candidates["map_atom"] = point.last.matching
-    elif isinstance(point.last, MultiMatching):
-        candidates["last_sync"] = point.last
-    idx = np.arange(len(aff.pairs))
-    scores = {k: float(np.sum(aff.score_assignments(idx, lay.widen(m.pairwise_array(aff.pairs)))))
-              for k, m in candidates.items()}
-    best = max(scores, key=scores.get)
-    timings["sync"] = seconds_at_points + time.perf_counter() - t
-    info.update({"n_sync": out.n_sync, "output": best, "candidate_scores": scores,
-                 "matching": candidates[best], "input_assignments": first,
-                 "n_universe_rule": rule or perm.info.get("n_universe_rule", "")})
+    timings["sync"] = seconds_at_points
+    info.update({"n_sync": out.n_sync, "input_assignments": first})
+
+    def build():
+        """Score the consistent output candidates; the best goes to ``info["matching"]``."""
+        t = time.perf_counter()
+        method = "spectral" if sync == "birkhoff" else sync
+        perm = _synchronize(aff.pairs, lay.strip(aff.pairs, final), None, lay,
+                            point.n_universe, method, gen)
+        candidates["permutation_sync"] = perm.matching
+        if sync == "birkhoff":
+            point(doubly_stochastic_iterates(out.soft))   # one last warm-started sync point
+            candidates["map_atom"] = point.last.matching
+        elif isinstance(point.last, MultiMatching):
+            candidates["last_sync"] = point.last
+        idx = np.arange(len(aff.pairs))
+        scores = {k: float(np.sum(aff.score_assignments(idx, lay.widen(
+            m.pairwise_array(aff.pairs))))) for k, m in candidates.items()}
+        best = max(scores, key=scores.get)
+        timings["sync"] += time.perf_counter() - t
+        info.update({"output": best, "candidate_scores": scores, "matching": candidates[best],
+                     "n_universe_rule": rule or perm.info.get("n_universe_rule", "")})
+
+    if build_output:
+        build()
+    else:
+        info["build_output"] = build
     return final, out.soft, out.n_iter, int(np.sum(~out.converged))
 
 
@@ -858,7 +909,10 @@ def _synchronize_verified(pairs, assignments, lay, sync, gen, verified):
     use = verified if lay.n_universe is None else np.ones_like(verified)
     out = _synchronize(pairs[use], np.asarray(assignments)[use], None, lay, lay.n_universe,
                        sync, gen, min_score=VERIFY_MIN_SCORE)
-    return out.matching, out.info.get("n_universe_rule", "")
+    rule = out.info.get("n_universe_rule", "")
+    if lay.n_universe is None:
+        rule = f"estimated from the verified maps ({int(use.sum())} pairs): {rule}"
+    return out.matching, rule
 
 
 def _synchronize(pairs, assignments, soft, lay, n_universe, sync, gen, min_score=None):

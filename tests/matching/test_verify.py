@@ -380,3 +380,55 @@ def test_default_drops_a_verification_the_geometry_does_not_support(kwargs):
         assert auto.info["n_universe_rule"] == off.info["n_universe_rule"]
         assert auto.accuracy(c.ground_truth) == off.accuracy(c.ground_truth) > 0.8
     pickle.loads(pickle.dumps(auto))
+
+
+@pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
+@pytest.mark.parametrize("n_graphs, used", [(6, False), (8, True)])
+def test_default_keeps_the_verification_from_70_percent_of_pairs(n_graphs, used):
+    """One graph of unrelated points among mild views of one point set: its pairs fail (but
+    for one chance fit with 8 graphs). With 6 graphs 10 of 15 pairs verify (0.67: below the
+    70 % the default asks for, its output is verify=None's); with 8 graphs 22 of 28 (0.79:
+    the verified maps are used)."""
+    graphs, _ = _landmark_collection(n_graphs=n_graphs, keep=(18, 22), seed=1)
+    graphs[-1] = Graph.from_points(np.random.default_rng(9).random((20, 2)), edges="delaunay")
+    res = match_collection(graphs, affinity=_AFFINITY, mode="offline", sync="spectral", rng=0,
+                           progress=False)
+    info = res.info["verify"]
+    assert info["verified"].sum() == {6: 10, 8: 22}[n_graphs] and info["used"] is used
+    off = match_collection(graphs, affinity=_AFFINITY, mode="offline", sync="spectral",
+                           verify=None, rng=0, progress=False)
+    assert np.array_equal(res.assignments, off.assignments) is not used
+
+
+@pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
+def test_default_fallback_reports_the_input_as_verify_none_does():
+    """108 graphs and more: the input-consistency report samples triangles from the random
+    stream that the online output's builder also draws from; when the default drops its
+    verification, both run in verify=None's order (the report was 0.578 against 0.574)."""
+    N = 110
+    c = make_subgraph_collection(n_graphs=N, n_universe=6, p_keep=(0.6, 1.0),
+                                 deformation=0.02, rng=1)
+    rng = np.random.default_rng(0)
+    graphs = [Graph(g.adjacency, edge_features=g.edge_features,
+                    points=rng.random((g.n_nodes, 2))) for g in c.graphs]
+    pairs = np.sort(np.array([(i, (i + k) % N) for k in (1, 2) for i in range(N)]), axis=1)
+    auto = match_collection(graphs, pairs=pairs, rng=3, progress=False)
+    off = match_collection(graphs, pairs=pairs, rng=3, progress=False, verify=None)
+    assert not auto.info["verify"]["used"]
+    assert auto.input_consistency == off.input_consistency
+    np.testing.assert_array_equal(auto.assignments, off.assignments)
+
+
+def test_default_falls_back_when_the_points_are_refused():
+    """Coordinates beyond verify_assignment's range: asked for by name, an error naming the
+    graphs; by default, no verification (the reason kept) and verify=None's output."""
+    base = np.random.default_rng(0).random((8, 2))
+    graphs = [Graph.from_points(base[:k] + 2e12, edges="full") for k in (5, 6, 7)]
+    res = match_collection(graphs, rng=0, progress=False)
+    off = match_collection(graphs, verify=None, rng=0, progress=False)
+    info = res.info["verify"]
+    assert info["auto"] and not info["used"] and "at most 1e+12" in info["refused"]
+    np.testing.assert_array_equal(res.assignments, off.assignments)
+    assert res.n_universe == off.n_universe
+    with pytest.raises(ValueError, match=r"`verify='affine'` cannot check the matches"):
+        match_collection(graphs, verify="affine", rng=0, progress=False)

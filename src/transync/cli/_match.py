@@ -305,7 +305,7 @@ def add_parsers(sub) -> None:
                         "every pair, then synchronize once")
     p.add_argument("--n-universe", type=positive_int, default=None,
                    help="universe size (default: estimated; the number of points when all sets "
-                        "have the same size, unless --verify is given)")
+                        "have the same size, unless --verify names a model)")
     p.add_argument("--partial", default="universe", choices=list(PARTIAL),
                    help="point sets of different sizes: map them into the universe, or pad "
                         "them with dummy nodes (the baseline)")
@@ -321,8 +321,8 @@ def add_parsers(sub) -> None:
                    choices=["auto", "none", "affine", "similarity", "homography"],
                    help="geometric verification of every pair's matches before the "
                         "synchronization (2-d points of one rigid or planar object); auto: "
-                        "affine for point sets of different sizes, kept when at least half "
-                        "the pairs verify, none for equal sizes")
+                        "affine for point sets of different sizes, kept when at least 70 %% "
+                        "of the pairs verify, none for equal sizes")
     p.add_argument("--verify-threshold", type=positive_float, default=None,
                    help="verification gate, as a fraction of the median nearest-neighbour "
                         "distance of the points (default 0.5)")

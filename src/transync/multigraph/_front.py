@@ -53,8 +53,11 @@ SOFT_UNIVERSE_MAX = 2000
 #: ``verify="auto"``: the plane model it verifies with (graphs of different sizes with 2-d points)
 AUTO_VERIFY_MODEL = "affine"
 #: ``verify="auto"``: below this share of verified pairs the collection is not taken for views
-#: of one rigid or planar scene, and the unverified pipeline's output is kept
-AUTO_VERIFY_MIN_SHARE = 0.5
+#: of one rigid or planar scene, and the unverified pipeline's output is kept. Measured
+#: (docs/methods/subgraphs.md): CMU House partial verifies 0.67-1.0 of its pairs on 6 frames
+#: over the whole sequence (10th percentile 0.79), 0.92-1.0 on 20; point sets jittered
+#: non-rigidly by about half their spacing 0.42-0.76, where verifying costs 0.10-0.24 F1
+AUTO_VERIFY_MIN_SHARE = 0.7
 
 
 def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
@@ -121,9 +124,10 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
     a node whose slot no verified match supports is left unplaced (label ``-1``, unmatched in
     every pair) instead of given an arbitrary partner. By default (``verify="auto"``) graphs of
     different sizes with 2-d points are verified with an affine model, and the verification is
-    dropped again when fewer than half the pairs pass (not one rigid or planar scene); equal
-    sizes are not verified (there the quadratic model alone is exact on CMU House, and one
-    affine map between far views costs up to 0.09 F1: ``docs/methods/subgraphs.md``).
+    dropped again when fewer than 70 % of the pairs pass (not one rigid or planar scene: the
+    output is then exactly ``verify=None``'s); equal sizes are not verified (there the
+    quadratic model alone is exact on CMU House, and one affine map between far views costs up
+    to 0.09 F1: ``docs/methods/subgraphs.md``).
 
     Parameters
     ----------
@@ -181,11 +185,13 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
         ``points``); not with ``partial="dummies"`` on graphs of different sizes (dummy nodes
         have no points). ``"auto"``: ``"affine"`` when the graphs are partial views of a
         universe (different sizes, or ``n_universe`` above their size, with
-        ``partial="universe"``) and every graph has 2-d points, kept only when at least half
-        the pairs verify (otherwise the unverified pipeline's output is returned); no
-        verification otherwise. ``None``: never.
-        ``res.info["verify"]``, when one ran: each pair's verified matches, whether it
-        verified, ``"auto"`` and whether the verified maps were ``"used"``.
+        ``partial="universe"``) and every graph has 2-d points, kept only when at least 70 % of
+        the pairs verify (otherwise, or when the points are beyond what
+        :func:`~transync.matching.verify_assignment` takes, the unverified pipeline's output
+        is returned, exactly as with ``None``); no verification otherwise. ``None``: never.
+        ``res.info["verify"]``, when one ran: each pair's number of inliers and whether it
+        verified, ``"auto"``, whether the verified maps were ``"used"`` and, when the points
+        were refused under ``"auto"``, the reason (``"refused"``).
     verify_threshold : float, optional
         The verification's gate, as a fraction of the median nearest-neighbour distance among
         the second graph's points; default that of
@@ -313,13 +319,16 @@ def _run(graphs, lay, pairs, affinity, solver, sync, mode, executor, options, sy
         info["soft"] = _real_blocks(doubly_stochastic_iterates(soft), pairs, lay.sizes)
     assignments = lay.strip(pairs, assignments)
     input_assignments = lay.strip(pairs, info.pop("input_assignments", assignments))
+    # verify="auto" may drop the verification again and must then return what verify=None
+    # returns: the random stream is rewound to where verify=None would be at each step
+    state_before_report = gen.bit_generator.state
     input_consistency = _consistency(pairs, input_assignments, lay.sync_sizes, gen)
 
     matching = info.pop("matching", None)
-    build_output = info.pop("build_output", None)
+    build_output = info.pop("build_output", None)      # a closure: never left in the result
     if verify is not None:
         t = time.perf_counter()
-        state = gen.bit_generator.state       # verify="auto" may drop the verification again
+        state = gen.bit_generator.state
         verified_maps = _verify_stage(graphs, pairs, assignments, verify, executor, gen,
                                       progress, info)
         timings["verify"] = time.perf_counter() - t
@@ -327,11 +336,15 @@ def _run(graphs, lay, pairs, affinity, solver, sync, mode, executor, options, sy
         info["verify"]["used"] = used = not verify[2] or share >= AUTO_VERIFY_MIN_SHARE
         if used:     # synchronize the verified maps (hard), as they are
             assignments, soft, refine, matching = verified_maps, None, False, None
-        else:        # verify="auto": one plane transform explains too few pairs
-            verify, gen.bit_generator.state = None, state     # as if it had not run
-            if build_output is not None:                # the online output, as unverified
-                build_output()
-                matching = info.pop("matching")
+        elif build_output is not None:
+            # verify="auto", online: one plane transform explains too few pairs; the output
+            # is built, and the input reported, in verify=None's order
+            verify, gen.bit_generator.state = None, state_before_report
+            build_output()
+            matching = info.pop("matching")
+            input_consistency = _consistency(pairs, input_assignments, lay.sync_sizes, gen)
+        else:        # verify="auto", offline: as if it had not run
+            verify, gen.bit_generator.state = None, state
     if sync is not None and matching is None:
         t = time.perf_counter()
         if verify is None:
@@ -637,16 +650,25 @@ def _verify_stage(graphs, pairs, assignments, verify, executor, gen, progress,
     seeds = gen.integers(2**63, size=len(pairs))
     points = [g.points for g in graphs]
     chunks = split_chunks(len(pairs), executor)
-    outs = map_chunks(_verify_chunk,
-                      [(points, pairs[idx], A[idx], seeds[idx], model, gate) for idx in chunks],
-                      executor=executor, progress=progress, desc="verify pairs")
     out = np.full_like(A, -1)
     n_inliers = np.zeros(len(pairs), dtype=np.int64)
     verified = np.zeros(len(pairs), dtype=bool)
+    # threshold None: verify_assignment's
+    info["verify"] = {"model": model, "threshold": threshold, "n_inliers": n_inliers,
+                      "verified": verified, "auto": auto}
+    try:
+        outs = map_chunks(_verify_chunk, [(points, pairs[idx], A[idx], seeds[idx], model, gate)
+                                          for idx in chunks],
+                          executor=executor, progress=progress, desc="verify pairs")
+    except ValueError as exc:
+        if not auto:
+            raise
+        # verify="auto" was not asked for by name: points that verify_assignment refuses
+        # (e.g. coordinates beyond its range) mean no verification, not an error
+        info["verify"]["refused"] = str(exc)
+        return out
     for idx, (o, n_in, ok) in zip(chunks, outs):
         out[idx], n_inliers[idx], verified[idx] = o, n_in, ok
-    info["verify"] = {"model": model, "threshold": threshold, "n_inliers": n_inliers,
-                      "verified": verified, "auto": auto}   # threshold None: verify_assignment's
     return out
 
 

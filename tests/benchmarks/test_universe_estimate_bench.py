@@ -1,20 +1,13 @@
 """benchmarks/universe_estimate.py: its interval and a tiny run of the script end to end."""
 
-import importlib.util
 import math
-from pathlib import Path
 
 import pytest
 
-_PATH = Path(__file__).resolve().parents[2] / "benchmarks" / "universe_estimate.py"
-
 
 @pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location("universe_estimate_bench", _PATH)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+def bench(load_benchmark):
+    return load_benchmark("universe_estimate", "universe_estimate_bench")
 
 
 def test_wilson_interval(bench):

@@ -54,9 +54,9 @@ SOFT_UNIVERSE_MAX = 2000
 AUTO_VERIFY_MODEL = "affine"
 #: ``verify="auto"``: below this share of verified pairs the collection is not taken for views
 #: of one rigid or planar scene, and the unverified pipeline's output is kept. Measured
-#: (docs/methods/subgraphs.md): CMU House partial verifies 0.67-1.0 of its pairs on 6 frames
-#: over the whole sequence (10th percentile 0.79), 0.92-1.0 on 20; point sets jittered
-#: non-rigidly by about half their spacing 0.42-0.76, where verifying costs 0.10-0.24 F1
+#: (benchmarks/verify_auto.py, docs/methods/subgraphs.md): CMU House partial verifies 0.67-1.0
+#: of its pairs on 6 frames over the whole sequence, 0.93-1.0 on 20, and gains 0.09-0.31 F1;
+#: point sets jittered non-rigidly by half their spacing verify 0.40-0.67 and lose 0.06-0.29
 AUTO_VERIFY_MIN_SHARE = 0.7
 
 

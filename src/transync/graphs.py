@@ -283,8 +283,8 @@ def _distances(P: np.ndarray) -> np.ndarray:
     top = float(np.abs(D).max(initial=0.0))
     if not top > 0 or not np.isfinite(top):
         return np.linalg.norm(D, axis=-1)
-    scale = 2.0 ** -np.frexp(top)[1]
-    return np.linalg.norm(D * scale, axis=-1) / scale
+    e = int(np.frexp(top)[1])       # ldexp, not 2.0 ** -e: that overflows for subnormal tops
+    return np.ldexp(np.linalg.norm(np.ldexp(D, -e), axis=-1), e)
 
 
 def _delaunay(P: np.ndarray) -> np.ndarray:
@@ -300,7 +300,7 @@ def _delaunay(P: np.ndarray) -> np.ndarray:
     lo = P.min(axis=0)
     span = float((P.max(axis=0) - lo).max())
     if span > 0 and np.isfinite(span):
-        P = (P - lo) * 2.0 ** -np.frexp(span)[1]
+        P = np.ldexp(P - lo, -int(np.frexp(span)[1]))     # exact; no 2**1024 overflow
     try:
         tri = Delaunay(P)
         if not len(tri.coplanar):

@@ -300,11 +300,6 @@ def _fit_correct(K: np.ndarray, y: np.ndarray, train: np.ndarray, test: np.ndarr
     return int(np.count_nonzero(clf.predict(K[np.ix_(test, train)]) == y[test]))
 
 
-def _fit_score(K: np.ndarray, y: np.ndarray, train: np.ndarray, test: np.ndarray,
-               C: float) -> float:
-    return _fit_correct(K, y, train, test, C) / len(test)
-
-
 def _select_C(K_train: np.ndarray, y_train: np.ndarray, C_grid: np.ndarray,
               inner_splits: int, rng: np.random.Generator) -> tuple[int, float]:
     """(kernel index, ``C``) with the best mean inner-CV accuracy; sees training data only.
@@ -438,7 +433,7 @@ def repeated_cv(K, y, *, n_splits: int = 10, n_repeats: int = 10, C_grid=None,
                 q, C = _select_C(Ks[:, train][:, :, train], y_idx[train], C_grid, inner_splits,
                                  inner_rngs[k])
                 chosen[r, k], chosen_k[r, k] = C, q
-                acc[r, k] = _fit_score(Ks[q], y_idx, train, test, C)
+                acc[r, k] = _fit_correct(Ks[q], y_idx, train, test, C) / test.size
                 bar.update(1)
     per_repeat = acc.mean(axis=1)
     return CVResult(accuracies=acc, per_repeat=per_repeat, mean=float(per_repeat.mean()),

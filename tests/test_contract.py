@@ -1306,8 +1306,8 @@ def small_graphs(draw, labelled=None):
            st.lists(small_graphs(), min_size=0, max_size=2))),
        st.sampled_from(["node", "sm", "rrwm"]), st.sampled_from(["orthogonal", "spectral"]),
        st.sampled_from(["linear", "gaussian", "relaxed"]),
-       st.sampled_from([None, None, 1, 3]))
-def test_transitive_assignment_kernel_estimator(collections, matcher, sync, kernel, k):
+       st.sampled_from([None, None, 1, 3]), st.sampled_from([1, 1, 2]))
+def test_transitive_assignment_kernel_estimator(collections, matcher, sync, kernel, k, R):
     """fit_transform on any small graphs: a finite, symmetric, PSD Gram matrix with unit
     diagonal; transform of new graphs: finite rows in [-1, 1]; or a named refusal (empty
     collections, graphs without nodes, graphs larger than the fitted universe)."""
@@ -1315,7 +1315,7 @@ def test_transitive_assignment_kernel_estimator(collections, matcher, sync, kern
 
     graphs, new = collections
     est = TransitiveAssignmentKernel(matcher=matcher, sync=sync, kernel=kernel, n_neighbors=k,
-                                     random_state=0)
+                                     n_alignments=R, random_state=0)
     K = call(est.fit_transform, graphs)
     if K is REFUSED:
         return

@@ -136,3 +136,26 @@ def test_cli_kernel_with_a_view_graph(toy, tmp_path):
     with pytest.raises(SystemExit) as err:                # argparse: bad option value
         main([*args, "--neighbors", "0"])
     assert err.value.code == 2
+
+
+def test_cli_kernel_ensemble_of_alignments(toy, tmp_path):
+    """--alignments R: the estimator's n_alignments; its Gram matrix is written and PSD."""
+    from transync.datasets import load_tu
+    from transync.kernels import TransitiveAssignmentKernel
+
+    out = tmp_path / "out"
+    args = ["kernel", str(toy), "--out", str(out), "--matcher", "node", "--folds", "2",
+            "--repeats", "1", "--no-progress"]
+    assert main([*args, "--alignments", "3"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["params"]["n_alignments"] == 3
+    assert "averaged over 3 alignments" in (out / "report.md").read_text()
+    with np.load(out / "gram.npz") as z:
+        K, kept = z["K"], z["kept"]
+    assert min_eigenvalue_ratio(K) >= -1e-9
+    graphs = [load_tu(toy).graphs[k] for k in kept]
+    want = TransitiveAssignmentKernel(matcher="node", n_alignments=3, random_state=0)
+    np.testing.assert_allclose(K, want.fit_transform(graphs), atol=1e-12)
+    with pytest.raises(SystemExit) as err:
+        main([*args, "--alignments", "0"])
+    assert err.value.code == 2

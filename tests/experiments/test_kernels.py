@@ -301,6 +301,24 @@ def test_tak_gram_equals_the_estimators(toy, tmp_path, method, kernel):
     assert len(list((tmp_path / "cache").rglob("alignment-*.npz"))) == 1
 
 
+@pytest.mark.parametrize("method, neighbors", [("TAK-node-gauss-bag5", None),
+                                               ("TAK-node-gauss-k10-bag5", 10)])
+def test_ensemble_gram_equals_the_estimators(toy, tmp_path, method, neighbors):
+    """The ensemble kernels reuse the cached pairwise maps of their single-alignment kernel
+    (one pairwise file for both) and equal the estimator's n_alignments=5 Gram matrix."""
+    from transync.kernels import TransitiveAssignmentKernel
+
+    prepared = kx.prepare(str(toy))
+    single = method.replace("-bag5", "")
+    kx.compute_gram(prepared, single, tmp_path / "cache")
+    ours = kx.compute_gram(prepared, method, tmp_path / "cache")
+    assert len(list((tmp_path / "cache").rglob("pairwise-*.npz"))) == 1
+    est = TransitiveAssignmentKernel(matcher="node", kernel="gaussian", times=kx._times(10),
+                                     n_neighbors=neighbors, n_alignments=5, random_state=0)
+    np.testing.assert_allclose(ours.K, est.fit_transform(list(prepared.graphs)), atol=1e-10)
+    assert ours.seconds > 0 and np.isfinite(ours.cpu_seconds) and ours.min_eig_ratio >= -1e-9
+
+
 @pytest.mark.parametrize("kernel", ["linear", "gaussian"])
 def test_non_transitive_gram_uses_the_tak_maps(toy, tmp_path, kernel):
     """NT-lin / NT-gauss: the pairwise kernel on the very RRWM maps TAK-lin synchronizes (one

@@ -678,3 +678,103 @@ def test_relaxed_kernel_of_a_graph_no_match_reaches(sync):
                                        random_state=0).fit_transform(graphs)
         np.testing.assert_allclose(np.diag(K), 1.0)
         assert min_eigenvalue_ratio(K) >= -1e-9
+
+
+# ---------------------------------------------------------------------------------------------
+# an ensemble of alignments (n_alignments, pair_fraction)
+# ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("kernel", ["linear", "gaussian", "relaxed"])
+def test_ensemble_is_the_mean_of_its_members_kernels_and_psd(kernel):
+    """n_alignments = 3: the first member is the single-alignment fit (same seed, all pairs),
+    the others synchronize connected subsamples of the pairs and differ from it; the Gram
+    matrix is the mean of the members' kernels, PSD with unit diagonal, and reproducible."""
+    from transync.kernels import assignment_kernel
+
+    rng = np.random.default_rng(11)
+    graphs = [_random_graph(int(rng.integers(4, 9)), 0.4, rng) for _ in range(16)]
+    one = TransitiveAssignmentKernel(matcher="node", kernel=kernel, random_state=5).fit(graphs)
+    ens = TransitiveAssignmentKernel(matcher="node", kernel=kernel, n_alignments=3,
+                                     random_state=5).fit(graphs)
+    assert len(ens.alignments_) == len(ens.member_aligned_) == len(ens.member_gamma_) == 3
+    assert ens.member_pairs_.shape == (3, len(ens.pairs_)) and ens.member_pairs_.dtype == bool
+    assert ens.member_pairs_[0].all() and not ens.member_pairs_[1:].all(axis=1).any()
+    for keep in ens.member_pairs_:
+        assert _connected(ens.pairs_[keep], len(graphs))
+    np.testing.assert_array_equal(ens.labels_, one.labels_)
+    np.testing.assert_array_equal(ens.member_aligned_[0], one.aligned_)
+    assert ens.gamma_ == one.gamma_
+    assert any(not np.array_equal(a.labels, ens.labels_) for a in ens.alignments_[1:])
+    mean = np.mean([assignment_kernel(a, kernel=kernel, gamma=g)
+                    for a, g in zip(ens.member_aligned_, ens.member_gamma_)], axis=0)
+    np.testing.assert_allclose(ens.gram_, mean, atol=1e-12)
+    np.testing.assert_allclose(np.diag(ens.gram_), 1.0)
+    assert min_eigenvalue_ratio(ens.gram_) >= -1e-9
+    again = TransitiveAssignmentKernel(matcher="node", kernel=kernel, n_alignments=3,
+                                       random_state=5).fit(graphs)
+    np.testing.assert_array_equal(again.gram_, ens.gram_)
+    assert not np.allclose(TransitiveAssignmentKernel(
+        matcher="node", kernel=kernel, n_alignments=3, random_state=6).fit(graphs).gram_,
+        TransitiveAssignmentKernel(matcher="node", kernel=kernel, random_state=6).fit(
+            graphs).gram_)
+
+
+def test_ensemble_without_bagging_on_the_dense_path_repeats_one_alignment():
+    """pair_fraction=1: every member synchronizes all pairs; on the dense path (deterministic
+    eigensolver) they coincide, as the docstring says -- bagging is the ensemble's diversity."""
+    rng = np.random.default_rng(11)
+    graphs = [_random_graph(int(rng.integers(4, 9)), 0.4, rng) for _ in range(16)]
+    ens = TransitiveAssignmentKernel(matcher="node", kernel="gaussian", n_alignments=3,
+                                     pair_fraction=1.0, random_state=5).fit(graphs)
+    assert ens.member_pairs_.all()
+    assert all(np.array_equal(a.labels, ens.labels_) for a in ens.alignments_)
+    one = TransitiveAssignmentKernel(matcher="node", kernel="gaussian", random_state=5)
+    np.testing.assert_allclose(ens.gram_, one.fit(graphs).gram_, atol=1e-12)
+
+
+def test_ensemble_of_consistent_matches_is_the_single_kernel():
+    """Permuted copies of rigid prototypes: every subsample of exact matches synchronizes to the
+    same alignment (up to the slots' order, which the kernel does not see), so the ensemble's
+    Gram matrix and its transform equal the single alignment's."""
+    rng = np.random.default_rng(2)
+    graphs, _ = _planted(rng, sizes=(7, 7), copies=4)
+    new = [_relabel(graphs[1], rng)]
+    kw = dict(matcher="node", kernel="linear", random_state=0)
+    one = TransitiveAssignmentKernel(**kw).fit(graphs)
+    ens = TransitiveAssignmentKernel(n_alignments=4, pair_fraction=0.3, **kw).fit(graphs)
+    np.testing.assert_allclose(ens.gram_, one.gram_, atol=1e-10)
+    np.testing.assert_allclose(ens.transform(new), one.transform(new), atol=1e-10)
+    np.testing.assert_allclose(ens.transform(new)[0], ens.gram_[1], atol=1e-10)
+
+
+def test_ensemble_transform_averages_the_placements_and_pickles():
+    """transform places new graphs in every member's universe and averages the kernels."""
+    rng = np.random.default_rng(3)
+    graphs = [_random_graph(int(rng.integers(4, 8)), 0.5, rng) for _ in range(10)]
+    new = [_relabel(graphs[2], rng), _random_graph(6, 0.5, rng)]
+    ens = TransitiveAssignmentKernel(matcher="node", kernel="gaussian", n_alignments=3,
+                                     random_state=0).fit(graphs)
+    T = ens.transform(new)
+    assert T.shape == (2, 10) and np.all((T >= -1e-12) & (T <= 1 + 1e-12))
+    # the mean over members of the single-member transform with that member's fitted state
+    parts = []
+    for a, f, g in zip(ens.alignments_, ens.member_aligned_, ens.member_gamma_):
+        member = clone(ens).set_params(n_alignments=1).fit(graphs)
+        member.alignments_, member.member_aligned_, member.member_gamma_ = (a,), (f,), (g,)
+        parts.append(member.transform(new))
+    np.testing.assert_allclose(T, np.mean(parts, axis=0), atol=1e-12)
+    back = pickle.loads(pickle.dumps(ens))
+    np.testing.assert_allclose(back.transform(new), T, atol=1e-12)
+    assert clone(ens).get_params()["n_alignments"] == 3
+
+
+@pytest.mark.parametrize("name, bad, exc", [
+    ("n_alignments", 0, ValueError), ("n_alignments", -2, ValueError),
+    ("n_alignments", 1.5, TypeError), ("n_alignments", "3", TypeError),
+    ("n_alignments", True, TypeError), ("pair_fraction", 0.0, ValueError),
+    ("pair_fraction", 1.5, ValueError), ("pair_fraction", np.nan, ValueError),
+    ("pair_fraction", "half", TypeError), ("pair_fraction", None, TypeError)])
+def test_bad_ensemble_parameters_are_refused_naming_them(name, bad, exc):
+    g = _random_graph(4, 0.6, np.random.default_rng(0))
+    with pytest.raises(exc, match=name):
+        TransitiveAssignmentKernel(matcher="node", **{name: bad}).fit([g, g])

@@ -58,7 +58,8 @@ def _cmd_kernel(args) -> int:
         raise CLIError(f"--folds {args.folds}: the smallest class of {ds.name!r} has "
                        f"{counts.min()} graphs after pruning; use fewer folds")
     params = dict(matcher=args.matcher, sync=args.sync, kernel=args.kernel,
-                  n_neighbors=args.neighbors, random_state=args.seed)
+                  n_neighbors=args.neighbors, n_alignments=args.alignments,
+                  random_state=args.seed)
     progress = not args.no_progress
     est = TransitiveAssignmentKernel(**params, executor=args.workers, progress=progress)
     t0 = time.perf_counter()
@@ -104,7 +105,10 @@ def _markdown(r: dict) -> list[str]:
         f"- kernel: transitive assignment, matcher {p['matcher']}, sync {p['sync']}, "
         f"{p['kernel']} slot kernel, cosine-normalized (seed {p['random_state']}); pairs "
         f"matched: " + ("all" if p.get("n_neighbors") is None else
-                        f"view graph, {p['n_neighbors']} nearest graphs + spanning tree"),
+                        f"view graph, {p['n_neighbors']} nearest graphs + spanning tree")
+        + ("" if p.get("n_alignments", 1) == 1 else
+           f"; Gram matrix averaged over {p['n_alignments']} alignments (the first of all "
+           "pairs, the others of random 70 % subsamples)"),
         f"- graphs: {r['kept']} of {r['graphs']} kept, {r['classes']} classes, universe "
         f"n = {r['universe']}; pruning: {r['pruning']}",
         f"- accuracy: {100 * acc['mean']:.2f} ± {100 * acc['std']:.2f} % ({acc['repeats']} x "
@@ -143,6 +147,10 @@ def add_parser(sub) -> None:
                    help="view graph: match each graph to its K nearest graphs (mean HKS + "
                         "label histogram) plus a spanning tree instead of all pairs (default: "
                         "all pairs; use it on large sets, e.g. NCI1)")
+    p.add_argument("--alignments", type=positive_int, default=1, metavar="R",
+                   help="ensemble: average the kernels of R synchronizations of the same "
+                        "matches, the first of all pairs, the others of random 70%% subsamples "
+                        "(R times the synchronization's cost; default: 1)")
     p.add_argument("--folds", type=_at_least_2, default=10,
                    help="outer stratified folds (default: 10)")
     p.add_argument("--repeats", type=positive_int, default=10,

@@ -549,6 +549,13 @@ def _tak_gram(prepared: PreparedSet, params: dict, cache: Path, *, executor, pro
     return K, float(al["seconds"]) + time.perf_counter() - t0, peak, cpu
 
 
+def _matching_seconds(pw: dict) -> float:
+    """Wall seconds of the pairwise stage of a cached ``pairwise-*.npz``: the fit that wrote it
+    minus its synchronization (``sync_seconds``; files written before 2026-11-27 lack it, and
+    their time includes one orthogonal synchronization)."""
+    return float(pw["seconds"]) - float(pw.get("sync_seconds", 0.0))
+
+
 def _ensemble_gram(prepared: PreparedSet, params: dict, cache: Path, al: dict):
     """An ensemble TAK kernel: ``TransitiveAssignmentKernel(n_alignments=...)`` fitted on the
     cached pairwise maps of ``params`` (its ``gram_``); its time, memory and CPU time are the
@@ -566,7 +573,7 @@ def _ensemble_gram(prepared: PreparedSet, params: dict, cache: Path, al: dict):
     t0, c0 = time.perf_counter(), time.process_time()
     with _peak_rss() as mem:
         est.fit(list(prepared.graphs), assignments=pw["assignments"].astype(np.int64))
-    seconds = float(pw["seconds"]) + time.perf_counter() - t0
+    seconds = _matching_seconds(pw) + time.perf_counter() - t0
     cpu = float(pw.get("cpu_seconds", np.nan)) + time.process_time() - c0
     return est.gram_, seconds, max(mem["peak"], float(pw.get("peak_mb", 0.0))), cpu
 
@@ -599,7 +606,7 @@ def _pairwise_gram(prepared: PreparedSet, params: dict, cache: Path, *, executor
     K = kx.pairwise_assignment_kernel(feats, pw["assignments"].astype(np.int64), pairs,
                                       kernel=params["kernel"])
     cpu = float(pw.get("cpu_seconds", np.nan)) + time.process_time() - c0
-    return K, float(pw["seconds"]) + time.perf_counter() - t0, \
+    return K, _matching_seconds(pw) + time.perf_counter() - t0, \
         float(pw.get("peak_mb", np.nan)), cpu
 
 
@@ -642,7 +649,7 @@ def _alignment(prepared: PreparedSet, params: dict, cache: Path, *, executor, pr
             pw_peak = pw_cpu = 0.0
             if stored is not None and "assignments" in inspect.signature(est.fit).parameters:
                 est.fit(graphs, assignments=stored["assignments"].astype(np.int64))
-                seconds = time.perf_counter() - t0 + float(stored["seconds"])
+                seconds = time.perf_counter() - t0 + _matching_seconds(stored)
                 pw_peak = float(stored.get("peak_mb", 0.0))
                 pw_cpu = float(stored.get("cpu_seconds", np.nan))
             else:
@@ -651,8 +658,14 @@ def _alignment(prepared: PreparedSet, params: dict, cache: Path, *, executor, pr
                     est.fit(graphs)
                 seconds = time.perf_counter() - t0
                 a = np.asarray(est.assignments_)
+                # the fit's wall time, and its synchronization's share: the pairwise stage
+                # is their difference (_matching_seconds); CPU time is not split
+                info = est.alignment_.info
+                sync_seconds = float(info.get("seconds_total", 0.0)
+                                     + info.get("seconds_input", 0.0))
                 save_npz(pw_path, assignments=a.astype(np.uint8 if n <= 256 else np.int32),
-                         seconds=np.float64(seconds), peak_mb=np.float64(pm["peak"]),
+                         seconds=np.float64(seconds), sync_seconds=np.float64(sync_seconds),
+                         peak_mb=np.float64(pm["peak"]),
                          cpu_seconds=np.float64(time.process_time() - c0))
         feats = list(est.kernel_features_)
         return dict(labels=np.asarray(est.labels_),

@@ -778,3 +778,90 @@ def test_bad_ensemble_parameters_are_refused_naming_them(name, bad, exc):
     g = _random_graph(4, 0.6, np.random.default_rng(0))
     with pytest.raises(exc, match=name):
         TransitiveAssignmentKernel(matcher="node", **{name: bad}).fit([g, g])
+
+
+@pytest.fixture
+def matrix_free(monkeypatch):
+    """The matrix-free synchronization path (random eigensolver starts) on small inputs."""
+    from transync.synchronization import _spectral
+
+    monkeypatch.setattr(_spectral, "DENSE_MAX", 10)
+
+
+@pytest.mark.parametrize("seed", ["int", "generator"])
+def test_ensemble_first_member_is_the_single_fit_whatever_the_seed(matrix_free, seed):
+    """Member 0 is the n_alignments=1 fit for an int seed and for a Generator (whose members'
+    seeds are drawn only after member 0, on the path where the eigensolver uses the rng);
+    None gives valid, PSD ensembles."""
+    rng = np.random.default_rng(4)
+    graphs = [_random_graph(int(rng.integers(4, 9)), 0.4, rng) for _ in range(12)]
+
+    def state():
+        return 3 if seed == "int" else np.random.default_rng(3)
+
+    kw = dict(matcher="node", kernel="relaxed")
+    one = TransitiveAssignmentKernel(random_state=state(), **kw).fit(graphs)
+    ens = TransitiveAssignmentKernel(n_alignments=3, random_state=state(), **kw).fit(graphs)
+    np.testing.assert_array_equal(ens.member_aligned_[0], one.aligned_)
+    again = TransitiveAssignmentKernel(n_alignments=3, random_state=state(), **kw).fit(graphs)
+    np.testing.assert_array_equal(again.gram_, ens.gram_)
+    fresh = TransitiveAssignmentKernel(n_alignments=2, random_state=None, **kw).fit(graphs)
+    assert min_eigenvalue_ratio(fresh.gram_) >= -1e-9
+
+
+def test_bagged_subsamples_keep_a_spanning_forest_of_the_view_graph():
+    """A tiny pair_fraction keeps just a spanning tree of the matched pairs (the view graph of
+    n_neighbors=2 here): N - 1 pairs, all among the view graph's, connecting every graph."""
+    rng = np.random.default_rng(8)
+    graphs = [_random_graph(int(rng.integers(4, 8)), 0.5, rng) for _ in range(14)]
+    ens = TransitiveAssignmentKernel(matcher="node", kernel="gaussian", n_neighbors=2,
+                                     n_alignments=4, pair_fraction=1e-9,
+                                     random_state=0).fit(graphs)
+    assert ens.member_pairs_.shape == (4, len(ens.pairs_)) and ens.member_pairs_[0].all()
+    for keep in ens.member_pairs_[1:]:
+        assert keep.sum() == len(graphs) - 1 and _connected(ens.pairs_[keep], len(graphs))
+    assert len({keep.tobytes() for keep in ens.member_pairs_[1:]}) > 1
+    assert min_eigenvalue_ratio(ens.gram_) >= -1e-9
+
+
+def test_ensemble_relaxed_spectral_transform_uses_each_members_embedding():
+    """Relaxed + spectral: each member places new graphs with its own degrees and eigenvalues;
+    the ensemble's rows are the mean of the members' rows computed from their own state."""
+    from transync.kernels import assignment_kernel, relaxed_features
+
+    rng = np.random.default_rng(5)
+    graphs = [_random_graph(int(rng.integers(4, 8)), 0.5, rng) for _ in range(10)]
+    new = [_relabel(graphs[3], rng), _random_graph(7, 0.5, rng)]
+    ens = TransitiveAssignmentKernel(matcher="node", sync="spectral", kernel="relaxed",
+                                     n_alignments=3, pair_fraction=0.5,
+                                     random_state=1).fit(graphs)
+    assign = tk.match_pairs(list(ens.features_) + hks_features(new, ens.times_),
+                            [g.adjacency for g in graphs + new],
+                            np.array([[10 + t, j] for t in range(2) for j in range(10)]),
+                            n=ens.n_universe_, matcher="node", sigma2=ens.sigma2_, rng=1)
+    rows = []
+    for a, fitted in zip(ens.alignments_, ens.member_aligned_):
+        _, Q = place_graphs(assign.reshape(2, 10, -1), a.labels, embedding=a.embedding,
+                            method="spectral", degrees=a.info["degrees"],
+                            eigenvalues=a.info["eigenvalues"],
+                            sizes=np.array([g.n_nodes for g in new]),
+                            fitted_sizes=np.array([g.n_nodes for g in graphs]))
+        rows.append(assignment_kernel(relaxed_features(hks_features(new, ens.times_), Q),
+                                      fitted, kernel="relaxed"))
+    np.testing.assert_allclose(ens.transform(new), np.mean(rows, axis=0), atol=1e-10)
+    assert not np.allclose(rows[0], rows[1])
+
+
+def test_estimator_pickled_before_the_ensemble_loads_as_one_member(rng):
+    """A pickle without n_alignments and the member attributes (older transync) transforms."""
+    graphs = [_random_graph(int(rng.integers(4, 8)), 0.5, rng) for _ in range(6)]
+    est = TransitiveAssignmentKernel(matcher="node", random_state=0).fit(graphs)
+    want = est.transform(graphs[:2])
+    state = est.__getstate__()
+    for key in ("n_alignments", "pair_fraction", "alignments_", "member_aligned_",
+                "member_gamma_", "member_pairs_"):
+        del state[key]
+    old = TransitiveAssignmentKernel.__new__(TransitiveAssignmentKernel)
+    old.__setstate__(state)
+    np.testing.assert_allclose(old.transform(graphs[:2]), want)
+    assert old.get_params()["n_alignments"] == 1

@@ -12,7 +12,8 @@ orthogonal synchronization, linear / Gaussian / relaxed slot kernel; ``TAK-spec`
 spectrally, ``TAK-node`` matches with the node-only assignment, the fast ablation; the
 ``-k10`` variants match each graph only to its 10 nearest graphs plus a spanning tree, the view
 graph of ``n_neighbors=10``, and run on ENZYMES, PPI and NCI1 -- on NCI1 instead of the
-all-pairs variants), the
+all-pairs variants; the ``-bag5`` variants average the kernels of 5 synchronizations of the same
+matches, ``n_alignments=5``), the
 same linear and Gaussian kernels on the unsynchronized pairwise RRWM maps (``NT-lin``,
 ``NT-gauss``: non-transitive, the thesis's "HKS + RRWM" rows, from TAK-lin's cached matching;
 :func:`transync.kernels.pairwise_assignment_kernel`), the
@@ -551,8 +552,9 @@ def _tak_gram(prepared: PreparedSet, params: dict, cache: Path, *, executor, pro
 
 def _matching_seconds(pw: dict) -> float:
     """Wall seconds of the pairwise stage of a cached ``pairwise-*.npz``: the fit that wrote it
-    minus its synchronization (``sync_seconds``; files written before 2026-11-27 lack it, and
-    their time includes one orthogonal synchronization)."""
+    minus its synchronization (``sync_seconds``), i.e. HKS, matching and that fit's own kernel
+    (seconds, next to the matching's minutes); files written before 2026-11-27 lack
+    ``sync_seconds`` and their time includes one orthogonal synchronization."""
     return float(pw["seconds"]) - float(pw.get("sync_seconds", 0.0))
 
 

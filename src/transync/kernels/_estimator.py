@@ -57,7 +57,8 @@ def _bagged_pairs(pairs: np.ndarray, n_graphs: int, fraction: float,
     """Mask of a bootstrap-like subsample of the matched pairs: each pair kept with probability
     ``fraction``, plus the pairs of a uniformly random-weighted minimum spanning forest of the
     pair graph, so that the subsample connects every graph the full pair set connects (the
-    synchronization needs a connected view graph)."""
+    synchronization needs a connected view graph). ``pairs``: distinct ``(i, j)``, ``i < j``,
+    as :func:`view_graph` returns them."""
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import minimum_spanning_tree
 
@@ -189,8 +190,8 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
         Ensemble size ``R``: the Gram matrix is the mean of the kernels of ``R``
         synchronizations of the same pairwise matches -- the first on all matched pairs (the
         single-alignment kernel: ``n_alignments=1`` is exactly it), the others each on a random
-        subsample of the pairs (bagging, ``pair_fraction``). A mean of PSD matrices with unit
-        diagonal is PSD with unit diagonal. The synchronization settles in one of many
+        subsample of the pairs (bagging, ``pair_fraction``). A mean of PSD matrices is PSD
+        (with unit diagonal when ``normalize``). The synchronization settles in one of many
         nearly-equal local optima, and averaging over several smooths that arbitrary choice
         (ENZYMES, node matcher, Gaussian kernel, 10 x 10-fold CV: 49.2 -> 51.0 with ``R = 5``;
         docs/kernels.md). Costs ``R`` synchronizations; the matching is shared.
@@ -312,6 +313,19 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
             state = dict(state, executor=None)     # a pool cannot be pickled: run serially
         return state
 
+    def __setstate__(self, state):
+        """Estimators pickled before the ensemble (``n_alignments``) load as one-member
+        ensembles."""
+        state = dict(state)
+        state.setdefault("n_alignments", 1)
+        state.setdefault("pair_fraction", 0.7)
+        if "gram_" in state and "alignments_" not in state:
+            state["alignments_"] = (state["alignment_"],)
+            state["member_aligned_"] = (state["aligned_"],)
+            state["member_gamma_"] = (state["gamma_"],)
+            state["member_pairs_"] = np.ones((1, len(state["pairs_"])), dtype=bool)
+        super().__setstate__(state)
+
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
         tags.input_tags.two_d_array = False          # X is a sequence of graphs
@@ -358,16 +372,18 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
             out.append(np.hstack([h, onehot.astype(float)]))
         return out
 
-    def _member_rngs(self) -> list:
-        """One ``rng`` per alignment: ``random_state`` itself for the first (so that
-        ``n_alignments=1`` is the single-alignment kernel), then, for an int seed ``s``,
-        ``default_rng([s, r])``; a Generator spawns its members' seeds; None: fresh entropy."""
+    def _member_rng(self, r: int):
+        """The ``rng`` of ensemble member ``r``: ``random_state`` itself for the first (so that
+        ``n_alignments=1`` is the single-alignment kernel); then, for an int seed ``s``,
+        ``default_rng([s, r])``; a Generator draws each member's seed when the member starts
+        (after the first member's synchronization, which it seeds unchanged); None: fresh
+        entropy."""
         rs = self.random_state
-        extra = range(1, int(self.n_alignments))
+        if r == 0:
+            return rs
         if isinstance(rs, numbers.Integral) and not isinstance(rs, (bool, np.bool_)):
-            return [rs] + [np.random.default_rng([int(rs), r]) for r in extra]
-        gen = as_generator(rs)          # validates; None -> fresh entropy
-        return [rs] + [np.random.default_rng(gen.integers(2**63)) for _ in extra]
+            return np.random.default_rng([int(rs), r])
+        return np.random.default_rng(as_generator(rs).integers(2**63))
 
     @staticmethod
     def _align(kernel: str, feats: list[np.ndarray], labels, embedding, n: int) -> np.ndarray:
@@ -448,8 +464,9 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
             assignments = np.zeros((0, n), dtype=np.int32)
         kernel_features = self._kernel_features(hks, graphs, label_values)
         members, gram = [], None
-        for r, rng in enumerate(self._member_rngs()):
+        for r in range(int(self.n_alignments)):
             # member 0: all pairs (the single-alignment kernel); then bagged pair subsets
+            rng = self._member_rng(r)
             keep = (np.ones(pairs.shape[0], dtype=bool) if r == 0
                     else _bagged_pairs(pairs, N, float(self.pair_fraction), rng))
             alignment = synchronize_alignments(

@@ -536,8 +536,8 @@ def _tak_gram(prepared: PreparedSet, params: dict, cache: Path, *, executor, pro
     from .. import kernels as kx
 
     al = _alignment(prepared, params, cache, executor=executor, progress=progress)
-    if params.get("alignments", 1) > 1:
-        return _ensemble_gram(prepared, params, cache, al)
+    if params.get("alignments", 1) > 1:                 # the alignment cached the matching
+        return _ensemble_gram(prepared, params, cache)
     t0, c0 = time.perf_counter(), time.process_time()
     feats = _kernel_features(al)
     if params["kernel"] == "relaxed":
@@ -558,7 +558,7 @@ def _matching_seconds(pw: dict) -> float:
     return float(pw["seconds"]) - float(pw.get("sync_seconds", 0.0))
 
 
-def _ensemble_gram(prepared: PreparedSet, params: dict, cache: Path, al: dict):
+def _ensemble_gram(prepared: PreparedSet, params: dict, cache: Path):
     """An ensemble TAK kernel: ``TransitiveAssignmentKernel(n_alignments=...)`` fitted on the
     cached pairwise maps of ``params`` (its ``gram_``); its time, memory and CPU time are the
     pairwise stage's as it took plus the ensemble's synchronizations and kernels."""

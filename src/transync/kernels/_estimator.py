@@ -10,6 +10,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
+from .._progress import progress_bar
 from .._validation import as_generator, check_choice, check_int, check_int_array, check_positive
 from ..graphs import Graph
 from ._checks import check_label_array, check_sequence, check_width
@@ -208,7 +209,8 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
         :func:`sklearn.base.clone` (so ``GridSearchCV`` and ``Pipeline`` work with it), and is
         dropped to ``None`` (serial) when the estimator is pickled: a pool cannot be pickled.
     progress : bool, default=False
-        Progress bar over the pairwise matching.
+        Progress bars over the pairwise matching and, with ``n_alignments > 1``, over the
+        ensemble's synchronizations.
     random_state : None, int or numpy.random.Generator
         Seeds the matcher, the eigensolver and the ensemble's pair subsamples.
 
@@ -464,24 +466,28 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
             assignments = np.zeros((0, n), dtype=np.int32)
         kernel_features = self._kernel_features(hks, graphs, label_values)
         members, gram = [], None
-        for r in range(int(self.n_alignments)):
-            # member 0: all pairs (the single-alignment kernel); then bagged pair subsets
-            rng = self._member_rng(r)
-            keep = (np.ones(pairs.shape[0], dtype=bool) if r == 0
-                    else _bagged_pairs(pairs, N, float(self.pair_fraction), rng))
-            alignment = synchronize_alignments(
-                assignments[keep], pairs[keep], N, n=n, sizes=None if sync_dummies else sizes,
-                node_labels=node_labels if drop else None, method=self.sync,
-                keep_embedding=kernel == "relaxed", rng=rng)
-            aligned = self._align(kernel, kernel_features, alignment.labels,
-                                  alignment.embedding, n)
-            gamma = None
-            if kernel == "gaussian":
-                gamma = float(self.gamma) if self.gamma is not None else median_gamma(aligned)
-            K = assignment_kernel(aligned, kernel=kernel, gamma=gamma,
-                                  normalize=bool(self.normalize))
-            gram = K if gram is None else gram + K
-            members.append((keep, alignment, aligned, gamma))
+        R = int(self.n_alignments)
+        with progress_bar(R, "synchronizations", enabled=bool(self.progress) and R > 1,
+                          unit="alignment") as bar:
+            for r in range(R):
+                # member 0: all pairs (the single-alignment kernel); then bagged pair subsets
+                rng = self._member_rng(r)
+                keep = (np.ones(pairs.shape[0], dtype=bool) if r == 0
+                        else _bagged_pairs(pairs, N, float(self.pair_fraction), rng))
+                alignment = synchronize_alignments(
+                    assignments[keep], pairs[keep], N, n=n, sizes=None if sync_dummies else sizes,
+                    node_labels=node_labels if drop else None, method=self.sync,
+                    keep_embedding=kernel == "relaxed", rng=rng)
+                aligned = self._align(kernel, kernel_features, alignment.labels,
+                                      alignment.embedding, n)
+                gamma = None
+                if kernel == "gaussian":
+                    gamma = float(self.gamma) if self.gamma is not None else median_gamma(aligned)
+                K = assignment_kernel(aligned, kernel=kernel, gamma=gamma,
+                                      normalize=bool(self.normalize))
+                gram = K if gram is None else gram + K
+                members.append((keep, alignment, aligned, gamma))
+                bar.update()
         if len(members) > 1:
             gram /= len(members)
         # fitted attributes only now: a failed fit leaves no partly fitted estimator

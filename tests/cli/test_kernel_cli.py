@@ -122,40 +122,28 @@ def test_ctrl_c_exits_130_and_writes_nothing(toy, tmp_path, capsys, monkeypatch)
     assert "interrupted" in capsys.readouterr().err and not (tmp_path / "o").exists()
 
 
-def test_cli_kernel_with_a_view_graph(toy, tmp_path):
-    data = toy
-    out = tmp_path / "out"
-    args = ["kernel", str(data), "--out", str(out), "--matcher", "node", "--folds", "2",
-            "--repeats", "1", "--no-progress"]
-    assert main([*args, "--neighbors", "3"]) == 0
-    report = json.loads((out / "report.json").read_text())
-    assert report["params"]["n_neighbors"] == 3
-    assert "view graph, 3 nearest graphs" in (out / "report.md").read_text()
-    with np.load(out / "gram.npz") as z:
-        assert min_eigenvalue_ratio(z["K"]) >= -1e-9
-    with pytest.raises(SystemExit) as err:                # argparse: bad option value
-        main([*args, "--neighbors", "0"])
-    assert err.value.code == 2
-
-
-def test_cli_kernel_ensemble_of_alignments(toy, tmp_path):
-    """--alignments R: the estimator's n_alignments; its Gram matrix is written and PSD."""
+@pytest.mark.parametrize("option, param, text", [
+    ("--neighbors", "n_neighbors", "view graph, 3 nearest graphs"),
+    ("--alignments", "n_alignments", "averaged over 3 alignments")])
+def test_cli_kernel_view_graph_and_ensemble_options(toy, tmp_path, option, param, text):
+    """--neighbors K / --alignments R: the estimator's n_neighbors / n_alignments, reported;
+    the Gram matrix written is the estimator's and PSD; 0 is refused by argparse."""
     from transync.datasets import load_tu
     from transync.kernels import TransitiveAssignmentKernel
 
     out = tmp_path / "out"
     args = ["kernel", str(toy), "--out", str(out), "--matcher", "node", "--folds", "2",
             "--repeats", "1", "--no-progress"]
-    assert main([*args, "--alignments", "3"]) == 0
+    assert main([*args, option, "3"]) == 0
     report = json.loads((out / "report.json").read_text())
-    assert report["params"]["n_alignments"] == 3
-    assert "averaged over 3 alignments" in (out / "report.md").read_text()
+    assert report["params"][param] == 3
+    assert text in (out / "report.md").read_text()
     with np.load(out / "gram.npz") as z:
         K, kept = z["K"], z["kept"]
     assert min_eigenvalue_ratio(K) >= -1e-9
     graphs = [load_tu(toy).graphs[k] for k in kept]
-    want = TransitiveAssignmentKernel(matcher="node", n_alignments=3, random_state=0)
+    want = TransitiveAssignmentKernel(matcher="node", random_state=0, **{param: 3})
     np.testing.assert_allclose(K, want.fit_transform(graphs), atol=1e-12)
-    with pytest.raises(SystemExit) as err:
-        main([*args, "--alignments", "0"])
+    with pytest.raises(SystemExit) as err:                # argparse: bad option value
+        main([*args, option, "0"])
     assert err.value.code == 2

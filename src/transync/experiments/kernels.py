@@ -550,6 +550,17 @@ def _tak_gram(prepared: PreparedSet, params: dict, cache: Path, *, executor, pro
     return K, float(al["seconds"]) + time.perf_counter() - t0, peak, cpu
 
 
+def _estimator(params: dict, n: int, **options):
+    """The :class:`~transync.kernels.TransitiveAssignmentKernel` of the TAK parameters
+    ``params`` (matcher, sync, HKS scales, view graph; universe ``n``; seed 0), with
+    ``options`` (kernel, ensemble size, executor, progress)."""
+    from ..kernels import TransitiveAssignmentKernel
+
+    return TransitiveAssignmentKernel(
+        matcher=params["matcher"], sync=params["sync"], times=_times(params["scales"]),
+        n_universe=n, n_neighbors=params.get("neighbors"), random_state=0, **options)
+
+
 def _matching_seconds(pw: dict) -> float:
     """Wall seconds of the pairwise stage of a cached ``pairwise-*.npz``: the fit that wrote it
     minus its synchronization (``sync_seconds``), i.e. HKS, matching and that fit's own kernel
@@ -562,16 +573,11 @@ def _ensemble_gram(prepared: PreparedSet, params: dict, cache: Path):
     """An ensemble TAK kernel: ``TransitiveAssignmentKernel(n_alignments=...)`` fitted on the
     cached pairwise maps of ``params`` (its ``gram_``); its time, memory and CPU time are the
     pairwise stage's as it took plus the ensemble's synchronizations and kernels."""
-    from ..kernels import TransitiveAssignmentKernel
-
     pw_path, _, n = _cache_paths(prepared, params, cache)
     pw = _load_npz(pw_path)
     if pw is None:                                           # pragma: no cover - a race
         raise RuntimeError(f"the pairwise maps {pw_path} vanished from the cache")
-    est = TransitiveAssignmentKernel(
-        matcher=params["matcher"], sync=params["sync"], kernel=params["kernel"],
-        times=_times(params["scales"]), n_universe=n, n_neighbors=params.get("neighbors"),
-        n_alignments=int(params["alignments"]), random_state=0)
+    est = _estimator(params, n, kernel=params["kernel"], n_alignments=int(params["alignments"]))
     t0, c0 = time.perf_counter(), time.process_time()
     with _peak_rss() as mem:
         est.fit(list(prepared.graphs), assignments=pw["assignments"].astype(np.int64))
@@ -625,8 +631,6 @@ def _cache_paths(prepared: PreparedSet, params: dict, cache: Path) -> tuple[Path
 
 
 def _alignment(prepared: PreparedSet, params: dict, cache: Path, *, executor, progress):
-    from ..kernels import TransitiveAssignmentKernel
-
     graphs = list(prepared.graphs)
     pw_path, al_path, n = _cache_paths(prepared, params, cache)
 
@@ -640,11 +644,7 @@ def _alignment(prepared: PreparedSet, params: dict, cache: Path, *, executor, pr
         return out
 
     def _fit():
-        est = TransitiveAssignmentKernel(
-            matcher=params["matcher"], sync=params["sync"], kernel="relaxed",
-            times=_times(params["scales"]), n_universe=n,
-            n_neighbors=params.get("neighbors"), executor=executor,
-            progress=progress, random_state=0)
+        est = _estimator(params, n, kernel="relaxed", executor=executor, progress=progress)
         with _file_lock(pw_path):
             stored = _load_npz(pw_path)
             t0 = time.perf_counter()

@@ -76,6 +76,72 @@ def test_planted_transform_is_recovered_exactly(model, seed):
     assert res.threshold > 0 and 1 <= res.n_rounds <= 5
 
 
+def _perspective_views(seed, n=24):
+    """Points of one plane seen by two pinhole cameras with strong foreshortening: one
+    homography explains every match, no affine map does within the gate."""
+    rng = np.random.default_rng(seed)
+    p1 = rng.random((n, 2))
+    H = np.array([[1.0, 0.1, 0.2], [0.05, 0.9, 0.1], [0.9, 0.6, 1.0]])
+    return p1, _apply(H, p1)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_candidate_models_keep_the_best_supported(seed):
+    """model=(a, b): each candidate is the single-model verification with one seed drawn
+    from rng; the verified one with more matches is kept (ties: the earlier), and `support`
+    records every candidate's matches."""
+    p1, p2 = _perspective_views(seed)
+    putative = np.arange(len(p1))
+    putative[[0, 1, 2]] = putative[[1, 2, 0]]
+    both = verify_assignment(p1, p2, putative, model=("affine", "homography"), rng=seed)
+    draw = int(np.random.default_rng(seed).integers(2**63))
+    alone = {m: verify_assignment(p1, p2, putative, model=m, rng=draw)
+             for m in ("affine", "homography")}
+    assert both.support == {m: r.n_inliers for m, r in alone.items()}
+    assert alone["homography"].n_inliers == len(p1) > alone["affine"].n_inliers
+    assert both.model == "homography" and both.verified
+    np.testing.assert_array_equal(both.assignment, np.arange(len(p1)))
+    np.testing.assert_array_equal(both.transform, alone["homography"].transform)
+    # the order decides ties only: both orders keep the homography here
+    assert verify_assignment(p1, p2, putative, model=("homography", "affine"),
+                             rng=seed).model == "homography"
+    # an affine scene: both explain every match, the earlier model is kept
+    A = np.array([[0.9, -0.3], [0.4, 1.1]])
+    tie = verify_assignment(p1, p1 @ A.T + 1, putative, model=("affine", "homography"),
+                            rng=seed)
+    assert tie.model == "affine" and tie.support == {"affine": 24, "homography": 24}
+    assert verify_assignment(p1, p1 @ A.T + 1, putative, model=("homography", "affine"),
+                             rng=seed).model == "homography"
+    # one model asked for: its own support only
+    assert alone["affine"].support == {"affine": alone["affine"].n_inliers}
+
+
+def test_candidate_models_that_all_fail_return_the_first_failure():
+    rng = np.random.default_rng(0)
+    p1, p2 = rng.random((15, 2)), rng.random((15, 2))
+    res = verify_assignment(p1, p2, rng.permutation(15), model=("similarity", "affine"), rng=0)
+    assert not res.verified and res.model == "similarity" and np.all(res.assignment == -1)
+    assert res.support == {"similarity": 0, "affine": 0}
+
+
+@pytest.mark.parametrize("model, exc, match", [
+    ((), TypeError, "non-empty sequence"),
+    (("affine", "affine"), ValueError, "twice"),
+    (("affine", "projective"), ValueError, "or a sequence of them"),
+    (("affine", 3), ValueError, "or a sequence of them"),
+    (3, TypeError, "`model` must be a transform name"),
+    ("projective", ValueError, "`model` must be one of"),
+])
+def test_candidate_models_input_contract(model, exc, match):
+    p1, p2 = _perspective_views(0)
+    with pytest.raises(exc, match=match):
+        verify_assignment(p1, p2, np.arange(len(p1)), model=model)
+    # min_inliers must allow every candidate's minimal sample
+    with pytest.raises(ValueError, match="min_inliers"):
+        verify_assignment(p1, p2, np.arange(len(p1)), model=("affine", "homography"),
+                          min_inliers=3)
+
+
 def test_relabelling_the_second_graph_relabels_the_answer():
     p1, p2, putative, truth, _ = _planted("affine", 7)
     perm = np.random.default_rng(1).permutation(len(p2))      # new node u is old perm[u]
@@ -256,6 +322,9 @@ def test_match_collection_verify_refusals():
         match_collection(equal, verify_threshold=0.5, progress=False)
     with pytest.raises(ValueError, match="`verify` must be 'auto', one of"):
         match_collection(graphs, verify="Auto", progress=False)
+    for bad in ((), ("affine", "affine"), ("affine", "rigid"), ("affine", None), {"affine"}):
+        with pytest.raises(ValueError, match="a tuple of distinct ones"):
+            match_collection(graphs, verify=bad, progress=False)
     no_points = [Graph(np.ones((4, 4)) - np.eye(4)) for _ in range(3)]
     with pytest.raises(ValueError, match="graph 0 has no points"):
         match_collection(no_points, verify="affine", progress=False)
@@ -320,15 +389,17 @@ def test_extreme_scales_and_a_far_point():
 @pytest.mark.parametrize("kwargs", [dict(), dict(sync="spectral", mode="offline"),
                                     dict(sync=None)])
 def test_default_verifies_partial_views_with_points(kwargs):
-    """Graphs of different sizes with 2-d points: the default is the affine verification,
-    exactly as if asked for (same seeds, same maps), and says so."""
+    """Graphs of different sizes with 2-d points: the default is the affine-or-homography
+    verification, exactly as if asked for (same seeds, same maps), and says so."""
     graphs, truth = _landmark_collection(keep=(18, 22))
     auto = match_collection(graphs, affinity=_AFFINITY, rng=0, progress=False, **kwargs)
-    asked = match_collection(graphs, affinity=_AFFINITY, verify="affine", rng=0,
-                             progress=False, **kwargs)
+    asked = match_collection(graphs, affinity=_AFFINITY, verify=["affine", "homography"],
+                             rng=0, progress=False, **kwargs)
     np.testing.assert_array_equal(auto.assignments, asked.assignments)
     info = auto.info["verify"]
-    assert info["model"] == "affine" and info["auto"] and info["used"]
+    assert info["model"] == ("affine", "homography") and info["auto"] and info["used"]
+    assert set(info["pair_models"]) <= {"affine", "homography"}
+    assert len(info["pair_models"]) == len(info["verified"]) == len(info["verified_first"])
     assert not asked.info["verify"]["auto"] and asked.info["verify"]["used"]
     assert multimatching_precision_recall(auto, truth)["f1"] > 0.9
     if kwargs.get("sync", "auto") is not None:
@@ -386,15 +457,17 @@ def test_default_drops_a_verification_the_geometry_does_not_support(kwargs):
 @pytest.mark.parametrize("n_graphs, used", [(6, False), (8, True)])
 def test_default_keeps_the_verification_from_70_percent_of_pairs(n_graphs, used):
     """One graph of unrelated points among mild views of one point set: its pairs fail (but
-    for one chance fit with 8 graphs). With 6 graphs 10 of 15 pairs verify (0.67: below the
-    70 % the default asks for, its output is verify=None's); with 8 graphs 22 of 28 (0.79:
-    the verified maps are used)."""
+    for one chance fit with 8 graphs). With 6 graphs 10 of 15 pairs verify affinely (0.67:
+    below the 70 % the default asks for, its output is verify=None's); with 8 graphs 22 of 28
+    (0.79: the verified maps are used). The share of the first model decides: the homography
+    alternative verifies a pair more with 8 graphs, and counts for the maps only."""
     graphs, _ = _landmark_collection(n_graphs=n_graphs, keep=(18, 22), seed=1)
     graphs[-1] = Graph.from_points(np.random.default_rng(9).random((20, 2)), edges="delaunay")
     res = match_collection(graphs, affinity=_AFFINITY, mode="offline", sync="spectral", rng=0,
                            progress=False)
     info = res.info["verify"]
-    assert info["verified"].sum() == {6: 10, 8: 22}[n_graphs] and info["used"] is used
+    assert info["verified_first"].sum() == {6: 10, 8: 22}[n_graphs] and info["used"] is used
+    assert np.all(info["verified"] >= info["verified_first"])
     off = match_collection(graphs, affinity=_AFFINITY, mode="offline", sync="spectral",
                            verify=None, rng=0, progress=False)
     assert np.array_equal(res.assignments, off.assignments) is not used

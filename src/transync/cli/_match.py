@@ -321,8 +321,9 @@ def add_parsers(sub) -> None:
                    choices=["auto", "none", "affine", "similarity", "homography"],
                    help="geometric verification of every pair's matches before the "
                         "synchronization (2-d points of one rigid or planar object); auto: "
-                        "affine for point sets of different sizes, kept when at least 70 %% "
-                        "of the pairs verify, none for equal sizes")
+                        "for point sets of different sizes each pair keeps the better "
+                        "supported of an affine map and a homography, kept when at least "
+                        "70 %% of the pairs verify affinely; none for equal sizes")
     p.add_argument("--verify-threshold", type=positive_float, default=None,
                    help="verification gate, as a fraction of the median nearest-neighbour "
                         "distance of the points (default 0.5)")

@@ -29,7 +29,7 @@ Examples
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -68,9 +68,12 @@ class VerificationResult:
     threshold : float
         The gate used, in the units of ``points2``.
     model : str
-        The transform family fitted.
+        The transform family fitted (of several candidates: the one kept).
     n_rounds : int
         Guided-matching rounds run (each a linear assignment and a refit).
+    support : dict
+        Every candidate model's verified matches, ``{model: n_inliers}`` (0: that model's
+        verification failed); one entry when one model was asked for.
     """
 
     assignment: np.ndarray
@@ -80,6 +83,7 @@ class VerificationResult:
     threshold: float
     model: str
     n_rounds: int
+    support: dict = field(default_factory=dict)
 
 
 #: smallest ratio of the two point sets' scales a verification takes (and its inverse the
@@ -198,7 +202,26 @@ def _guided(H: np.ndarray, x1: np.ndarray, x2: np.ndarray, gate: float) -> np.nd
     return a
 
 
-def verify_assignment(points1, points2, assignment, *, model: str = "affine",
+def _check_models(model) -> tuple[str, ...]:
+    """``model`` as a tuple of transform names: one name, or a non-empty sequence of distinct
+    names (the candidates of a per-pair model choice)."""
+    if isinstance(model, str):
+        return (check_choice(model, "model", tuple(VERIFY_MODELS)),)
+    if isinstance(model, (tuple, list)) and model:
+        names = tuple(model)
+        for m in names:
+            if not isinstance(m, str) or m not in VERIFY_MODELS:
+                raise ValueError(f"`model` must be one of "
+                                 f"{', '.join(map(repr, VERIFY_MODELS))} or a sequence of "
+                                 f"them, got {model!r}")
+        if len(set(names)) < len(names):
+            raise ValueError(f"`model` names a transform twice: {model!r}")
+        return names
+    raise TypeError(f"`model` must be a transform name ({', '.join(map(repr, VERIFY_MODELS))})"
+                    f" or a non-empty sequence of them, got {model!r}")
+
+
+def verify_assignment(points1, points2, assignment, *, model="affine",
                       threshold: float = DEFAULT_THRESHOLD, min_inliers: int | None = None,
                       max_rounds: int = 5, rng=None) -> VerificationResult:
     """Keep the matches one plane transform supports; recover the ones it predicts.
@@ -219,17 +242,24 @@ def verify_assignment(points1, points2, assignment, *, model: str = "affine",
         Points of the second graph.
     assignment : array_like of shape (n1,), int
         Putative map ``u -> assignment[u]`` (``-1`` unmatched), e.g. a matcher's output.
-    model : {"affine", "similarity", "homography"}, default="affine"
+    model : {"affine", "similarity", "homography"} or sequence of them, default="affine"
         Transform family: ``"similarity"`` (rotation, uniform scale, translation; 2 matches per
         sample), ``"affine"`` (3) or ``"homography"`` (4; points on one plane seen by a pinhole
-        camera).
+        camera). A sequence, e.g. ``("affine", "homography")``, verifies with each and keeps
+        the verified result with the most matches (ties: the earlier model; none verified:
+        the first model's failed result); ``.model`` names the one kept. Each candidate is
+        then exactly ``verify_assignment(..., model=m, rng=seed)`` for one ``seed`` drawn
+        from ``rng``, so every model sees the same RANSAC stream. Views of a scene that is
+        not one plane, or seen in perspective, are often explained better by one model in
+        some pairs and by the other in others.
     threshold : float, default=0.5
         The gate, as a fraction of the median nearest-neighbour distance among ``points2``: a
         point mapped closer than that to a point of ``points2`` may match it. Half the typical
         spacing keeps a mapped point from reaching its neighbour's match.
     min_inliers : int, optional
         Matches needed for a verified map. Default: half the smaller point set (rounded up),
-        and at least twice the minimal sample (similarity 4, affine 6, homography 8). A wrong
+        and at least twice the minimal sample (similarity 4, affine 6, homography 8; per
+        candidate model). Given, it must be at least every model's minimal sample. A wrong
         transform still lands points within the gate of others by chance (about one point in
         six at the default gate, for evenly spread points), and the best of RANSAC's samples
         collects several such chance matches; a transform that explains half the nodes is
@@ -271,13 +301,11 @@ def verify_assignment(points1, points2, assignment, *, model: str = "affine",
     p1 = _check_points(points1, "points1")
     p2 = _check_points(points2, "points2")
     a = check_assignment(assignment, "assignment", n1=len(p1), n2=len(p2))
-    model = check_choice(model, "model", tuple(VERIFY_MODELS))
+    models = _check_models(model)
     threshold = check_positive(threshold, "threshold")
-    k = VERIFY_MODELS[model]
-    if min_inliers is None:
-        min_inliers = max(2 * k, -(-min(len(p1), len(p2)) // 2))
-    else:
-        min_inliers = check_int(min_inliers, "min_inliers", minimum=k)
+    if min_inliers is not None:
+        min_inliers = check_int(min_inliers, "min_inliers",
+                                minimum=max(VERIFY_MODELS[m] for m in models))
     max_rounds = check_int(max_rounds, "max_rounds", minimum=1)
     gen = as_generator(rng)
 
@@ -296,7 +324,28 @@ def verify_assignment(points1, points2, assignment, *, model: str = "affine",
     if not np.isfinite(gate):
         raise ValueError(f"`threshold` times the spacing of `points2` must be a finite "
                          f"distance, got {threshold:g} x {1 / T2[0, 0]:g}")
-    empty = np.full(len(p1), UNMATCHED, dtype=np.int64)
+    if len(models) == 1:
+        res = _verify(models[0], a, x1, x2, T1, T2, g, gate, min_inliers, max_rounds, gen)
+        return replace(res, support={res.model: res.n_inliers})
+    seed = int(gen.integers(2**63))
+    best, support = None, {}
+    for m in models:
+        res = _verify(m, a, x1, x2, T1, T2, g, gate, min_inliers, max_rounds,
+                      np.random.default_rng(seed))
+        support[m] = res.n_inliers
+        if best is None or (res.verified and (not best.verified
+                                              or res.n_inliers > best.n_inliers)):
+            best = res
+    return replace(best, support=support)
+
+
+def _verify(model: str, a, x1, x2, T1, T2, g: float, gate: float, min_inliers: int | None,
+            max_rounds: int, gen: np.random.Generator) -> VerificationResult:
+    """One model's verification of the putative map ``a`` (normalized points ``x1``, ``x2``,
+    their normalizations ``T1``, ``T2``, the gate ``g`` normalized and ``gate`` in units)."""
+    if min_inliers is None:
+        min_inliers = max(2 * VERIFY_MODELS[model], -(-min(len(x1), len(x2)) // 2))
+    empty = np.full(len(x1), UNMATCHED, dtype=np.int64)
     failed = VerificationResult(empty, np.full((3, 3), np.nan), 0, False, gate, model, 0)
     src = np.flatnonzero(a >= 0)
     if len(src) < min_inliers or g <= 0:          # min_inliers >= k, the minimal sample

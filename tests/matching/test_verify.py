@@ -87,15 +87,14 @@ def _perspective_views(seed, n=24):
 
 @pytest.mark.parametrize("seed", range(3))
 def test_candidate_models_keep_the_best_supported(seed):
-    """model=(a, b): each candidate is the single-model verification with one seed drawn
-    from rng; the verified one with more matches is kept (ties: the earlier), and `support`
+    """model=(a, b): each candidate is the single-model verification from the same rng
+    state; the verified one with more matches is kept (ties: the earlier), and `support`
     records every candidate's matches."""
     p1, p2 = _perspective_views(seed)
     putative = np.arange(len(p1))
     putative[[0, 1, 2]] = putative[[1, 2, 0]]
     both = verify_assignment(p1, p2, putative, model=("affine", "homography"), rng=seed)
-    draw = int(np.random.default_rng(seed).integers(2**63))
-    alone = {m: verify_assignment(p1, p2, putative, model=m, rng=draw)
+    alone = {m: verify_assignment(p1, p2, putative, model=m, rng=seed)
              for m in ("affine", "homography")}
     assert both.support == {m: r.n_inliers for m, r in alone.items()}
     assert alone["homography"].n_inliers == len(p1) > alone["affine"].n_inliers
@@ -114,6 +113,25 @@ def test_candidate_models_keep_the_best_supported(seed):
                              rng=seed).model == "homography"
     # one model asked for: its own support only
     assert alone["affine"].support == {"affine": alone["affine"].n_inliers}
+
+
+def test_candidate_models_share_the_generator_state_of_the_first():
+    """With a Generator: every candidate starts from its state, which is then left where the
+    first model's own call leaves it; on random putative matches (RANSAC's order matters)
+    the first candidate's verdict is the single model's, pair after pair."""
+    rng = np.random.default_rng(4)
+    for _ in range(30):
+        p1, p2 = rng.random((16, 2)), rng.random((14, 2))
+        p2[:8] = p1[:8] * 1.1 + 0.2 + 0.02 * rng.standard_normal((8, 2))
+        putative = np.full(16, -1)
+        putative[:8] = np.arange(8)
+        putative[:3] = rng.permutation(3)
+        putative[8:14] = 8 + rng.permutation(6)
+        g1, g2 = np.random.default_rng(7), np.random.default_rng(7)
+        both = verify_assignment(p1, p2, putative, model=("affine", "homography"), rng=g1)
+        first = verify_assignment(p1, p2, putative, model="affine", rng=g2)
+        assert both.support["affine"] == first.n_inliers
+        assert g1.bit_generator.state == g2.bit_generator.state
 
 
 def test_candidate_models_that_all_fail_return_the_first_failure():
@@ -322,7 +340,8 @@ def test_match_collection_verify_refusals():
         match_collection(equal, verify_threshold=0.5, progress=False)
     with pytest.raises(ValueError, match="`verify` must be 'auto', one of"):
         match_collection(graphs, verify="Auto", progress=False)
-    for bad in ((), ("affine", "affine"), ("affine", "rigid"), ("affine", None), {"affine"}):
+    for bad in ((), ("affine", "affine"), ("affine", "rigid"), ("affine", None), {"affine"},
+                ("affine", ["homography"]), [["affine"]], ("affine", {"a": 1})):
         with pytest.raises(ValueError, match="a tuple of distinct ones"):
             match_collection(graphs, verify=bad, progress=False)
     no_points = [Graph(np.ones((4, 4)) - np.eye(4)) for _ in range(3)]
@@ -471,6 +490,51 @@ def test_default_keeps_the_verification_from_70_percent_of_pairs(n_graphs, used)
     off = match_collection(graphs, affinity=_AFFINITY, mode="offline", sync="spectral",
                            verify=None, rng=0, progress=False)
     assert np.array_equal(res.assignments, off.assignments) is not used
+
+
+def _perspective_collection(seed, n_views=6, n=24, strength=0.6):
+    """Partial views of one plane in strong perspective: a homography explains every pair,
+    an affine map only the milder ones."""
+    rng = np.random.default_rng(seed)
+    base = rng.random((n, 2))
+    graphs = []
+    for _ in range(n_views):
+        H = np.eye(3)
+        H[:2, :2] += 0.1 * rng.standard_normal((2, 2))
+        H[:2, 2] = rng.uniform(-1, 1, 2)
+        H[2, :2] = strength * rng.uniform(-1, 1, 2)
+        kept = rng.permutation(np.flatnonzero(rng.random(n) < 0.85))
+        graphs.append(Graph.from_points(_apply(H, base[kept]), edges="delaunay"))
+    return graphs
+
+
+@pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
+def test_default_decides_on_the_first_model_and_keeps_the_better_per_pair():
+    """Views in perspective: the affine map verifies 6 of 15 pairs, either model 11 (0.73).
+    The 70 % rule counts the affine ones, exactly those verify='affine' verifies (the first
+    candidate runs as the model alone), so the default falls back to verify=None's output;
+    each pair kept the model with more matches (the homography only when it had more)."""
+    from transync.datasets import LANDMARK_AFFINITY
+
+    graphs = _perspective_collection(7)
+    kw = dict(affinity=functools.partial(gaussian_edge_affinity, **LANDMARK_AFFINITY), rng=0,
+              progress=False, mode="offline", sync="spectral")
+    auto = match_collection(graphs, **kw)
+    both = match_collection(graphs, verify=("affine", "homography"), **kw)
+    affine = match_collection(graphs, verify="affine", **kw)
+    off = match_collection(graphs, verify=None, **kw)
+    info, alone = auto.info["verify"], affine.info["verify"]
+    np.testing.assert_array_equal(info["verified_first"], alone["verified"])
+    assert info["verified_first"].sum() == 6 and info["verified"].sum() == 11
+    assert info["auto"] and not info["used"]
+    np.testing.assert_array_equal(auto.assignments, off.assignments)
+    # forced, the A/H maps are used, and differ from the affine ones where a homography won
+    assert both.info["verify"]["used"] and not np.array_equal(both.assignments,
+                                                              affine.assignments)
+    homog = info["pair_models"] == "homography"
+    assert homog.sum() == 11 - 6 + np.sum(homog & alone["verified"])
+    assert np.all(info["n_inliers"][homog] > alone["n_inliers"][homog])
+    np.testing.assert_array_equal(info["n_inliers"][~homog], alone["n_inliers"][~homog])
 
 
 @pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")

@@ -248,10 +248,11 @@ def verify_assignment(points1, points2, assignment, *, model="affine",
         camera). A sequence, e.g. ``("affine", "homography")``, verifies with each and keeps
         the verified result with the most matches (ties: the earlier model; none verified:
         the first model's failed result); ``.model`` names the one kept. Each candidate is
-        then exactly ``verify_assignment(..., model=m, rng=seed)`` for one ``seed`` drawn
-        from ``rng``, so every model sees the same RANSAC stream. Views of a scene that is
-        not one plane, or seen in perspective, are often explained better by one model in
-        some pairs and by the other in others.
+        exactly ``verify_assignment(..., model=m, rng=rng)`` from the same state of ``rng``
+        (a Generator is left where the first model's call leaves it), so the first model's
+        verdict is the one it gives alone. Views of a scene that is not one plane, or seen in
+        perspective, are often explained better by one model in some pairs and by the other
+        in others.
     threshold : float, default=0.5
         The gate, as a fraction of the median nearest-neighbour distance among ``points2``: a
         point mapped closer than that to a point of ``points2`` may match it. Half the typical
@@ -327,15 +328,19 @@ def verify_assignment(points1, points2, assignment, *, model="affine",
     if len(models) == 1:
         res = _verify(models[0], a, x1, x2, T1, T2, g, gate, min_inliers, max_rounds, gen)
         return replace(res, support={res.model: res.n_inliers})
-    seed = int(gen.integers(2**63))
+    # every candidate from the same generator state, which is left where the first model's
+    # verification leaves it: the first candidate is exactly the first model's own call
+    start, after_first = gen.bit_generator.state, None
     best, support = None, {}
     for m in models:
-        res = _verify(m, a, x1, x2, T1, T2, g, gate, min_inliers, max_rounds,
-                      np.random.default_rng(seed))
+        gen.bit_generator.state = start
+        res = _verify(m, a, x1, x2, T1, T2, g, gate, min_inliers, max_rounds, gen)
+        after_first = after_first or gen.bit_generator.state
         support[m] = res.n_inliers
         if best is None or (res.verified and (not best.verified
                                               or res.n_inliers > best.n_inliers)):
             best = res
+    gen.bit_generator.state = after_first
     return replace(best, support=support)
 
 

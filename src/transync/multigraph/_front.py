@@ -52,9 +52,9 @@ VERIFY_MIN_SCORE = 1e-9
 SOFT_UNIVERSE_MAX = 2000
 #: ``verify="auto"``: the plane models it verifies with (graphs of different sizes with 2-d
 #: points), each pair keeping the better supported (``verify_assignment(model=...)``). Measured
-#: (docs/methods/subgraphs.md): against the affine model alone, F1 +0.002 .. +0.010 on CMU
-#: House partial (6-20 frames), -0.002 .. +0.08 on generated perspective sequences, -0.010 on
-#: exact similarity views
+#: (docs/methods/subgraphs.md): against the affine model alone, mean F1 +0.002 .. +0.017 on
+#: CMU House partial (6-20 frames; level on the stored CMU point), +0.008 .. +0.068 on
+#: generated perspective sequences, -0.002 on exact similarity views
 AUTO_VERIFY_MODEL = ("affine", "homography")
 #: ``verify="auto"``: below this share of pairs verified by the first (affine) model the
 #: collection is not taken for views of one rigid or planar scene, and the unverified
@@ -69,7 +69,8 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
                      mode: str = "online", affinity=None, pairs=None, executor=None,
                      options: dict | None = None, sync_every: int | None = None,
                      damping: float = 1.0, refine: bool = True, n_universe: int | None = None,
-                     partial: str = "universe", verify: str | None = "auto",
+                     partial: str = "universe",
+                     verify: str | tuple[str, ...] | None = "auto",
                      verify_threshold: float | None = None, rng=None,
                      progress: bool = True) -> MultiMatchingResult:
     """Match ``N`` graphs at once; synchronized methods return cycle-consistent maps.
@@ -200,9 +201,11 @@ default="auto"
         :func:`~transync.matching.verify_assignment` takes, the unverified pipeline's output
         is returned, exactly as with ``None``); no verification otherwise. ``None``: never.
         ``res.info["verify"]``, when one ran: each pair's number of inliers, whether it
-        verified (``"verified"``; with the first model alone: ``"verified_first"``), the model
-        it kept (``"pair_models"``), ``"auto"``, whether the verified maps were ``"used"``
-        and, when the points were refused under ``"auto"``, the reason (``"refused"``).
+        verified (``"verified"``; with the first model alone: ``"verified_first"``, exactly
+        what ``verify=<first model>`` verifies), the model it kept (``"pair_models"``; the
+        first model where none verified or the points were refused), ``"auto"``, whether the
+        verified maps were ``"used"`` and, when the points were refused under ``"auto"``,
+        the reason (``"refused"``).
     verify_threshold : float, optional
         The verification's gate, as a fraction of the median nearest-neighbour distance among
         the second graph's points; default that of
@@ -614,8 +617,9 @@ def _check_verify(verify, threshold, graphs, lay: "_Layout"):
     if isinstance(verify, list):
         verify = tuple(verify)
     if not ((isinstance(verify, str) and verify in VERIFY_MODELS)
-            or (isinstance(verify, tuple) and verify and len(set(verify)) == len(verify)
-                and all(isinstance(m, str) and m in VERIFY_MODELS for m in verify))):
+            or (isinstance(verify, tuple) and verify
+                and all(isinstance(m, str) and m in VERIFY_MODELS for m in verify)
+                and len(set(verify)) == len(verify))):
         raise ValueError(f"`verify` must be 'auto', one of "
                          f"{', '.join(map(repr, VERIFY_MODELS))}, a tuple of distinct ones "
                          f"(each pair keeps the better supported) or None, got {verify!r}")

@@ -680,10 +680,10 @@ def _verify_stage(graphs, pairs, assignments, verify, executor, gen, progress,
     out = np.full_like(A, -1)
     n_inliers = np.zeros(len(pairs), dtype=np.int64)
     verified = np.zeros(len(pairs), dtype=bool)
+    first = np.zeros(len(pairs), dtype=bool)
     names = (model,) if isinstance(model, str) else model
     pair_models = np.full(len(pairs), names[0], dtype=f"<U{max(map(len, names))}")
     # threshold None: verify_assignment's
-    first = np.zeros(len(pairs), dtype=bool)
     info["verify"] = {"model": model, "threshold": threshold, "n_inliers": n_inliers,
                       "verified": verified, "pair_models": pair_models,
                       "verified_first": first, "auto": auto}

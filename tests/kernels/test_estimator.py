@@ -805,7 +805,12 @@ def test_ensemble_first_member_is_the_single_fit_whatever_the_seed(matrix_free, 
     np.testing.assert_array_equal(ens.member_aligned_[0], one.aligned_)
     again = TransitiveAssignmentKernel(n_alignments=3, random_state=state(), **kw).fit(graphs)
     np.testing.assert_array_equal(again.gram_, ens.gram_)
-    fresh = TransitiveAssignmentKernel(n_alignments=2, random_state=None, **kw).fit(graphs)
+    # Unseeded: about 1 fit in 130 stops the orthogonal sweeps at max_iter with a relative
+    # change near 5e-6 and says so (ConvergenceWarning, measured on 400 fits); the claim here is
+    # only that the result is valid, whatever the draw.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        fresh = TransitiveAssignmentKernel(n_alignments=2, random_state=None, **kw).fit(graphs)
     assert min_eigenvalue_ratio(fresh.gram_) >= -1e-9
 
 

@@ -499,3 +499,21 @@ def check_choice(value, name: str, choices) -> str:
         opts = ", ".join(repr(c) for c in choices)
         raise ValueError(f"`{name}` must be one of {opts}, got {value!r}")
     return value
+
+
+def check_choices(value, name: str, choices, *, what: str = "") -> tuple[str, ...]:
+    """``value`` as a tuple of names from ``choices``: one name, or a non-empty tuple or list
+    of distinct ones (``what``: what a sequence means and what else is accepted, for the
+    message)."""
+    opts = ", ".join(repr(c) for c in choices)
+    names = (value,) if isinstance(value, str) else value
+    if not isinstance(names, (tuple, list)) or not names:
+        raise TypeError(f"`{name}` must be one of {opts} or a non-empty sequence of distinct "
+                        f"ones{what}, got {value!r}")
+    names = tuple(names)
+    if not all(isinstance(m, str) and m in choices for m in names):
+        raise ValueError(f"`{name}` must be one of {opts} or a sequence of distinct ones"
+                         f"{what}, got {value!r}")
+    if len(set(names)) < len(names):
+        raise ValueError(f"`{name}` names a choice twice, got {value!r}")
+    return names

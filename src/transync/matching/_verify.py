@@ -33,7 +33,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .._validation import as_generator, check_array, check_choice, check_int, check_positive
+from .._validation import as_generator, check_array, check_choices, check_int, check_positive
 from ..permutations import UNMATCHED, check_assignment, solve_lap
 
 __all__ = ["VERIFY_MODELS", "VerificationResult", "verify_assignment"]
@@ -202,25 +202,6 @@ def _guided(H: np.ndarray, x1: np.ndarray, x2: np.ndarray, gate: float) -> np.nd
     return a
 
 
-def _check_models(model) -> tuple[str, ...]:
-    """``model`` as a tuple of transform names: one name, or a non-empty sequence of distinct
-    names (the candidates of a per-pair model choice)."""
-    if isinstance(model, str):
-        return (check_choice(model, "model", tuple(VERIFY_MODELS)),)
-    if isinstance(model, (tuple, list)) and model:
-        names = tuple(model)
-        for m in names:
-            if not isinstance(m, str) or m not in VERIFY_MODELS:
-                raise ValueError(f"`model` must be one of "
-                                 f"{', '.join(map(repr, VERIFY_MODELS))} or a sequence of "
-                                 f"them, got {model!r}")
-        if len(set(names)) < len(names):
-            raise ValueError(f"`model` names a transform twice: {model!r}")
-        return names
-    raise TypeError(f"`model` must be a transform name ({', '.join(map(repr, VERIFY_MODELS))})"
-                    f" or a non-empty sequence of them, got {model!r}")
-
-
 def verify_assignment(points1, points2, assignment, *, model="affine",
                       threshold: float = DEFAULT_THRESHOLD, min_inliers: int | None = None,
                       max_rounds: int = 5, rng=None) -> VerificationResult:
@@ -302,7 +283,7 @@ def verify_assignment(points1, points2, assignment, *, model="affine",
     p1 = _check_points(points1, "points1")
     p2 = _check_points(points2, "points2")
     a = check_assignment(assignment, "assignment", n1=len(p1), n2=len(p2))
-    models = _check_models(model)
+    models = check_choices(model, "model", tuple(VERIFY_MODELS))
     threshold = check_positive(threshold, "threshold")
     if min_inliers is not None:
         min_inliers = check_int(min_inliers, "min_inliers",

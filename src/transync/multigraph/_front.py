@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._blas import blas_limit
-from .._validation import as_generator, check_array, check_choice, check_int, check_positive
+from .._validation import (as_generator, check_array, check_choice, check_choices, check_int,
+                           check_positive)
 from ..exceptions import ConvergenceWarning
 from ..permutations import MultiMatching, cycle_inconsistency_arrays
 from ..synchronization import (
@@ -614,15 +615,9 @@ def _check_verify(verify, threshold, graphs, lay: "_Layout"):
                              f"which verify=None runs none of: pass verify='affine' (or "
                              f"'similarity', 'homography'), got verify_threshold={threshold!r}")
         return None
-    if isinstance(verify, list):
-        verify = tuple(verify)
-    if not ((isinstance(verify, str) and verify in VERIFY_MODELS)
-            or (isinstance(verify, tuple) and verify
-                and all(isinstance(m, str) and m in VERIFY_MODELS for m in verify)
-                and len(set(verify)) == len(verify))):
-        raise ValueError(f"`verify` must be 'auto', one of "
-                         f"{', '.join(map(repr, VERIFY_MODELS))}, a tuple of distinct ones "
-                         f"(each pair keeps the better supported) or None, got {verify!r}")
+    models = check_choices(verify, "verify", tuple(VERIFY_MODELS),
+                           what=" (each pair keeps the better supported), 'auto' or None")
+    verify = models[0] if isinstance(verify, str) else models
     if threshold is not None:
         threshold = check_positive(threshold, "verify_threshold")
     if lay.kind == "dummies":

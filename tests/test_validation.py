@@ -238,3 +238,13 @@ def test_complete_pairs_accepts_every_pair_once_in_any_order_and_names_a_missing
                                              rf"\(test\), got {len(pairs) - 1}; missing e\.g\. "
                                              rf"\({lo}, {hi}\)"):
             check_index_pairs(np.delete(pairs, k, axis=0), n, unique=True, complete="test")
+
+
+def test_as_generator_refuses_bools_and_names_the_argument():
+    """``rng=True`` is not seed 1 (``n_universe=True`` is refused likewise)."""
+    for bad in (True, np.bool_(False)):
+        with pytest.raises(TypeError, match="`random_state` must be None, an int .* got bool"):
+            _validation.as_generator(bad, "random_state")
+    with pytest.raises(ValueError, match="`rng` must be None, a non-negative int"):
+        _validation.as_generator(-3)
+    assert isinstance(_validation.as_generator(np.int64(3)), np.random.Generator)

@@ -34,19 +34,23 @@ __all__ = [
 ]
 
 
-def as_generator(rng) -> np.random.Generator:
-    """Return a ``numpy.random.Generator`` from ``None``, an int seed or a Generator (SPEC 7)."""
+def as_generator(rng, name: str = "rng") -> np.random.Generator:
+    """Return a ``numpy.random.Generator`` from ``None``, an int seed or a Generator (SPEC 7);
+    ``name``: the argument, for messages."""
     if isinstance(rng, np.random.Generator):
         return rng
-    if isinstance(rng, numbers.Integral) and not isinstance(rng, bool) and rng < 0:
-        raise ValueError(f"`rng` must be None, a non-negative int seed or a "
+    if isinstance(rng, (bool, np.bool_)):
+        raise TypeError(f"`{name}` must be None, an int or a numpy.random.Generator, got bool "
+                        f"{rng!r}")
+    if isinstance(rng, numbers.Integral) and rng < 0:
+        raise ValueError(f"`{name}` must be None, a non-negative int seed or a "
                          f"numpy.random.Generator, got {rng}")
     if rng is None or isinstance(rng, (numbers.Integral, np.random.SeedSequence)):
         return np.random.default_rng(rng)
     if isinstance(rng, np.random.RandomState):
         return np.random.default_rng(rng.randint(2**31))
     raise TypeError(
-        f"`rng` must be None, an int or a numpy.random.Generator, got {type(rng).__name__}"
+        f"`{name}` must be None, an int or a numpy.random.Generator, got {type(rng).__name__}"
     )
 
 

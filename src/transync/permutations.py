@@ -876,20 +876,29 @@ class MultiMatching:
             hit += int((ok & (pred_v == true_v)).sum())
         return float(hit / tot) if tot else 1.0
 
-    def maps_from(self, maps: Mapping, pairs: np.ndarray) -> np.ndarray:
+    def maps_from(self, maps: Mapping, pairs: np.ndarray, *, name: str = "other") -> np.ndarray:
         """Pairwise assignments ``{(i, j): assignment}`` (need not be consistent) as a
         ``(P, n_max)`` array aligned with ``pairs`` (validated against this matching's sizes;
-        ``(j, i)`` used, inverted, when only it is given; a missing pair gives ``-1`` rows)."""
+        ``(j, i)`` used, inverted, when only it is given; a missing pair gives ``-1`` rows).
+        Every key must be a pair of distinct object indices, used or not (``name``: the
+        argument, for messages)."""
         pairs = self.check_pairs(pairs)
         sizes = self.sizes
+        N = self.n_objects
+        for key in maps:
+            if not (isinstance(key, tuple) and len(key) == 2
+                    and all(isinstance(k, (int, np.integer)) and not isinstance(k, bool)
+                            and 0 <= k < N for k in key) and key[0] != key[1]):
+                raise ValueError(f"`{name}` keys must be pairs (i, j) of distinct object indices "
+                                 f"in [0, {N}), got key {key!r}")
         n_max = int(sizes.max(initial=0))
         out = np.full((pairs.shape[0], n_max), UNMATCHED, dtype=np.int64)
         for p, (i, j) in enumerate(pairs.tolist()):
             if (i, j) in maps:
-                a = check_assignment(maps[(i, j)], f"other[{(i, j)}]", n1=int(sizes[i]),
+                a = check_assignment(maps[(i, j)], f"{name}[{(i, j)}]", n1=int(sizes[i]),
                                      n2=int(sizes[j]))
             elif (j, i) in maps:
-                a = invert(check_assignment(maps[(j, i)], f"other[{(j, i)}]", n1=int(sizes[j]),
+                a = invert(check_assignment(maps[(j, i)], f"{name}[{(j, i)}]", n1=int(sizes[j]),
                                             n2=int(sizes[i])), int(sizes[i]))
             else:
                 continue

@@ -870,3 +870,21 @@ def test_estimator_pickled_before_the_ensemble_loads_as_one_member(rng):
     old.__setstate__(state)
     np.testing.assert_allclose(old.transform(graphs[:2]), want)
     assert old.get_params()["n_alignments"] == 1
+
+
+def test_bool_node_labels_and_a_bad_random_state():
+    """Bool node labels (which Graph accepts) are labels 0 / 1 (before: "`label_values` must
+    hold integers", an argument the user never passed); a bad ``random_state`` is refused by
+    its name before any work."""
+    rng = np.random.default_rng(2)
+    graphs = [_random_graph(int(rng.integers(4, 7)), 0.5, rng) for _ in range(6)]
+    flags = [Graph(g.adjacency, node_labels=rng.random(g.n_nodes) < 0.5) for g in graphs]
+    ints = [Graph(g.adjacency, node_labels=g.node_labels.astype(int)) for g in flags]
+    a = TransitiveAssignmentKernel(matcher="node", random_state=0).fit(flags)
+    b = TransitiveAssignmentKernel(matcher="node", random_state=0).fit(ints)
+    np.testing.assert_array_equal(a.label_values_, [0, 1])
+    np.testing.assert_array_equal(a.gram_, b.gram_)
+    np.testing.assert_array_equal(a.transform(flags), b.transform(ints))
+    for bad, exc in (("seed", TypeError), (True, TypeError), (-1, ValueError)):
+        with pytest.raises(exc, match="`random_state` must be None"):
+            TransitiveAssignmentKernel(matcher="node", random_state=bad).fit(graphs)

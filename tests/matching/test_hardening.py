@@ -12,7 +12,7 @@ import pytest
 import scipy.sparse as sp
 
 from transync.datasets import make_point_matching_problem
-from transync.exceptions import DegenerateInputError
+from transync.exceptions import ConvergenceWarning, DegenerateInputError
 from transync.graphs import Graph
 from transync.matching import (
     METHODS,
@@ -337,7 +337,7 @@ def test_points_of_different_dimensions_refused(rng):
     with pytest.raises(ValueError, match="`g1` and `g2` must have points of the same dimension "
                                          "for attribute='length', got 2 and 3"):
         match_graphs(g2d, g3d)
-    with pytest.raises(ValueError, match="node points dimensions differ: 2 vs 3"):
+    with pytest.raises(ValueError, match="`g1.points` and `g2.points` must have the same width"):
         gaussian_node_affinity(g2d, g3d, attribute="points")
     with pytest.raises(TypeError, match="`g1` and `g2` must be Graph objects, got ndarray"):
         gaussian_node_affinity(np.zeros((2, 2)), g2d)
@@ -397,3 +397,45 @@ def test_sigma2_checked_for_every_method(method, rng):
     g = Graph.from_points(rng.random((4, 2)), edges="full")
     with pytest.raises(TypeError, match="`sigma2` must be a real number, got str 'x'"):
         match_graphs(g, g, method=method, sigma2="x", node_affinity=np.eye(4))
+
+
+# ---------------------------------------------------------------------------------------------
+# found by a contract fuzz of the public entry points (2026-11-27)
+
+def test_linear_solvers_refuse_scores_whose_objective_overflows():
+    """Scores near float64's limit: refused by name, never an infinite objective."""
+    for solver in (hungarian, sinkhorn):
+        with pytest.raises(ValueError, match="`scores` is too large to match on"):
+            solver(np.full((2, 2), 1e308))
+    g = Graph.from_points(np.random.default_rng(0).random((2, 2)), edges="full")
+    for method in ("hungarian", "rrwm"):
+        with pytest.raises(ValueError, match="`node_affinity` is too large to match on"):
+            match_graphs(g, g, method=method, node_affinity=np.full((2, 2), 1e308))
+    with pytest.raises(TypeError, match="`n1` must be an int, got bool"):
+        hungarian(np.ones((1, 1)), n1=True, n2=True)
+
+
+def test_sinkhorn_tau_beyond_float64_is_refused_or_reported():
+    """``scores / tau`` overflowing: a ValueError naming ``tau``; spanning beyond float64's
+    precision (the potentials' own test cancels to 0): not converged, with the real error."""
+    with pytest.raises(ValueError, match="`tau`=1e-308 makes scores / tau overflow"):
+        sinkhorn(np.full((3, 3), 2.0), tau=1e-308)
+    S = np.random.default_rng(0).random((4, 4))
+    with pytest.warns(ConvergenceWarning, match="beyond float64's precision; pass a larger"):
+        res = sinkhorn(S, tau=1e-20)
+    real = float(np.max(np.abs(res.soft.sum(1) - 1.0)))
+    assert not res.converged and res.info["marginal_error"] == real > 1e-6
+    ok = sinkhorn(S, tau=0.05)                     # an ordinary tau: exact marginals, converged
+    assert ok.converged and np.allclose(ok.soft.sum(1), 1.0, atol=1e-6)
+
+
+def test_solver_messages_name_the_users_argument():
+    K = np.random.default_rng(1).random((16, 16))
+    K = K + K.T
+    with pytest.raises(ValueError, match="`amplification` must be <= 500 with variant='orig"):
+        rrwm(K, n1=4, n2=4, amplification=1000)
+    assert rrwm(K, n1=4, n2=4, amplification=1000, variant="pygmtools").assignment.shape == (4,)
+    from transync.matching import ipfp
+
+    with pytest.raises(ValueError, match="`init` must have 2 dimensions"):
+        ipfp(K, n1=4, n2=4, init=[0, 1, 2, 3])

@@ -334,6 +334,8 @@ def test_validation_errors(rng):
         ipfp(K, n1=4, n2=4, init="random")
     with pytest.raises(ValueError, match="`beta_rate` must be > 1"):
         ga(K, n1=4, n2=4, beta_rate=1.0)
+    with pytest.raises(ValueError, match=r"`beta_rate`=1.000000001 anneals .* more than 10000"):
+        ga(K, n1=4, n2=4, beta_rate=1 + 1e-9)                 # ~3e9 levels: refused, no hang
     with pytest.raises(ValueError, match="`min_step` must be <="):
         pf(K, n1=4, n2=4, step=0.01, min_step=0.1)
     with pytest.raises(ValueError, match="`method` must be one of"):

@@ -41,3 +41,20 @@ def test_metric_errors():
         affinity_score(K, [1], n2=2)
     with pytest.raises(ValueError, match="`affinity`"):
         affinity_score(np.full((1, 1), np.nan), [0], n2=1)
+
+
+def test_affinity_score_input_contract():
+    """``n2`` and ``normalize_by`` checked by name; entries whose products overflow refused
+    (before: NaN from 0 * inf, a string ``n2`` repeated into the shape message)."""
+    K = np.ones((4, 4))
+    with pytest.raises(TypeError, match="`n2` must be an int, got str"):
+        affinity_score(K, [0, 1], n2="2")
+    with pytest.raises(TypeError, match="`n2` must be an int, got bool"):
+        affinity_score(K, [0, 1], n2=True)
+    with pytest.raises(ValueError, match="`n2` must be >= 1, got 0"):
+        affinity_score(K, [0, 1], n2=0)
+    with pytest.raises(ValueError, match="`normalize_by` must be an assignment of the same 2"):
+        affinity_score(K, [0, 1], n2=2, normalize_by=[0])
+    with pytest.raises(ValueError, match="`affinity` is too large"):
+        affinity_score(np.full((4, 4), 1e308), [0, 1], n2=2)
+    assert affinity_score(K, [0, 1], n2=2, normalize_by=[1, 0]) == 1.0

@@ -95,3 +95,19 @@ def test_bad_input(pred, exc, match):
         multimatching_precision_recall(pred, gt)
     with pytest.raises(ValueError, match="pairs"):
         multimatching_precision_recall(gt, gt, pairs=[[0, 5]])
+
+
+@pytest.mark.parametrize("key", [(0, 5), ("a", "b"), (1, 1), (0, 1, 2), (True, 1), -1])
+def test_dict_prediction_keys_are_checked_by_both_metrics(key):
+    """A key that is not a pair of distinct graph indices is refused by name, not ignored
+    (before: the accuracy of ``{(0, 5): ...}`` on 3 objects was a silent 0.0)."""
+    truth = [np.array([0, 1]), np.array([1, 0]), np.array([0, 1])]
+    pred = {(0, 1): np.array([1, 0]), key: np.array([1, 0])}
+    for metric in (multimatching_accuracy, multimatching_precision_recall):
+        with pytest.raises(ValueError, match=r"`prediction` keys must be pairs \(i, j\) of "
+                                             r"distinct object indices in \[0, 3\)"):
+            metric(pred, truth)
+    with pytest.raises(ValueError, match="`prediction` must hold 3 objects"):
+        multimatching_accuracy([np.array([0, 1])] * 2, truth)
+    good = {(0, 1): np.array([1, 0]), (2, 1): np.array([1, 0])}     # (2, 1): inverted for (1, 2)
+    assert multimatching_accuracy(good, truth) == pytest.approx(2 / 3)

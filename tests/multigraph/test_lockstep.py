@@ -201,6 +201,8 @@ def test_options_validated_and_defaults():
         run_lockstep(A, solver="ga", options={"bogus": 1})
     with pytest.raises(ValueError, match="beta_rate"):
         run_lockstep(A, solver="ga", options={"beta_rate": 0.5})
+    with pytest.raises(ValueError, match="more than 10000"):
+        run_lockstep(A, solver="ga", options={"beta_rate": 1.0002})
     with pytest.raises(ValueError, match="variant"):
         run_lockstep(A, solver="rrwm", options={"variant": "fast"})
     with pytest.raises(ValueError, match="`solver` must be one of"):

@@ -315,3 +315,23 @@ def test_online_orthogonal_sync(planted):
     res = match_collection(planted.graphs, sync="orthogonal", affinity=AFF, progress=False,
                            rng=0)
     assert res.accuracy(planted.ground_truth) == 1.0 and res.consistency == 1.0
+
+
+def test_view_graph_and_block_dict_contract():
+    """Bad view-graph rows are reported as what they are (before: "`pairs[0]` pairs graph 7
+    with itself" for an index out of range, "graph 0.5" for a fraction); a dict of K blocks
+    with a block of a graph with itself is refused, not ignored."""
+    graphs = make_graph_collection(n_graphs=3, n_inliers=4, rng=0).graphs
+    with pytest.raises(ValueError, match=r"`pairs` must hold graph indices in \[0, 3\)"):
+        match_collection(graphs, pairs=[[7, 7], [0, 1], [1, 2]], progress=False)
+    with pytest.raises(TypeError, match="`pairs` must hold integer graph indices, got 0.5"):
+        match_collection(graphs, pairs=[[0.5, 0.5], [0, 1], [1, 2]], progress=False)
+    with pytest.raises(ValueError, match=r"`pairs\[0\]` pairs graph 1 with itself"):
+        match_collection(graphs, pairs=[[1, 1], [0, 1], [1, 2]], progress=False)
+    K = {(i, j): gaussian_edge_affinity(graphs[i], graphs[j]).to_dense()
+         for i in range(3) for j in range(i + 1, 3)}
+    with pytest.raises(ValueError, match=r"key \(0, 0\) pairs graph 0 with itself"):
+        match_collection(graphs, affinity={**K, (0, 0): "junk"}, progress=False)
+    with pytest.raises(ValueError, match="`affinity` is too small to match on"):
+        match_collection(graphs, affinity={k: v * 1e-305 for k, v in K.items()},
+                         progress=False)

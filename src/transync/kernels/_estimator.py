@@ -53,6 +53,11 @@ def _check_graphs(X, name: str = "X") -> list[Graph]:
     return graphs
 
 
+def _int_labels(g: Graph) -> np.ndarray:
+    """A graph's node labels as int64 (bool labels as 0 / 1; checked by :func:`_check_graphs`)."""
+    return np.asarray(g.node_labels).astype(np.int64)
+
+
 def _bagged_pairs(pairs: np.ndarray, n_graphs: int, fraction: float,
                   rng: np.random.Generator) -> np.ndarray:
     """Mask of a bootstrap-like subsample of the matched pairs: each pair kept with probability
@@ -358,6 +363,8 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise TypeError(f"`{name}` must be a bool, got "
                                 f"{type(getattr(self, name)).__name__}")
+        if not isinstance(self.random_state, np.random.RandomState):   # (draws from it)
+            as_generator(self.random_state, "random_state")             # before any work
 
     @staticmethod
     def _kernel_features(hks: list[np.ndarray], graphs: list[Graph],
@@ -367,7 +374,7 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
             return hks
         out = []
         for h, g in zip(hks, graphs):
-            lab = np.asarray(g.node_labels)
+            lab = _int_labels(g)
             idx = np.searchsorted(vals, lab)
             idx = np.minimum(idx, vals.size - 1)
             onehot = (vals[idx] == lab)[:, None] & (np.arange(vals.size) == idx[:, None])
@@ -440,7 +447,7 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
             raise ValueError(f"node_labels=True but `X[{k}]` has no node labels")
         use_labels = (bool(all(has_labels)) if isinstance(self.node_labels, str)
                       else bool(self.node_labels))
-        node_labels = [np.asarray(g.node_labels) for g in graphs] if use_labels else None
+        node_labels = [_int_labels(g) for g in graphs] if use_labels else None
         label_values = np.unique(np.concatenate(node_labels)) if use_labels else None
         kernel, sync_dummies = self.kernel, bool(self.sync_dummies)
         drop = bool(self.drop_label_mismatches) and not sync_dummies
@@ -558,9 +565,9 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
             if missing:
                 raise ValueError(f"`X[{missing[0]}]` has no node labels, but the kernel was "
                                  "fitted with node labels")
-            node_labels = [np.asarray(g.node_labels) for g in graphs]
+            node_labels = [_int_labels(g) for g in graphs]
         fitted_labels = (None if node_labels is None
-                         else [np.asarray(g.node_labels) for g in self.graphs_])
+                         else [_int_labels(g) for g in self.graphs_])
         hks = hks_features(graphs, self.times_)
         N, M = len(self.graphs_), len(graphs)
         nearest = None

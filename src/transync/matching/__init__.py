@@ -15,7 +15,7 @@ from ._affinity import (
     gaussian_node_affinity,
 )
 from ._front import METHODS, match_graphs, solver_options
-from ._ga import GAStepper, default_beta_max, ga
+from ._ga import GAStepper, annealing_levels, default_beta_max, ga
 from ._ipfp import IPFPStepper, ipfp
 from ._linear import hungarian, sinkhorn
 from ._pf import PFStepper, pf
@@ -50,6 +50,7 @@ __all__ = [
     "SMStepper",
     "SinkhornBatchOutput",
     "Stepper",
+    "annealing_levels",
     "default_beta_max",
     "ga",
     "hungarian",

@@ -629,7 +629,9 @@ def gaussian_node_affinity(g1: Graph, g2: Graph, *, sigma2: float = 1.0,
         raise ValueError(f"both graphs need `{need}`"
                          " for a node affinity")
     if f1.shape[1] != f2.shape[1]:
-        raise ValueError(f"node {attribute} dimensions differ: {f1.shape[1]} vs {f2.shape[1]}")
+        what = "node_features" if attribute == "features" else "points"
+        raise ValueError(f"`g1.{what}` and `g2.{what}` must have the same width, got "
+                         f"{f1.shape[1]} and {f2.shape[1]}")
     d2 = ((f1[:, None, :] - f2[None, :, :]) ** 2).sum(-1)
     _refuse_underflow(int(np.count_nonzero(d2 <= _UNDERFLOW * sigma2)), 1, sigma2,
                       f"node {attribute}", float(np.median(np.abs(np.concatenate(
@@ -787,6 +789,7 @@ def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = DEFAULT_SIGM
         if node_affinity.min() < 0:
             raise ValueError("`node_affinity` must be non-negative, "
                              f"got minimum {node_affinity.min():.6g}")
+        _check_values(node_affinity, "node_affinity", n1 * n2)
     a1, a2 = _edge_attributes(g1, attribute, "g1"), _edge_attributes(g2, attribute, "g2")
     M1, M2 = g1.mask, g2.mask
     m1, m2 = int(M1.sum()), int(M2.sum())

@@ -169,11 +169,12 @@ def match_graphs(g1: Graph, g2: Graph, *, method: str = "rrwm", affinity=None,
                     f"(bandwidth 1.0), which underflows on these node features: pass "
                     f"`node_affinity=gaussian_node_affinity(g1, g2, sigma2=...)` with a larger "
                     f"bandwidth ({exc})") from None
-        from .._validation import check_array
+        from .._validation import check_affinity_magnitude, check_array
 
         S = check_array(node_affinity, "node_affinity", ndim=2)
         if S.shape != (n1, n2):
             raise ValueError(f"`node_affinity` must have shape ({n1}, {n2}), got {S.shape}")
+        check_affinity_magnitude(abs(S).max(), S.size, "node_affinity")
         return solver(S, **options)
     if aff is None:
         aff = gaussian_edge_affinity(g1, g2, sigma2=sigma2, node_affinity=node_affinity)

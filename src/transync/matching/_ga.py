@@ -59,6 +59,27 @@ def default_beta_max(n1: int, n2: int) -> float:
     return max(_DEFAULTS["beta_max"], float(max(n1, n2)))
 
 
+#: most annealing levels a schedule may take (the default schedule takes 43 up to 10 nodes,
+#: 106 at 1000): a ``beta_rate`` barely above 1 would otherwise run for days
+MAX_LEVELS = 10_000
+
+
+def annealing_levels(beta0: float, beta_max: float, beta_rate: float) -> int:
+    """Levels of the schedule ``beta0, beta0 * beta_rate, ...`` up to ``beta_max`` (both
+    included), refused above :data:`MAX_LEVELS`.
+
+    >>> annealing_levels(0.5, 10.0, 1.075)
+    43
+    """
+    levels = int(np.ceil(np.log(beta_max / beta0) / np.log(beta_rate))) + 1
+    if levels > MAX_LEVELS:
+        raise ValueError(f"`beta_rate`={beta_rate!r} anneals from beta0={beta0!r} to "
+                         f"beta_max={beta_max!r} in {levels} levels, more than "
+                         f"{MAX_LEVELS}: pass a larger `beta_rate` (default "
+                         f"{_DEFAULTS['beta_rate']})")
+    return levels
+
+
 def _slack_sinkhorn(M: np.ndarray, *, max_iter: int, tol: float) -> np.ndarray:
     """Gold & Rangarajan's slack Sinkhorn of ``M`` (shape ``(n1 + 1, n2 + 1)``), in place."""
     return sinkhorn_normalize(M, domain="augmented", slack="augmented", tol=tol,
@@ -121,7 +142,7 @@ class GAStepper(_BaseStepper):
             raise ValueError(f"`beta_rate` must be > 1, got {self.beta_rate!r}")
         if self.beta_max < self.beta0:
             raise ValueError(f"`beta_max` must be >= beta0={self.beta0!r}, got {self.beta_max!r}")
-        levels = int(np.ceil(np.log(self.beta_max / self.beta0) / np.log(self.beta_rate))) + 1
+        levels = annealing_levels(self.beta0, self.beta_max, self.beta_rate)
         super().__init__(aff, max_iter=levels)
         self.max_inner = check_int(max_inner, "max_inner", minimum=1)
         self.inner_tol = check_positive(inner_tol, "inner_tol")

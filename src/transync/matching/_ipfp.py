@@ -75,7 +75,7 @@ class IPFPStepper(_BaseStepper):
                     st.step()
                 self._X = st.iterate
         else:
-            self._X = self._check_iterate(init)
+            self._X = self._check_iterate(init, "init")
         self._best = None
         self._best_score = -np.inf
         self._refresh()

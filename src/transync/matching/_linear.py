@@ -19,7 +19,8 @@ import warnings
 import numpy as np
 import scipy.sparse as sp
 
-from .._validation import check_array, check_bool, check_int, check_positive
+from .._validation import (check_affinity_magnitude, check_array, check_bool, check_int,
+                           check_positive)
 from ..exceptions import ConvergenceWarning
 from ..permutations import assignment_to_matrix, solve_lap
 from ._affinity import Affinity, as_affinity
@@ -35,6 +36,8 @@ def _score_matrix(scores, n1, n2, name: str = "scores"):
     An :class:`Affinity`, or a matrix of shape ``(n1 n2, n1 n2)`` with ``n1``/``n2`` given, is a
     Lawler ``K``; its diagonal (the unary term) is the score matrix.
     """
+    n1 = None if n1 is None else check_int(n1, "n1", minimum=1)
+    n2 = None if n2 is None else check_int(n2, "n2", minimum=1)
     if isinstance(scores, Affinity):
         aff = as_affinity(scores, n1=n1, n2=n2, name=name)
         return aff.diag(), aff
@@ -48,6 +51,7 @@ def _score_matrix(scores, n1, n2, name: str = "scores"):
                          f"shape (n1*n2, n1*n2), got {S.shape}")
     if S.shape[0] == 0 or S.shape[1] == 0:
         raise ValueError(f"`{name}` must be non-empty, got shape {S.shape}")
+    check_affinity_magnitude(np.max(np.abs(S)), S.size, name)     # objectives stay finite
     return S, None
 
 
@@ -145,11 +149,20 @@ def sinkhorn(scores, *, n1: int | None = None, n2: int | None = None, tau: float
     tau = check_positive(tau, "tau")
     max_iter = check_int(max_iter, "max_iter", minimum=1)
     tol = check_positive(tol, "tol")
-    out = sinkhorn_normalize(S / tau, domain="log", slack="mass", tol=tol, max_iter=max_iter)
+    with np.errstate(over="ignore"):
+        L = S / tau
+    if not np.all(np.isfinite(L)):
+        raise ValueError(f"`tau`={tau!r} makes scores / tau overflow (largest |score| "
+                         f"{np.max(np.abs(S)):.3g}): pass a larger `tau`")
+    out = sinkhorn_normalize(L, domain="log", slack="mass", tol=tol, max_iter=max_iter)
     X, n_iter, err, converged = out.X, out.n_sweeps, out.error, out.converged
     if not converged:
-        warnings.warn(f"sinkhorn: row sums off by {err:.3g} > tol={tol:g} after "
-                      f"max_iter={max_iter} sweeps", ConvergenceWarning, stacklevel=2)
+        span = float(np.ptp(L)) if L.size else 0.0
+        why = (f"after max_iter={max_iter} sweeps" if n_iter >= max_iter else
+               f"after {n_iter} sweeps: scores / tau span {span:.3g}, beyond float64's "
+               f"precision; pass a larger `tau`")
+        warnings.warn(f"sinkhorn: row sums off by {err:.3g} > tol={tol:g} {why}",
+                      ConvergenceWarning, stacklevel=2)
     assignment = solve_lap(X)
     return MatchingResult(assignment=assignment, soft=X,
                           objective=_linear_objective(S, aff, assignment), n_iter=n_iter,

@@ -42,6 +42,9 @@ from ._stepwise import _BaseStepper, _run
 __all__ = ["RRWMStepper", "rrwm"]
 
 VARIANTS = ("original", "pygmtools")
+#: largest ``amplification`` of ``variant="original"``, whose Sinkhorn runs on ``exp(amp x)``
+#: with ``max x = 1`` in the scaling domain (``exp`` overflows float64 beyond ~709)
+MAX_AMPLIFICATION = 500.0
 # per variant; the original values are RRWM.m's, the pygmtools values pygmtools 0.6's defaults
 # (alpha = 1 - c = 0.2, beta = 30, max_iter = 50, sk_iter = 20 half-sweeps, its threshold 1e-5)
 _DEFAULTS = {
@@ -157,6 +160,10 @@ class RRWMStepper(_BaseStepper):
         self.c = check_probability(pick(c, "c"), "c")
         self.amplification = check_positive(pick(amplification, "amplification"),
                                             "amplification")
+        if self.variant == "original" and self.amplification > MAX_AMPLIFICATION:
+            raise ValueError(f"`amplification` must be <= {MAX_AMPLIFICATION:g} with "
+                             f"variant='original' (its Sinkhorn scales exp(amplification), "
+                             f"which overflows float64 beyond ~709), got {self.amplification!r}")
         self.tol = check_positive(pick(tol, "tol"), "tol")
         self.sinkhorn_max_iter = check_int(pick(sinkhorn_max_iter, "sinkhorn_max_iter"),
                                            "sinkhorn_max_iter", minimum=1)
@@ -365,7 +372,9 @@ def rrwm(K, *, n1: int | None = None, n2: int | None = None, variant: str = "ori
         Weight of the random walk; ``1 - c`` weights the reweighted jump (pygmtools' ``alpha``
         is ``1 - c``). Default 0.2 (original), 0.8 (pygmtools).
     amplification : float, optional
-        ``beta``: the largest score is amplified to ``exp(beta)`` before Sinkhorn. Default 30.
+        ``beta``: the largest score is amplified to ``exp(beta)`` before Sinkhorn. Default 30;
+        at most 500 with ``variant="original"`` (whose Sinkhorn scales
+        ``exp(beta)`` itself; ``"pygmtools"`` shifts to the log domain from 600).
     max_iter : int, optional
         Maximum number of iterations. Default 300 (original), 50 (pygmtools).
     tol : float, optional

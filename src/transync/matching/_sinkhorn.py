@@ -217,6 +217,12 @@ def sinkhorn_normalize(M: np.ndarray, *, domain: str = "log", slack: str = "mass
         n_sweeps, err, converged = _alternate(dom, n_half=n_half, tol=tol,
                                               check_every=check_every)
         X, v = dom.matrix(), None
+        if converged and domain == "log":
+            # The potentials' test exp(f + lse) - 1 cancels to 0 once they reach ~1e16 (a log-
+            # kernel of that range, e.g. scores / tau with tau = 1e-20): check the matrix itself
+            real = float(np.max(np.abs(X.sum(1) - 1.0), initial=0.0))
+            if not real < tol:
+                err, converged = real, False
     return SinkhornOutput(X.T if transposed else X, n_sweeps, err, converged, v)
 
 

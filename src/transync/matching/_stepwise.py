@@ -128,11 +128,11 @@ class _BaseStepper:
     def iterate(self) -> np.ndarray:
         return self._X.copy()
 
-    def _check_iterate(self, X) -> np.ndarray:
-        X = check_array(X, "X", ndim=2)
+    def _check_iterate(self, X, name: str = "X") -> np.ndarray:
+        X = check_array(X, name, ndim=2)
         if X.shape != (self.n1, self.n2):
-            raise ValueError(f"`X` must have shape ({self.n1}, {self.n2}), got {X.shape}")
-        check_nonnegative(X, "X")
+            raise ValueError(f"`{name}` must have shape ({self.n1}, {self.n2}), got {X.shape}")
+        check_nonnegative(X, name)
         return np.array(X, dtype=float)
 
     def set_iterate(self, X) -> None:

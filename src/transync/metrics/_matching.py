@@ -9,13 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import check_array
-from ..permutations import (
-    MultiMatching,
-    assignment_to_matrix,
-    check_assignment,
-    cycle_inconsistency,
-)
+from .._validation import check_affinity_magnitude, check_array, check_int
+from ..permutations import assignment_to_matrix, check_assignment, cycle_inconsistency
+from ._multimatching import multimatching_precision_recall
 
 __all__ = [
     "affinity_score",
@@ -77,8 +73,8 @@ def multimatching_accuracy(prediction, truth, *, pairs=None) -> float:
     that ``truth`` puts in the same universe slot. ``truth`` is a
     :class:`~transync.permutations.MultiMatching` (or its labels); ``prediction`` a
     ``MultiMatching``, labels, a result carrying ``.matching``, or a dict
-    ``{(i, j): assignment}``. One implementation:
-    :meth:`transync.permutations.MultiMatching.accuracy`.
+    ``{(i, j): assignment}``. The ``"accuracy"`` (= recall) of
+    :func:`multimatching_precision_recall`, which see for how a dict is read.
 
     Parameters
     ----------
@@ -109,7 +105,7 @@ def multimatching_accuracy(prediction, truth, *, pairs=None) -> float:
     >>> multimatching_accuracy({(0, 1): np.array([1, 0])}, truth)
     1.0
     """
-    return MultiMatching.from_labels(truth).accuracy(prediction, pairs=pairs)
+    return multimatching_precision_recall(prediction, truth, pairs=pairs)["accuracy"]
 
 
 def matching_precision_recall(assignment, truth) -> dict[str, float]:
@@ -198,16 +194,23 @@ def affinity_score(affinity, assignment, *, n2: int | None = None,
     else:
         if n2 is None:
             raise TypeError("`n2` is required when `affinity` is a matrix")
+        n2 = check_int(n2, "n2", minimum=1)
         K = check_array(affinity, "affinity", ndim=2)         # finite: no silent NaN score
         if K.shape != (a.shape[0] * n2, a.shape[0] * n2):
             raise ValueError(f"`affinity` must have shape ({a.shape[0] * n2}, {a.shape[0] * n2}), "
                              f"got {K.shape}")
+        if K.size:
+            check_affinity_magnitude(np.abs(K).max(), K.shape[0], "affinity")
 
         def score(X):
             x = X.ravel(order="F")
             return float(x @ K @ x)
     value = score(assignment_to_matrix(a, n2))
     if normalize_by is not None:
-        ref = score(assignment_to_matrix(check_assignment(normalize_by, "normalize_by"), n2))
+        b = check_assignment(normalize_by, "normalize_by")
+        if b.shape != a.shape:
+            raise ValueError(f"`normalize_by` must be an assignment of the same {a.shape[0]} "
+                             f"nodes as `assignment`, got shape {b.shape}")
+        ref = score(assignment_to_matrix(b, n2))
         value = value / ref if ref else float("nan")
     return float(value)

@@ -99,7 +99,7 @@ def multimatching_precision_recall(prediction, truth, *, pairs=None) -> dict[str
     pred = _prediction(prediction, truth)
     if isinstance(pred, Mapping):
         # one implementation of dict -> pairwise maps: the one behind MultiMatching.accuracy
-        maps = truth.maps_from(pred, pairs)
+        maps = truth.maps_from(pred, pairs, name="prediction")
     correct = n_true = n_pred = 0
     for start in range(0, pairs.shape[0], _CHUNK):
         chunk = pairs[start:start + _CHUNK]

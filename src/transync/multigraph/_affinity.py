@@ -1013,6 +1013,9 @@ def _dict_keys(K: dict, name: str) -> list[tuple[int, int]]:
         if not ok:
             raise TypeError(f"`{name}` as a dict must have keys (i, j) of graph indices, got "
                             f"{key!r}")
+        if key[0] == key[1]:
+            raise ValueError(f"`{name}` as a dict holds blocks between two graphs; key {key!r} "
+                             f"pairs graph {int(key[0])} with itself")
         keys.append((int(key[0]), int(key[1])))
     return keys
 

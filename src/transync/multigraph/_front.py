@@ -564,7 +564,9 @@ def _check_pairs(pairs, N: int, *, need_all: bool, need_connected: bool) -> np.n
     if pairs is None:
         return all_pairs(N)
     arr = check_array(pairs, "pairs", dtype=None)
-    if arr.ndim == 2 and arr.shape[1:] == (2,) and arr.size and arr.dtype.kind in "iuf":
+    if (arr.ndim == 2 and arr.shape[1:] == (2,) and arr.size and arr.dtype.kind in "iuf"
+            and np.all(np.isfinite(arr)) and np.all(arr == np.floor(arr))
+            and arr.min() >= 0 and arr.max() < N):      # else check_pairs says what is wrong
         same = np.flatnonzero(arr[:, 0] == arr[:, 1])
         if same.size:
             raise ValueError(f"`pairs[{same[0]}]` pairs graph {arr[same[0], 0]} with itself")

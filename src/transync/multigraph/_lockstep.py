@@ -55,6 +55,7 @@ from ..matching import (
     GAStepper,
     PFStepper,
     RRWMStepper,
+    annealing_levels,
     default_beta_max,
     sinkhorn_augmented_batch,
     sinkhorn_batch,
@@ -162,7 +163,7 @@ class _RRWMOriginal(_Batch):
         self.warm = o["warm_start"]
         self.walk = aff.drop_conflicts()
         deg = self.walk.column_sums().max((1, 2))
-        check_affinity_scale(deg)
+        check_affinity_scale(deg, "affinity")
         self.scale = np.where(deg > 0, 1.0 / np.where(deg > 0, deg, 1.0), 0.0)
         size = self.n1 * self.n2
         self.x = np.full((self.P, self.n1, self.n2), 1.0 / size)
@@ -234,7 +235,7 @@ class _RRWMPygmtools(_Batch):
         self.sk_half = o["sinkhorn_max_iter"]
         rows = aff._product(np.ones((self.P, self.n1, self.n2)))
         top = rows.max((1, 2))
-        check_affinity_scale(top)
+        check_affinity_scale(top, "affinity")
         denom = top + rows.min((1, 2), initial=0.0) * 1e-5
         self.scale = np.where(denom > 0, 1.0 / np.where(denom > 0, denom, 1.0), 0.0)
         self.v = np.full((self.P, self.n1, self.n2), 1.0 / (self.n1 * self.n2))
@@ -302,13 +303,12 @@ class _GA(_Batch):
         self.beta0, self.beta_max, self.beta_rate = o["beta0"], o["beta_max"], o["beta_rate"]
         if self.beta_max is None:
             self.beta_max = default_beta_max(aff.n1, aff.n2)
-        levels = int(np.ceil(np.log(self.beta_max / self.beta0) / np.log(self.beta_rate))) + 1
-        super().__init__(aff, levels)
+        super().__init__(aff, annealing_levels(self.beta0, self.beta_max, self.beta_rate))
         self.max_inner, self.inner_tol = o["max_inner"], o["inner_tol"]
         self.sk_max, self.sk_tol = o["sinkhorn_max_iter"], o["sinkhorn_tol"]
         self.K = _SymOps(aff)
         top = self.K(np.ones((self.P, self.n1, self.n2))).max((1, 2))   # column sums
-        check_affinity_scale(top)
+        check_affinity_scale(top, "affinity")
         self.scale = np.where(top > 0, max(self.n1, self.n2) / np.where(top > 0, top, 1.0), 1.0)
         self.beta = self.beta0
         self.M = np.ones((self.P, self.n1 + 1, self.n2 + 1))
@@ -377,7 +377,7 @@ class _PF(_Batch):
         P, n1, n2 = self.P, self.n1, self.n2
         with np.errstate(over="ignore"):
             top = K(np.ones((P, n1, n2))).max((1, 2))
-        check_affinity_scale(top)
+        check_affinity_scale(top, "affinity")
         factor = np.ones(P)
         bad = (top != 0) & ((top < 1e-100) | (top > 1e100))
         if bad.any():       # _moderate: rescale affinities whose scale would overflow

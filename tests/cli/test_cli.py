@@ -125,6 +125,8 @@ def bad_inputs(tmp_path):
     (tmp_path / "one.txt").write_text("1 1\n")
     (tmp_path / "near.txt").write_text("0 0\n1 0\n")
     (tmp_path / "far.txt").write_text("0 0\n1000 0\n")
+    (tmp_path / "deep.json").write_text('{"pairs": ' + "[" * 5000 + "]" * 5000 + "}")
+    (tmp_path / "afile").write_text("")
     return tmp_path
 
 
@@ -132,6 +134,14 @@ def bad_inputs(tmp_path):
     (["sync", "{d}/empty.json"], r"empty\.json: expected a JSON object \{\"pairs\""),
     (["sync", "{d}/broken.json"], r"broken\.json, line 3: not valid JSON"),
     (["sync", "{d}/badpair.json"], r"badpair\.json: pairs\[0\] must be \[i, j, map\]"),
+    (["sync", "{d}/deep.json"], r"deep\.json: JSON nested too deeply to read"),
+    (["sync", "{d}"], r"is a folder; expected a JSON file"),
+    # an output folder that cannot be made is refused before the work, not after
+    (["kernel", "MUTAG", "--out", "{d}/afile/sub"],
+     r"cannot create the output folder .*afile/sub: .*afile is not a folder"),
+    (["experiment", "pairwise", "--quick", "--out", "{d}/afile/sub"],
+     r"cannot create the output folder .*afile/sub: .*afile is not a folder"),
+    (["experiment", "pairwise", "--quick", "--out", ""], r"output folder: got an empty path"),
     (["demo", "--experiments", "foo", "--out", "{d}/demo"],
      r"unknown experiment 'foo'; choose from cmu, homography, kernels, multigraph, pairwise, subgraph, sync"),
     (["experiment", "nope"], r"unknown experiment 'nope'; choose from"),
@@ -228,6 +238,19 @@ def test_warnings_print_one_line_each(bad_inputs, capsys, monkeypatch):
     assert main(["match", p, p]) == 0
     err = capsys.readouterr().err
     assert err == "transync: warning: match_graphs: stopped at its budget\n"
+
+
+def test_text_inputs_may_start_with_a_byte_order_mark(tmp_path, capsys):
+    """Point files and sync JSON saved by editors that write a UTF-8 BOM read as without."""
+    bom = b"\xef\xbb\xbf"
+    pts = np.random.default_rng(0).random((6, 2))
+    for name in ("a.txt", "b.txt"):
+        (tmp_path / name).write_bytes(bom + "".join(f"{x} {y}\n" for x, y in pts).encode())
+    (tmp_path / "p.json").write_bytes(bom + b'{"pairs": [[0, 1, [1, 0]], [1, 2, [0, 1]]]}')
+    assert main(["match", str(tmp_path / "a.txt"), str(tmp_path / "b.txt")]) == 0
+    assert json.loads(capsys.readouterr().out)["assignment"] == list(range(6))
+    assert main(["sync", str(tmp_path / "p.json")]) == 0
+    assert json.loads(capsys.readouterr().out)["labels"]
 
 
 def test_sync_json_with_integers_beyond_int64_is_a_named_error(tmp_path, capsys):
@@ -524,3 +547,22 @@ def test_library_errors_name_the_commands_options(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and want in err, err
         assert "gaussian_edge_affinity" not in err and "n_universe" not in err
+
+
+def test_sync_json_takes_the_sizes_the_library_asks_for(tmp_path, capsys):
+    """An object in no pair: the error points to the JSON's "sizes" (not to a library
+    argument the command does not have), and with "sizes" given it gets its own slots."""
+    f = tmp_path / "p.json"
+    f.write_text('{"pairs": [[0, 2, [1, 0]]]}')
+    assert main(["sync", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert 'give "sizes": [n_0, n_1, ...] in the JSON' in err and "sizes=" not in err
+    f.write_text('{"pairs": [[0, 2, [1, 0]]], "sizes": [2, 3, 2]}')
+    assert main(["sync", str(f)]) == 0
+    labels = json.loads(capsys.readouterr().out)["labels"]
+    assert [len(lab) for lab in labels] == [2, 3, 2]
+    assert labels[0][0] == labels[2][1] and labels[0][1] == labels[2][0]
+    assert not set(labels[1]) & (set(labels[0]) | set(labels[2]))
+    f.write_text('{"pairs": [[0, 2, [1, 0]]], "sizes": [2, "x"]}')
+    assert main(["sync", str(f)]) == 2
+    assert '"sizes" must be a list of node counts' in capsys.readouterr().err

@@ -289,3 +289,17 @@ def test_real_house_sequence():
         accuracies.append(np.mean(result.assignment == prob.truth(0, 1)))
     # measured: 1.0 on 20 random starts with a gap of 10 (frames shuffled)
     assert min(accuracies) >= 0.95, accuracies
+
+
+def test_frame_number_beyond_int64_and_a_byte_order_mark(tmp_path):
+    """A 20-digit frame number is refused with the file named (before: a raw OverflowError);
+    a label file with a UTF-8 byte-order mark reads as without."""
+    _sequence(tmp_path, numbers=[1, 99999999999999999999])
+    _err(ValueError, tmp_path,
+         f"{tmp_path / 'label' / 'hotel99999999999999999999'}: frame number "
+         "99999999999999999999 out of range (at most 4611686018427387903)")
+    other = _sequence(tmp_path / "bom", n_frames=3)
+    plain = load_cmu_sequence(other)
+    f = other / "label" / "hotel2"
+    f.write_bytes(b"\xef\xbb\xbf" + f.read_bytes())
+    np.testing.assert_array_equal(load_cmu_sequence(other).points, plain.points)

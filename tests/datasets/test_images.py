@@ -52,6 +52,12 @@ def test_sequence_loaders_on_fixtures(tmp_path, kind):
     back = cv2.warpPerspective(seq.images[2], seq.homographies[2], (80, 60))
     inner = np.s_[15:45, 20:60]
     assert np.median(np.abs(back[inner].astype(float) - seq.images[0][inner])) < 20
+    # an image numbered 0 is not silently taken as the reference (before: "H1to1p not found")
+    stray = tmp_path / ("img0.png" if kind == "oxford" else "0.png")
+    cv2.imwrite(str(stray), np.zeros((8, 8), np.uint8))
+    with pytest.raises(ValueError, match=f"{stray.name}: image index 0, but the format numbers "
+                                         "images from 1"):
+        loader(tmp_path)
 
 
 

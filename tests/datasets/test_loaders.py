@@ -267,8 +267,10 @@ def test_adelaidermf_fixture_loads(tmp_path):
     ({"img2": None}, "`: field 'img2' missing"),
     ({"label": np.zeros((1, 2), np.uint8)}, "`, field 'label': expected 5 labels (one per column "
                                             "of 'data'), got shape (1, 2)"),
-    ({"label": -np.ones((1, 5))}, "`, field 'label': expected labels >= 0 (0 = outlier), got "
-                                  "minimum -1"),
+    ({"label": -np.ones((1, 5))}, "`, field 'label': expected labels from 0 (outlier) to "
+                                  "4611686018427387903, got -1"),
+    ({"label": np.full((1, 5), 1e19)}, "`, field 'label': expected labels from 0 (outlier) to "
+                                       "4611686018427387903, got 1e+19"),
     ({"label": np.full((1, 5), 0.5)}, "`, field 'label': expected integer labels"),
     ({"data": np.ones((3, 5))}, "`, field 'data': expected a 6xN array (x1, y1, 1, x2, y2, 1), "
                                 "got shape (3, 5)"),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -118,8 +119,18 @@ def check_output_folder(path) -> Path:
     """``path`` as a Path, refused when it exists and is not a folder: call it before a long
     computation, so that its result is not lost to an output path that cannot take it."""
     out = Path(path)
+    if str(path) == "":
+        raise CLIError("output folder: got an empty path")
     if out.exists() and not out.is_dir():
         raise CLIError(f"output folder {out} exists and is not a folder")
+    # the nearest existing ancestor must be a folder this process may create entries in
+    parent = out
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if parent.exists() and not parent.is_dir():
+        raise CLIError(f"cannot create the output folder {out}: {parent} is not a folder")
+    if parent.exists() and parent != out and not os.access(parent, os.W_OK | os.X_OK):
+        raise CLIError(f"cannot create the output folder {out}: {parent} is not writable")
     return out
 
 

@@ -6,9 +6,8 @@ import contextlib
 import importlib
 import inspect
 import time
-from pathlib import Path
 
-from ._common import CLIError, positive_int, seed_int
+from ._common import CLIError, check_output_folder, positive_int, seed_int
 
 __all__ = ["add_parsers"]
 
@@ -56,7 +55,8 @@ def _cmd_experiment(args) -> int:
             print(f"{name:14s} {doc[0] if doc else ''}")
         return 0
     _check_names([args.name], "experiment")
-    out = Path(args.out or f"results/{args.name}{'-quick' if args.quick else ''}")
+    out = check_output_folder(args.out if args.out is not None
+                              else f"results/{args.name}{'-quick' if args.quick else ''}")
     sets = [s for s in args.sets.split(",") if s.strip()] if args.sets else None
     exp = _build(args.name, quick=args.quick, data=args.data, sets=sets, out=out)
     args.interrupt_hint = (f"finished trials are saved in {out / 'results.sqlite'}; run the "
@@ -78,7 +78,7 @@ def _cmd_demo(args) -> int:
     from ..experiments import run_experiment
 
     _check_names(args.experiments, "experiment")
-    out = Path(args.out)
+    out = check_output_folder(args.out)
     args.interrupt_hint = (f"finished trials are saved under {out}; run the same command again "
                            "to resume")
     t0 = time.perf_counter()

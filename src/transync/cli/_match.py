@@ -72,7 +72,7 @@ def _read_text_points(p: Path):
     try:
         if b"\0" in raw:
             raise UnicodeDecodeError("ascii", raw, 0, 1, "NUL byte")
-        text = raw.decode("utf-8")
+        text = raw.decode("utf-8-sig")                  # a byte-order mark is allowed
     except UnicodeDecodeError:
         raise CLIError(f"{p}: not a text file of points (binary content); give a .npy file or "
                        "text/CSV with one point a row") from None
@@ -112,8 +112,13 @@ def _cmd_match(args) -> int:
     scale = float(max(np.ptp(P1, axis=0).max(), np.ptp(P2, axis=0).max()))
     if not scale > 0:
         scale = 1.0                      # every point identical: nothing to rescale
-    g1 = Graph.from_points(P1 / scale, edges=args.edges)
-    g2 = Graph.from_points(P2 / scale, edges=args.edges)
+    graphs = []
+    for path, P in ((args.points1, P1), (args.points2, P2)):
+        try:
+            graphs.append(Graph.from_points(P / scale, edges=args.edges))
+        except ValueError as exc:
+            raise CLIError(f"{path}: {cli_message(exc, ('edges',))}") from exc
+    g1, g2 = graphs
     if min(len(P1), len(P2)) < 2:
         raise CLIError(f"need at least 2 points in each set to compare edges, got {len(P1)} and "
                        f"{len(P2)}")
@@ -169,7 +174,7 @@ def _cmd_collection(args) -> int:
             graphs.append(Graph.from_points(P / scale, edges=args.edges,
                                             k=min(5, max(len(P) - 1, 1))))
         except ValueError as exc:
-            raise CLIError(f"{path}: {exc}") from exc
+            raise CLIError(f"{path}: {cli_message(exc, ('edges',))}") from exc
     if args.affinity == "length+angle":
         if sets[0].shape[1] != 2:
             raise CLIError(f"--affinity length+angle needs 2-d points, got {sets[0].shape[1]}-d")
@@ -210,14 +215,19 @@ def _read_pairs(path: str) -> dict:
     import numpy as np
 
     p = Path(path)
+    if p.is_dir():
+        raise CLIError(f"{path} is a folder; expected a JSON file {{\"pairs\": ...}}")
     if not p.is_file():
         raise CLIError(f"no such file: {path}")
     try:
-        data = json.loads(p.read_text())
+        data = json.loads(p.read_text(encoding="utf-8-sig"))    # a byte-order mark is allowed
     except UnicodeDecodeError:
         raise CLIError(f"{path}: not a JSON text file") from None
     except json.JSONDecodeError as exc:
         raise CLIError(f"{path}, line {exc.lineno}: not valid JSON ({exc.msg})") from None
+    except RecursionError:
+        raise CLIError(f"{path}: JSON nested too deeply to read (expected "
+                       f"{{\"pairs\": [[i, j, assignment], ...]}})") from None
     form = '{"pairs": [[i, j, assignment or 0/1 matrix], ...]}'
     if not isinstance(data, dict) or "pairs" not in data:
         got = f"an object with keys {sorted(data)}" if isinstance(data, dict) else \
@@ -246,7 +256,12 @@ def _read_pairs(path: str) -> dict:
         if (i, j) in pairs:
             raise CLIError(f"{path}: pairs[{k}] repeats the pair ({i}, {j})")
         pairs[(i, j)] = np.asarray(a, dtype=np.int64)
-    return pairs
+    sizes = data.get("sizes")
+    if sizes is not None and not (isinstance(sizes, list) and all(
+            isinstance(n, int) and not isinstance(n, bool) and 0 <= n < 2**62 for n in sizes)):
+        raise CLIError(f"{path}: \"sizes\" must be a list of node counts (integers >= 0), one "
+                       f"per object, got {json.dumps(sizes)[:80]}")
+    return pairs, sizes
 
 
 def _cmd_sync(args) -> int:
@@ -254,12 +269,15 @@ def _cmd_sync(args) -> int:
 
     from ..synchronization import synchronize_permutations
 
-    pairs = _read_pairs(args.pairwise)
+    pairs, sizes = _read_pairs(args.pairwise)
     try:
         res = synchronize_permutations(pairs, method=args.method, n_universe=args.n_universe,
-                                       rng=args.seed)
+                                       sizes=sizes, rng=args.seed)
     except (ValueError, TypeError) as exc:
-        raise CLIError(f"{args.pairwise}: {cli_message(exc, ('n_universe', 'method'))}") from exc
+        msg = cli_message(exc, ("n_universe", "method")).replace(
+            "pass `sizes=`", 'give "sizes": [n_0, n_1, ...] in the JSON').replace(
+            "`sizes`", '"sizes"')
+        raise CLIError(f"{args.pairwise}: {msg}") from exc
     payload = {"method": args.method, "labels": [np.asarray(lab).tolist() for lab in res.labels],
                "objective": float(res.objective), "converged": bool(res.converged),
                "n_iter": int(res.n_iter)}
@@ -335,7 +353,10 @@ def add_parsers(sub) -> None:
     p = sub.add_parser("sync", help="synchronize pairwise assignments given as JSON "
                                     "{\"pairs\": [[i, j, assignment], ...]}")
     p.add_argument("pairwise", help="JSON file {\"pairs\": [[i, j, assignment], ...]} "
-                                    "(assignment[u] = v, -1 unmatched) or 0/1 matrices")
+                                    "(assignment[u] = v, -1 unmatched) or 0/1 matrices; "
+                                    "optionally \"sizes\": [n_0, n_1, ...], the node count "
+                                    "of every object (needed when an object's nodes are never "
+                                    "matched or it is in no pair)")
     p.add_argument("--method", default="spectral", choices=list(SYNC_METHODS),
                    help="permutation synchronization method (transync.synchronize_permutations)")
     p.add_argument("--n-universe", type=positive_int, default=None,

@@ -36,7 +36,7 @@ import numpy as np
 from .._validation import as_generator, check_bool, check_choice, check_int
 from ..graphs import Graph
 from ._graphs import GraphCollectionProblem
-from ._home import data_home
+from ._home import data_home, no_folder
 
 __all__ = ["LANDMARK_AFFINITY", "LandmarkSequence", "load_cmu_sequence"]
 
@@ -262,7 +262,7 @@ class LandmarkSequence:
 
 def _read_label_file(path: Path) -> np.ndarray:
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")          # a byte-order mark is allowed
     except UnicodeDecodeError:
         raise ValueError(f"{path}: not a text file (expected rows `x y`)") from None
     rows = []
@@ -297,6 +297,9 @@ def _label_files(folder: Path) -> tuple[str, dict[int, Path]]:
             continue
         by_number = found.setdefault(m["name"], {})
         number = int(m["number"])
+        if number >= 2**62:                                   # frames are stored as int64
+            raise ValueError(f"{p}: frame number {m['number']:.30} out of range (at most "
+                             f"{2**62 - 1})")
         if number in by_number:
             raise ValueError(f"{p}: duplicate frame number {number} (also {by_number[number]})")
         by_number[number] = p
@@ -357,7 +360,7 @@ def load_cmu_sequence(path=None) -> LandmarkSequence:
     else:
         folder = Path(path).expanduser()
         if not folder.is_dir():
-            raise FileNotFoundError(f"{folder}: no such folder (expected a folder in the CMU "
+            raise FileNotFoundError(f"{folder}: {no_folder(folder)} (expected a folder in the CMU "
                                     "layout, holding `label/`)")
     labels = folder / "label"
     if not labels.is_dir():

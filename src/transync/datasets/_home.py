@@ -20,6 +20,12 @@ __all__ = ["data_home"]
 _PACKAGE_ROOT = Path(__file__).resolve().parents[3]
 
 
+def no_folder(path: Path) -> str:
+    """Why ``path`` is not a folder, for a message: ``"no such folder"`` or ``"a file, not a
+    folder"``."""
+    return "a file, not a folder" if path.exists() else "no such folder"
+
+
 def _checkout_root() -> Path | None:
     """The repository root when this package runs from a source checkout (``src/`` layout)."""
     root = _PACKAGE_ROOT

@@ -224,6 +224,10 @@ def _image_files(folder: Path, pattern: str) -> dict:
 
 
 def _sequence(folder: Path, files: dict, h_name) -> HomographySequence:
+    if min(files) < 1:               # image 1 is the reference every ground truth starts from
+        raise ValueError(f"{files[min(files)]}: image index {min(files)}, but the format "
+                         f"numbers images from 1 (image 1 is the reference of the ground "
+                         f"truth {h_name(2)}, ...); rename or remove it")
     paths = list(files.values())
     images = [_read_image(p) for p in paths]
     Hs = [np.eye(3)]
@@ -521,10 +525,11 @@ def load_adelaidermf(name, folder=None) -> AdelaideRMFPair:
     if labels.dtype.kind == "f" and not np.all(np.isfinite(labels) & (labels == np.round(labels))):
         raise ValueError(f"`{path}`, field 'label': expected integer labels, got non-integer "
                          "values")
+    if labels.size and (labels.min() < 0 or labels.max() >= 2**62):
+        bad = labels.min() if labels.min() < 0 else labels.max()
+        raise ValueError(f"`{path}`, field 'label': expected labels from 0 (outlier) to "
+                         f"{2**62 - 1}, got {bad:.6g}")
     labels = labels.astype(np.int64)
-    if labels.size and labels.min() < 0:
-        raise ValueError(f"`{path}`, field 'label': expected labels >= 0 (0 = outlier), "
-                         f"got minimum {int(labels.min())}")
     img1, img2 = _mat_image(m, names, "img1", path), _mat_image(m, names, "img2", path)
     return AdelaideRMFPair(name=name, x1=(data[:2] / data[2]).T, x2=(data[3:5] / data[5]).T,
                            labels=labels, img1=img1, img2=img2)

@@ -39,6 +39,7 @@ import numpy as np
 
 from ..graphs import Graph
 from ._home import data_home as _data_home
+from ._home import no_folder
 
 __all__ = ["TUDataset", "list_tu", "load_tu"]
 
@@ -339,12 +340,12 @@ def _tu_root(data_home, *, required: bool) -> Path | None:
                         f"{type(data_home).__name__}")
     home = Path(data_home).expanduser()
     if not home.is_dir():
-        raise FileNotFoundError(f"{home}: no such folder (`data_home` must be the folder "
+        raise FileNotFoundError(f"{home}: {no_folder(home)} (`data_home` must be the folder "
                                 "holding `tu/`)")
     root = home / "tu"
     if not root.is_dir():
         if required:
-            raise FileNotFoundError(f"{root}: no such folder (expected TU data sets in "
+            raise FileNotFoundError(f"{root}: {no_folder(root)} (expected TU data sets in "
                                     "`<data_home>/tu/<NAME>/`)")
         return None
     return root
@@ -408,7 +409,7 @@ def _resolve(path_or_name, data_home) -> Path:
     if is_path:
         folder = Path(spec).expanduser()
         if not folder.is_dir():
-            raise FileNotFoundError(f"{folder}: no such folder ({_layout('DS')})")
+            raise FileNotFoundError(f"{folder}: {no_folder(folder)} ({_layout('DS')})")
         return folder
     root = _tu_root(data_home, required=True)
     names = _names(root)

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ._cmu import LandmarkSequence, _png_size
+from ._home import no_folder
 from ._matfile import MatFieldError, MatFileError, read_mat
 
 __all__ = ["load_willow_class"]
@@ -96,8 +97,8 @@ def load_willow_class(folder) -> LandmarkSequence:
     """
     folder = Path(folder).expanduser()
     if not folder.is_dir():
-        raise FileNotFoundError(f"{folder}: no such folder (expected a Willow-ObjectClass class "
-                                "folder of `<name>.png` + `<name>.mat` files)")
+        raise FileNotFoundError(f"{folder}: {no_folder(folder)} (expected a Willow-ObjectClass "
+                                "class folder of `<name>.png` + `<name>.mat` files)")
     mats = sorted(p for p in folder.iterdir()
                   if p.suffix.lower() == ".mat" and p.is_file() and not p.name.startswith("."))
     if not mats:

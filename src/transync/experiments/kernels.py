@@ -225,7 +225,8 @@ def resolve_sets(data=None, sets=None) -> dict[str, Path]:
     else:
         root = Path(data).expanduser()
         if not root.is_dir():
-            raise FileNotFoundError(f"the data folder {root} does not exist (expected a TU "
+            what = "is a file, not a folder" if root.exists() else "does not exist"
+            raise FileNotFoundError(f"the data folder {root} {what} (expected a TU "
                                     "folder or a folder of TU folders)")
         prefix = _tu_prefix(root)
         if prefix is not None:

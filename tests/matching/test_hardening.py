@@ -439,3 +439,7 @@ def test_solver_messages_name_the_users_argument():
 
     with pytest.raises(ValueError, match="`init` must have 2 dimensions"):
         ipfp(K, n1=4, n2=4, init=[0, 1, 2, 3])
+    g = Graph.from_points(np.random.default_rng(0).random((2, 2)), edges="full")
+    for method in ("rrwm", "sm", "ga", "ipfp", "pf"):      # given as `affinity`, not `K`
+        with pytest.raises(ValueError, match="`affinity` is too small to match on"):
+            match_graphs(g, g, method=method, affinity=np.full((4, 4), 1e-320))

@@ -19,7 +19,7 @@ import difflib
 import inspect
 
 from ..graphs import Graph
-from .._validation import check_choice, check_positive
+from .._validation import check_affinity_scale, check_choice, check_positive
 from ..exceptions import DegenerateInputError
 from ._affinity import (
     DEFAULT_SIGMA2,
@@ -153,6 +153,8 @@ def match_graphs(g1: Graph, g2: Graph, *, method: str = "rrwm", affinity=None,
         aff = as_affinity(affinity, n1=n1, n2=n2, name="affinity")
         if method in _LINEAR and node_affinity is None:
             return solver(aff, **options)
+        if method not in _LINEAR:        # named as given here (the solvers call it `K`)
+            check_affinity_scale(aff.max_column_sum(), "affinity")
     else:
         aff = None
     if method in _LINEAR:

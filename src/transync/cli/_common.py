@@ -116,7 +116,8 @@ def emit(payload: dict, out: str | None) -> int:
 
 
 def check_output_folder(path) -> Path:
-    """``path`` as a Path, refused when it exists and is not a folder: call it before a long
+    """``path`` as a Path, refused when it is empty, exists and is not a folder, or cannot be
+    created (its nearest existing ancestor not a writable folder): call it before a long
     computation, so that its result is not lost to an output path that cannot take it."""
     out = Path(path)
     if str(path) == "":

@@ -211,7 +211,9 @@ def _cmd_collection(args) -> int:
     return emit(payload, args.out)
 
 
-def _read_pairs(path: str) -> dict:
+def _read_pairs(path: str) -> tuple[dict, list | None]:
+    """The pairwise maps ``{(i, j): assignment}`` of a sync JSON file and its optional
+    ``"sizes"``."""
     import numpy as np
 
     p = Path(path)

@@ -19,7 +19,8 @@ import difflib
 import inspect
 
 from ..graphs import Graph
-from .._validation import check_affinity_scale, check_choice, check_positive
+from .._validation import (check_affinity_magnitude, check_affinity_scale, check_array,
+                           check_choice, check_positive)
 from ..exceptions import DegenerateInputError
 from ._affinity import (
     DEFAULT_SIGMA2,
@@ -171,8 +172,6 @@ def match_graphs(g1: Graph, g2: Graph, *, method: str = "rrwm", affinity=None,
                     f"(bandwidth 1.0), which underflows on these node features: pass "
                     f"`node_affinity=gaussian_node_affinity(g1, g2, sigma2=...)` with a larger "
                     f"bandwidth ({exc})") from None
-        from .._validation import check_affinity_magnitude, check_array
-
         S = check_array(node_affinity, "node_affinity", ndim=2)
         if S.shape != (n1, n2):
             raise ValueError(f"`node_affinity` must have shape ({n1}, {n2}), got {S.shape}")

@@ -488,7 +488,26 @@ def check_positive(value, name: str, *, allow_zero: bool = False) -> float:
     if not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
         rel = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"`{name}` must be finite and {rel}, got {value!r}")
-    return value
+    return abs(value)       # -0.0 -> 0.0 (NumPy samplers refuse a scale of -0.0)
+
+
+def check_image_size(size, name: str = "image_size", *, minimum: int = 1,
+                     maximum: int = 2**16) -> tuple[int, int]:
+    """``(width, height)`` in pixels: two integers (or integral floats) in [minimum, maximum]."""
+    if isinstance(size, (str, bytes)) or not isinstance(size, (Sequence, np.ndarray)):
+        raise TypeError(f"`{name}` must be (width, height), got {type(size).__name__} {size!r}")
+    if len(size) != 2:
+        raise ValueError(f"`{name}` must be (width, height), got {len(size)} value(s): {size!r}")
+    out = []
+    for v in size:
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
+            raise TypeError(f"`{name}` must be (width, height) in pixels, got "
+                            f"{type(v).__name__} {v!r} in {size!r}")
+        if not (np.isfinite(v) and float(v).is_integer() and minimum <= v <= maximum):
+            raise ValueError(f"`{name}` must be (width, height) in whole pixels, each in "
+                             f"[{minimum}, {maximum}], got {size!r}")
+        out.append(int(v))
+    return out[0], out[1]
 
 
 def check_probability(value, name: str) -> float:

@@ -102,3 +102,11 @@ def test_collection_ground_truth_is_a_multimatching():
 def test_generator_parameters_are_validated(fn, kwargs, exc, match):
     with pytest.raises(exc, match=match):
         fn(**kwargs)
+
+
+def test_negative_zero_widths_are_zero():
+    """``deformation=-0.0`` passed the >= 0 check and then NumPy refused a scale of -0.0."""
+    a = make_point_matching_problem(n_inliers=8, deformation=-0.0, rng=1)
+    b = make_point_matching_problem(n_inliers=8, deformation=0.0, rng=1)
+    np.testing.assert_array_equal(a.g1.points, b.g1.points)
+    np.testing.assert_array_equal(a.g2.points, b.g2.points)

@@ -40,9 +40,58 @@ def test_scene_is_repeatable_and_homographies_normalized():
     assert np.all(np.isfinite(c)) and np.abs(c).max() < 10 * 96
 
 
-@pytest.mark.parametrize("kw, match", [({"image_size": (20, 20)}, r"at least \(32, 32\)"),
+@pytest.mark.parametrize("kw, match", [({"image_size": (20, 20)}, r"each in \[32, 16384\]"),
+                                       ({"image_size": (np.inf, 64)}, r"each in \[32, 16384\]"),
+                                       ({"image_size": (64.5, 64)}, "whole pixels"),
                                        ({"difficulty": "extreme"}, "`difficulty` must be one"),
                                        ({"clutter": 2.0}, r"`clutter` must lie in \[0, 1\]")])
 def test_scene_options_checked(kw, match):
     with pytest.raises(ValueError, match=match):
         make_planar_scene(2, **kw)
+
+
+@pytest.mark.parametrize("generator", ["make_noisy_linear_maps", "make_noisy_homographies"])
+def test_noisy_map_generators_refuse_sizes_they_cannot_build(generator):
+    """10**20 objects (or dimensions) looped for ever; now refused before any work."""
+    from transync import datasets
+
+    make = getattr(datasets, generator)
+    with pytest.raises(ValueError, match=r"`n_(objects|views)`=10+.*would need 9e\+40"):
+        make(10**20)
+    if generator == "make_noisy_linear_maps":
+        with pytest.raises(ValueError, match=r"`dim`=10+ would need"):
+            make(3, dim=10**20)
+
+
+@pytest.mark.parametrize("image_size, error, match", [
+    ((1e200, 1e200), ValueError, r"\[2, 1048576\]"),       # was: NaN homographies
+    ((1, 1), ValueError, r"\[2, 1048576\]"),               # was: LinAlgError (corners coincide)
+    ((0, 5), ValueError, "`image_size`"),                   # was named `size`
+    ((640.5, 480), ValueError, "whole pixels"),
+    (640, TypeError, "`image_size` must be \\(width, height\\), got int"),
+    ((np.nan, 3), ValueError, "`image_size`"),
+    ((640, 480, 3), ValueError, "3 value"),
+    ((True, 480), TypeError, "`image_size`"),
+])
+def test_make_noisy_homographies_checks_image_size(image_size, error, match):
+    from transync.datasets import make_noisy_homographies
+
+    with pytest.raises(error, match=match):
+        make_noisy_homographies(4, image_size=image_size, rng=0)
+
+
+@pytest.mark.parametrize("max_angle", [-1.0, np.nan, None, "10"])
+def test_make_noisy_homographies_checks_max_angle(max_angle):
+    from transync.datasets import make_noisy_homographies
+
+    with pytest.raises((ValueError, TypeError), match="`max_angle`"):
+        make_noisy_homographies(4, max_angle=max_angle, rng=0)
+
+
+def test_make_noisy_homographies_extreme_valid_sizes_stay_finite():
+    from transync.datasets import make_noisy_homographies
+
+    for size in ((2, 2), (2**20, 2**20), (640.0, 480.0)):
+        p = make_noisy_homographies(4, image_size=size, rng=0)
+        assert np.isfinite(p.observed[p.mask]).all() and np.isfinite(p.truth).all()
+        assert p.image_size == (int(size[0]), int(size[1]))

@@ -137,6 +137,36 @@ def test_segment_plane_inputs_checked(small):
         segment_plane(small.images, H, return_evidence=True)
 
 
+def test_segment_plane_intensity_scale_is_to_grays(small):
+    """Float images x 1e30 overflowed float32 in the local variances (all-False masks, or NaN
+    into the classifier); [0, 1] floats met a regularizer made for 0..255. The rule is
+    to_gray's, so every scale gives the uint8 answer."""
+    ref = segment_plane(small.images, small.homographies, rng=0)
+    assert np.mean([m.mean() for m in ref]) > 0.9
+    for scale in (1e30, 1 / 255):
+        got = segment_plane([im.astype(np.float32) * np.float32(scale) for im in small.images],
+                            small.homographies, rng=0)
+        assert all(np.array_equal(a, b) for a, b in zip(ref, got))
+    ev = segment_plane_evidence([im.astype(np.float32) * 1e36 for im in small.images],
+                                small.homographies, rng=0)
+    assert np.isfinite(ev.median).all() and np.isfinite(ev.probability).all()
+
+
+def test_segment_plane_degenerate_inputs():
+    blank = [np.zeros((64, 64), np.uint8)] * 3                       # was LinAlgError
+    masks = segment_plane(blank, np.stack([np.eye(3)] * 3), rng=0)
+    assert [m.shape for m in masks] == [(64, 64)] * 3 and all(m.dtype == bool for m in masks)
+    tex = (np.random.default_rng(0).random((64, 64)) * 255).astype(np.uint8)
+    with pytest.raises(ValueError, match="`homographies` must hold invertible"):
+        segment_plane([tex] * 3, np.zeros((3, 3, 3)), rng=0)          # was accepted
+    with pytest.raises(ValueError, match=r"`smooth` must lie in \[0, 100\]"):
+        segment_plane([tex] * 3, np.stack([np.eye(3)] * 3), smooth=1e10)   # was cv2.error
+    with pytest.raises(TypeError, match="`images` must be a list of images, got NoneType"):
+        segment_plane(None, np.stack([np.eye(3)] * 3))
+    with pytest.raises(TypeError, match=r"`images\[1\]` must be an image array"):
+        segment_plane([tex, None, tex], np.stack([np.eye(3)] * 3))
+
+
 def test_segment_plane_evidence_is_a_result_not_a_flag(small):
     ev = segment_plane_evidence(small.images, small.homographies, rng=0)
     assert isinstance(ev, PlaneSegmentation)
@@ -155,6 +185,69 @@ def test_refine_ecc_inputs_checked(small):
         refine_homography_ecc(im, im, np.eye(2))
     with pytest.raises(ValueError, match=r"`H_init` must be finite"):
         refine_homography_ecc(im, im, np.full((3, 3), np.nan))
+    # gauss_size went to OpenCV unchecked: junk and even sizes came back as ok=False
+    for g, exc, match in ((2, ValueError, "must be odd"), (-1, ValueError, "must be >= 1"),
+                          (None, TypeError, "`gauss_size` must be an int"),
+                          ("a", TypeError, "`gauss_size` must be an int")):
+        with pytest.raises(exc, match=match):
+            refine_homography_ecc(im, im, np.eye(3), gauss_size=g)
+    assert refine_homography_ecc(im, im, np.eye(3), gauss_size=1, levels=1)[1]
+
+
+def test_warp_interpolation_must_be_an_opencv_flag():
+    from transync.homography import warp_to_reference
+
+    im = np.zeros((32, 32), np.uint8)
+    with pytest.raises(TypeError, match="`interpolation` must be an OpenCV INTER_"):
+        warp_to_reference(im, np.eye(3), (32, 32), interpolation=1.0)     # was a cv2.error
+    with pytest.raises(ValueError, match="`interpolation` must be one of"):
+        warp_to_reference(im, np.eye(3), (32, 32), interpolation=7)
+    assert warp_to_reference(im, np.eye(3), (32, 32), interpolation=np.int64(0)).shape == (32, 32)
+
+
+def test_pairwise_features_are_checked(small):
+    """Hand-made features were only length-checked: float64 descriptors hit FLANN's cv2.error,
+    fewer points than descriptors an IndexError."""
+    from transync.homography import sift_features
+
+    ims = small.images[:2]
+    feats = [sift_features(im, n_features=300) for im in ims]
+    as64 = [(p, d.astype(np.float64)) for p, d in feats]
+    a = estimate_pairwise_homographies(ims, features=as64, rng=0)
+    b = estimate_pairwise_homographies(ims, features=feats, rng=0)
+    np.testing.assert_array_equal(a.H, b.H)                  # matched as float32, the same
+    (p0, d0), f1 = feats
+    big = d0.astype(np.float64) * 1e300
+    bad = [
+        ([(p0[:5], d0), f1], ValueError,
+         r"`features\[0\]\[1\]` \(descriptors\) must have shape \(5, k\)"),
+        ([(p0[:, :1], d0), f1], ValueError,
+         r"`features\[0\]\[0\]` \(points\) must have shape \(m, 2\)"),
+        ([(p0, d0[:, :64]), f1], ValueError, "has width 128, the images before it 64"),
+        ([(p0, big), f1], ValueError, "must fit float32"),
+        ([(p0 * np.nan, d0), f1], ValueError, r"features\[0\]\[0\] \(points\)` must be finite"),
+        ([p0, f1], TypeError, r"`features\[0\]` must be a \(points, descriptors\) pair"),
+        ("feats", TypeError, "`features` must be a list"),
+        ([f1], ValueError, "one \\(pts, desc\\) pair per image"),
+    ]
+    for features, exc, match in bad:
+        with pytest.raises(exc, match=match):
+            estimate_pairwise_homographies(ims, features=features, rng=0)
+    with pytest.raises(TypeError, match="`refine` must be a bool"):
+        estimate_pairwise_homographies(ims, features=feats, refine="no", rng=0)
+
+
+def test_iteration_counts_beyond_opencv_are_refused(small):
+    """max_iter = 2**31 overflowed OpenCV's int and came back as "degenerate" / a failed pair."""
+    from transync.homography import sift_features
+
+    x = np.random.default_rng(0).random((60, 2)) * 100
+    with pytest.raises(ValueError, match=r"`max_iter` must be <= 2147483647"):
+        extract_planes(x, x + 1, max_iter=2**31, rng=0)
+    with pytest.raises(ValueError, match=r"`max_iter` must be <= 2147483647"):
+        estimate_pairwise_homographies(small.images[:2], n_features=300, max_iter=2**31, rng=0)
+    with pytest.raises(ValueError, match=r"`n_features` must be <= 1000000"):
+        sift_features(small.images[0], n_features=2**31)
 
 
 # ----------------------------------------------------------------------------- multiplane
@@ -282,3 +375,26 @@ def test_progress_is_logged_not_printed(small, caplog, capsys):
     np.testing.assert_array_equal(back.homographies, res.homographies)
     with pytest.raises(dataclasses.FrozenInstanceError):
         res.n_iter = 5
+
+
+def test_evaluate_alignment_pairwise_keys_whatever_the_estimates():
+    """pairwise=True dropped its keys when one view had no estimate (the result's keys
+    depended on the data); a failed view now counts 1000 px, as in the per-view errors, and
+    views that do not overlap give the documented NaN."""
+    from transync.geometry import translation
+    from transync.homography import evaluate_alignment
+
+    rng = np.random.default_rng(0)
+    ims = [(rng.random((40, 50)) * 255).astype(np.uint8) for _ in range(3)]
+    masks = [np.ones((40, 50), bool)] * 3
+    H = np.stack([translation(0, 0), translation(2, 1), translation(-1, 3)])
+    H_est = H.copy()
+    H_est[2] = np.nan
+    r = evaluate_alignment(ims, H_est, H, masks_true=masks, pairwise=True)
+    assert r["pairwise_max_error"] == 1000.0 and 0 < r["pairwise_mean_error"] < 1000.0
+    assert r["pairwise_median_error"] >= 0
+    apart = np.stack([translation(0, 0), translation(1000, 0)])
+    r = evaluate_alignment(ims[:2], apart, apart, masks_true=masks[:2], pairwise=True)
+    assert r["mean_error"] == 0.0
+    assert np.isnan([r["pairwise_mean_error"], r["pairwise_max_error"],
+                     r["pairwise_median_error"]]).all()

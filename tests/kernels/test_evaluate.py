@@ -168,6 +168,26 @@ def test_repeated_cv_validation():
         repeated_cv(K, np.repeat([0, 1], 10), n_splits=2.5)
 
 
+def test_repeated_cv_refuses_kernels_libsvm_cannot_fit():
+    """An asymmetric kernel made libsvm cycle forever, a huge one made it crawl (scaling K is
+    scaling C) or fail with sklearn's "dual coefficients not finite": both refused by name,
+    before any fit; round-off asymmetry passes."""
+    rng = np.random.default_rng(0)
+    X = rng.random((20, 5))
+    y = [0, 1] * 10
+    asym = X @ X.T + np.triu(np.ones((20, 20)))
+    with pytest.raises(ValueError, match=r"`K` must be symmetric.*K\[\d+, \d+\] = "):
+        repeated_cv(asym, y, n_splits=3, n_repeats=1, C_grid=[1.0])
+    with pytest.raises(ValueError, match=r"`K\[1\]` must be symmetric"):
+        repeated_cv(np.stack([X @ X.T, asym]), y, n_splits=3, n_repeats=1, C_grid=[1.0])
+    for scale, C_grid in ((1e300, None), (1e10, [1e3]), (1e15, [1.0])):
+        with pytest.raises(ValueError, match="`K` is too large for the SVM.*cosine_normalize"):
+            repeated_cv(X @ X.T * scale, y, n_splits=3, n_repeats=1, C_grid=C_grid)
+    K = X @ X.T
+    K = K + 1e-14 * rng.standard_normal(K.shape)        # round-off asymmetry
+    assert 0 <= repeated_cv(K * 1e8, y, n_splits=3, n_repeats=1, C_grid=[1e3]).mean <= 1
+
+
 # --------------------------------------------------------------------------- paired_ttest
 
 def test_paired_ttest_matches_scipy_and_checks_folds():

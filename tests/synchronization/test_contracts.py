@@ -233,9 +233,9 @@ def test_doubly_stochastic_max_iter_zero_is_the_initial_vertex(data):
 
 def test_linear_maps_degenerate_inputs():
     """Issue 13 item 4."""
-    with pytest.raises(ValueError, match=r"`T\[0, 1\]` must be invertible, got a singular matrix "
+    with pytest.raises(ValueError, match=r"`H\[0, 1\]` must be invertible, got a singular matrix "
                                          r"\(condition number inf\)"):
-        synchronize_homographies(np.zeros((3, 3, 3, 3)))
+        synchronize_homographies(np.zeros((3, 3, 3, 3)))       # named as the caller's argument
     with pytest.raises(ValueError, match=r"`T` must hold at least one object, got shape "
                                          r"\(0, 0, 3, 3\)"):
         synchronize_linear_maps(np.zeros((0, 0, 3, 3)))

@@ -247,3 +247,51 @@ def test_per_object_residual_scale_is_checked():
         synchronize_linear_maps(data.observed, mask=data.mask, residual_scale=np.ones(3))
     with pytest.raises(ValueError, match="must be positive"):
         synchronize_linear_maps(data.observed, mask=data.mask, residual_scale=np.zeros(4))
+
+
+def test_homography_messages_name_H_not_the_internal_T():
+    """synchronize_homographies validated through synchronize_linear_maps, whose messages
+    named its own argument `T`."""
+    from transync.synchronization import synchronize_homographies
+
+    H = np.broadcast_to(np.eye(3), (3, 3, 3, 3)).copy()
+    H[0, 1] = 0
+    with pytest.raises(ValueError, match=r"`H\[0, 1\]` must be invertible"):
+        synchronize_homographies(H)
+    H = np.broadcast_to(np.eye(3), (3, 3, 3, 3)).copy()
+    H[1, 2, 0, 0] = np.nan
+    with pytest.raises(ValueError, match=r"`H\[1, 2\]` must be finite where observed"):
+        synchronize_homographies(H)
+    with pytest.raises(ValueError, match=r"`H\[\(0, 1\)\]` must have shape \(3, 3\)"):
+        synchronize_homographies({(0, 1): np.eye(2)})               # was "residual='corner'"
+    with pytest.raises(ValueError, match=r"`image_size` must lie in \[1e-06, 1e\+09\]"):
+        synchronize_homographies(np.broadcast_to(np.eye(3), (3, 3, 3, 3)),
+                                 image_size=(1e300, 1e300))        # was "H[0, 1] singular"
+
+
+def test_inconsistent_tiny_blocks_are_degenerate_not_linalg_errors():
+    """A null-space block other than the reference's singular: np.linalg's LinAlgError."""
+    seen = 0
+    for seed in range(5):
+        T = np.random.default_rng(seed).normal(size=(3, 3, 2, 2)) * 1e-20
+        with pytest.raises(DegenerateInputError, match="null.space") as exc:
+            synchronize_linear_maps(T)
+        seen += "object 1" in str(exc.value)
+    assert seen >= 1                    # the non-reference case is among them
+
+
+def test_objective_finite_with_huge_weights():
+    """weights ~1e250 times squared residuals overflowed: an inf objective from finite
+    residuals. Only the weights' ratios matter."""
+    p = make_noisy_linear_maps(4, dim=2, noise=0, outlier_fraction=0.3, rng=972)
+    a = synchronize_linear_maps(p.observed * 1e40, weights=np.full((4, 4), 1e250))
+    b = synchronize_linear_maps(p.observed * 1e40, weights=np.full((4, 4), 1.0))
+    assert np.isfinite(a.objective)
+    assert a.objective == pytest.approx(b.objective, rel=1e-9)
+
+
+def test_n_objects_must_match_an_array():
+    T = make_noisy_linear_maps(4, noise=0.0, rng=0).observed
+    with pytest.raises(ValueError, match=r"`n_objects` must match the 4 objects"):
+        synchronize_linear_maps(T, n_objects=7)
+    assert synchronize_linear_maps(T, n_objects=4).maps.shape == (4, 3, 3)

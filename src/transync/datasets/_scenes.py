@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_generator, check_choice, check_int, check_positive, check_probability
+from .._validation import (as_generator, check_choice, check_image_size, check_int,
+                           check_positive, check_probability)
 from ..geometry import image_corners, normalize_determinant
 
 __all__ = ["PlanarScene", "make_planar_scene"]
@@ -230,7 +231,7 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
     n_views : int, default=20
         Number of views (images).
     image_size : (width, height), default=(640, 480)
-        Size of every image in pixels.
+        Size of every image in whole pixels, each from 32 to 2**14.
     difficulty : {"easy", "moderate", "hard"}, default="moderate"
         Presets: moderate = views within +-25 degrees of the plane normal and about 20 % of
         the reference view covered by clutter; hard = +-45 degrees and about 33 %; easy =
@@ -276,12 +277,7 @@ def make_planar_scene(n_views=20, *, image_size=(640, 480), difficulty="moderate
         preset["clutter"] = check_probability(clutter, "clutter")
     noise = check_positive(noise, "noise", allow_zero=True)
     reference = check_int(reference, "reference", minimum=0, maximum=n - 1)
-    try:
-        w, h = (int(v) for v in image_size)
-    except (TypeError, ValueError):
-        raise ValueError(f"`image_size` must be (width, height), got {image_size!r}") from None
-    if w < 32 or h < 32:
-        raise ValueError(f"`image_size` must be at least (32, 32), got {(w, h)}")
+    w, h = check_image_size(image_size, "image_size", minimum=32, maximum=2**14)
     rng = as_generator(rng)
     f = 1.1 * w
     K = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1.0]])

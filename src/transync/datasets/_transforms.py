@@ -11,8 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_generator, check_choice, check_int, check_positive, check_probability
+from .._validation import (as_generator, check_choice, check_image_size, check_int,
+                           check_positive, check_probability)
 from ..geometry import image_corners, normalize_determinant, transfer_points
+from ._graphs import _MAX_ENTRIES
 
 __all__ = ["TransformProblem", "make_noisy_homographies", "make_noisy_linear_maps"]
 
@@ -53,6 +55,14 @@ class TransformProblem:
     def true_pairwise(self) -> np.ndarray:
         """Ground-truth pairwise maps ``inv(truth[i]) @ truth[j]`` as (N, N, d, d)."""
         return np.einsum("iab,jbc->ijac", np.linalg.inv(self.truth), self.truth)
+
+
+def _check_size(n: int, d: int, given: str) -> None:
+    """Refuse problems whose (N, N, d, d) observations would not fit (``given``: the arguments
+    as the user gave them, for the message)."""
+    if n * n * d * d > _MAX_ENTRIES:
+        raise ValueError(f"{given} would need {n * n * d * d:.3g} observed entries "
+                         f"(N * N * d * d, more than {_MAX_ENTRIES:.0e}); use a smaller problem")
 
 
 def _observation_graph(n, density, rng):
@@ -119,6 +129,7 @@ def make_noisy_linear_maps(n_objects=10, dim=3, *, group="GL", noise=0.05, outli
     """
     n = check_int(n_objects, "n_objects", minimum=2)
     d = check_int(dim, "dim", minimum=1)
+    _check_size(n, d, f"`n_objects`={n} and `dim`={d}")
     group = check_choice(group, "group", ("GL", "SL", "SO"))
     noise = check_positive(noise, "noise", allow_zero=True)
     outlier_fraction = check_probability(outlier_fraction, "outlier_fraction")
@@ -193,7 +204,8 @@ def make_noisy_homographies(n_views=10, *, image_size=(640, 480), noise=0.5, out
     n_views : int, default=10
         Number of views ``N``.
     image_size : (width, height), default=(640, 480)
-        Image size in pixels (the corners define the noise and the errors).
+        Image size in whole pixels, each from 2 to 2**20 (the corners define the noise and the
+        errors).
     noise : float, default=0.5
         Pixel noise on the transferred corners.
     outlier_fraction : float, default=0.0
@@ -219,11 +231,13 @@ def make_noisy_homographies(n_views=10, *, image_size=(640, 480), noise=0.5, out
     True
     """
     n = check_int(n_views, "n_views", minimum=2)
+    _check_size(n, 3, f"`n_views`={n} (3 x 3 homographies)")
+    w, h = check_image_size(image_size, "image_size", minimum=2, maximum=2**20)
+    max_angle = check_positive(max_angle, "max_angle", allow_zero=True)
     noise = check_positive(noise, "noise", allow_zero=True)
     outlier_fraction = check_probability(outlier_fraction, "outlier_fraction")
     density = check_probability(density, "density")
     rng = as_generator(rng)
-    w, h = (int(v) for v in image_size)
     truth = np.stack([np.eye(3)] + [random_view_homography((w, h), rng, max_angle=max_angle)
                                     for _ in range(n - 1)])
     mask = _observation_graph(n, density, rng)

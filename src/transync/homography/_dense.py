@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numbers
+
 import cv2
 import numpy as np
 
@@ -76,7 +78,7 @@ def refine_homography_ecc(template, image, H_init, *, mask=None, template_mask=N
     eps : float, default=1e-5
         ECC convergence threshold.
     gauss_size : int, default=3
-        Gaussian filter size of ``cv2.findTransformECC``.
+        Gaussian filter size of ``cv2.findTransformECC``: odd, from 1 (no smoothing) to 1001.
 
     Returns
     -------
@@ -114,6 +116,9 @@ def refine_homography_ecc(template, image, H_init, *, mask=None, template_mask=N
     levels = check_int(levels, "levels", minimum=1, maximum=8)
     max_iter = check_int(max_iter, "max_iter", minimum=1)
     eps = check_positive(eps, "eps")
+    gauss_size = check_int(gauss_size, "gauss_size", minimum=1, maximum=1001)
+    if gauss_size % 2 == 0:
+        raise ValueError(f"`gauss_size` must be odd (an OpenCV Gaussian kernel), got {gauss_size}")
     m = tm = None
     if mask is not None:
         m = check_array(mask, "mask", ndim=2, dtype=bool)
@@ -198,13 +203,16 @@ def warp_to_reference(image, H, size, *, offset=(0, 0),
     image = check_image(image, "image", min_size=1)
     H = check_homographies(H, "H", ndim=2)
     size, offset = _canvas(size, offset)
-    if interpolation not in _INTERPOLATIONS or isinstance(interpolation, bool):
+    if isinstance(interpolation, bool) or not isinstance(interpolation, numbers.Integral):
+        raise TypeError(f"`interpolation` must be an OpenCV INTER_* flag (an int), got "
+                        f"{type(interpolation).__name__} {interpolation!r}")
+    if interpolation not in _INTERPOLATIONS:
         raise ValueError(f"`interpolation` must be one of OpenCV's INTER_NEAREST, INTER_LINEAR, "
                          f"INTER_CUBIC, INTER_AREA, INTER_LANCZOS4 {_INTERPOLATIONS}, got "
                          f"{interpolation!r}")
     if image.dtype not in (np.uint8, np.uint16, np.int16, np.float32, np.float64):
         image = image.astype(np.float64)           # the types OpenCV warps
-    return _warp(image, translation(*offset) @ H, size, interpolation)
+    return _warp(image, translation(*offset) @ H, size, int(interpolation))
 
 
 def _warp(image, H, size, interpolation=cv2.INTER_LINEAR) -> np.ndarray:

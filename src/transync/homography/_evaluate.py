@@ -173,7 +173,10 @@ def evaluate_alignment(images, H_est, H_true, *, masks_true, reference=0, masks_
     masks_est : sequence of bool arrays, optional
         Estimated plane masks: adds segmentation scores and ``brenner_ratio_own_masks``.
     pairwise : bool, default=False
-        Also report corner errors of every overlapping pair (:func:`pairwise_corner_error`).
+        Also report ``pairwise_mean_error``, ``pairwise_max_error`` and
+        ``pairwise_median_error`` over every overlapping pair (:func:`pairwise_corner_error`;
+        a pair with a failed view counts 1000 px). They are NaN when no two views overlap
+        (nothing to measure).
 
     Returns
     -------
@@ -223,11 +226,15 @@ def evaluate_alignment(images, H_est, H_true, *, masks_true, reference=0, masks_
            "median_error": float(np.median(e))}
     for t in (1, 3, 5):
         out[f"acc_{t}px"] = float(np.mean(e <= t))
-    if pairwise and ok.all():
-        pe = pairwise_corner_error(H_est, H_true, image_size=sizes)
-        out["pairwise_mean_error"] = float(pe.mean()) if pe.size else float("nan")
-        out["pairwise_max_error"] = float(pe.max()) if pe.size else float("nan")
-        out["pairwise_median_error"] = float(np.median(pe)) if pe.size else float("nan")
+    if pairwise:
+        # a pair with a failed view counts 1000 px, as a failed view does above
+        pe = pairwise_corner_error(np.where(ok[:, None, None], H_est, np.nan), H_true,
+                                   image_size=sizes)
+        pe = np.where(np.isfinite(pe), pe, 1000.0)
+        none = float("nan")         # no two views overlap: no pair to measure
+        out["pairwise_mean_error"] = float(pe.mean()) if pe.size else none
+        out["pairwise_max_error"] = float(pe.max()) if pe.size else none
+        out["pairwise_median_error"] = float(np.median(pe)) if pe.size else none
     size = tuple(int(v) for v in sizes[reference])
     H_safe = np.where(ok[:, None, None], H_est, H_true)
     m_est, c_est = mean_warped_image(gray, H_safe, size=size, masks=masks_true,

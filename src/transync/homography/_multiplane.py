@@ -16,7 +16,7 @@ import numpy as np
 
 from .._validation import as_generator, check_array, check_choice, check_int, check_positive
 from ..geometry import transfer_points
-from ._sparse import _METHODS, _robust_fit
+from ._sparse import _METHODS, MAX_RANSAC_ITER, _robust_fit
 
 __all__ = ["MultiPlaneResult", "extract_planes"]
 
@@ -76,7 +76,7 @@ def extract_planes(x1, x2, *, threshold=5.0, min_inliers=10, max_planes=None, me
     method : str, default="ransac"
         Robust estimator (as in :func:`estimate_pairwise_homographies`).
     max_iter : int, default=5000
-        Iterations of each robust fit.
+        Iterations of each robust fit, at most ``2**31 - 1`` (OpenCV's limit).
     rng : None, int or Generator, default=None
         Orders the remaining correspondences before every robust fit, and with them RANSAC's
         samples (OpenCV's global random state is never used).
@@ -115,7 +115,7 @@ def extract_planes(x1, x2, *, threshold=5.0, min_inliers=10, max_planes=None, me
         threshold = max(3.0, 0.01 * span)
     threshold = check_positive(threshold, "threshold")
     method = check_choice(method, "method", tuple(_METHODS))
-    max_iter = check_int(max_iter, "max_iter", minimum=1)
+    max_iter = check_int(max_iter, "max_iter", minimum=1, maximum=MAX_RANSAC_ITER)
     if max_planes is not None:
         max_planes = check_int(max_planes, "max_planes", minimum=1)
     gen = as_generator(rng)

@@ -16,9 +16,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .._validation import as_generator, check_array, check_int, check_positive, check_probability
+from .._validation import (as_generator, check_array, check_homographies, check_int,
+                           check_positive, check_probability)
 from ..geometry import translation
-from ._sparse import margin_canvas
+from ._sparse import check_image, margin_canvas, to_gray
 
 __all__ = ["PlaneSegmentation", "segment_plane", "segment_plane_evidence"]
 
@@ -71,8 +72,9 @@ def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, sm
 
     Parameters
     ----------
-    images : list of (h_i, w_i) grey images
-        The views.
+    images : list of (h_i, w_i) or (h_i, w_i, c) images
+        The views, at least 8 x 8 pixels; grey levels as :func:`to_gray` makes them (uint8 as
+        is, floats up to 2 as [0, 1], larger values rescaled to [0, 255]).
     homographies : ndarray of shape (N, 3, 3)
         ``homographies[i]`` maps pixels of view ``i`` into the reference view.
     reference, window, margin, smooth, min_views, threshold, rng
@@ -107,22 +109,28 @@ def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, sm
                                   threshold=threshold, rng=rng).masks
 
 
+MAX_SMOOTH = 100.0
+"""Largest ``smooth`` (Gaussian sigma, pixels) the segmentation takes."""
+
+
 def _check_inputs(images, homographies, reference, window, margin, smooth, min_views,
                   threshold):
     if isinstance(images, np.ndarray) and images.ndim == 2:
         raise TypeError("`images` must be a list of (h, w) grey images, got one 2-D array")
-    imgs = [check_array(im, f"images[{k}]", ndim=2, dtype=np.float32)
+    if images is None or isinstance(images, (str, bytes)) or not hasattr(images, "__len__"):
+        raise TypeError(f"`images` must be a list of images, got {type(images).__name__}")
+    # the intensity rule of the whole pipeline: grey levels 0..255 as to_gray makes them (the
+    # ZNCC regularizer and the texture feature assume that scale; floats x 1e30 overflowed)
+    imgs = [to_gray(check_image(im, f"images[{k}]", min_size=8)).astype(np.float32)
             for k, im in enumerate(images)]
     n = len(imgs)
     if n < 1:
         raise ValueError("`images` must hold at least one image, got 0")
-    for k, im in enumerate(imgs):
-        if min(im.shape) < 8:
-            raise ValueError(f"`images[{k}]` must be at least 8 x 8 pixels, got shape {im.shape}")
     H = check_array(homographies, "homographies", ndim=3)
     if H.shape != (n, 3, 3):
         raise ValueError(f"`homographies` must have shape ({n}, 3, 3) (one per image), "
                          f"got {H.shape}")
+    H = check_homographies(H, "homographies", ndim=3)
     opts = {"reference": check_int(reference, "reference", minimum=0, maximum=n - 1),
             "window": check_int(window, "window", minimum=1, maximum=101),
             "margin": check_positive(margin, "margin", allow_zero=True),
@@ -131,6 +139,9 @@ def _check_inputs(images, homographies, reference, window, margin, smooth, min_v
             "threshold": check_probability(threshold, "threshold")}
     if opts["margin"] > 2:
         raise ValueError(f"`margin` must lie in [0, 2], got {opts['margin']!r}")
+    if opts["smooth"] > MAX_SMOOTH:
+        raise ValueError(f"`smooth` must lie in [0, {MAX_SMOOTH:g}] pixels, got "
+                         f"{opts['smooth']!r}")
     return imgs, H, opts
 
 
@@ -142,8 +153,9 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
 
     Parameters
     ----------
-    images : list of (h_i, w_i) grey images
-        The views.
+    images : list of (h_i, w_i) or (h_i, w_i, c) images
+        The views, at least 8 x 8 pixels; grey levels as :func:`to_gray` makes them (uint8 as
+        is, floats up to 2 as [0, 1], larger values rescaled to [0, 255]).
     homographies : ndarray (N, 3, 3)
         ``homographies[i]`` maps pixels of view ``i`` into the reference view.
     reference : int, default=0
@@ -153,7 +165,8 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
     margin : float, default=0.2
         The canvas extends the reference frame by this fraction on every side (at most 2).
     smooth : float, default=4.0
-        Gaussian sigma (pixels) applied to the plane probabilities before thresholding.
+        Gaussian sigma (pixels, at most 100) applied to the plane probabilities before
+        thresholding.
     min_views : int, default=3
         Canvas pixels seen by fewer views are labelled plane only if they look like the
         consensus (no evidence against it).
@@ -172,7 +185,8 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
     Raises
     ------
     ValueError, TypeError
-        Fewer than two views, homographies of the wrong shape, bad options.
+        No views, bad images, homographies of the wrong shape, not finite or singular,
+        bad options.
 
     Examples
     --------
@@ -227,8 +241,11 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
             y = med[v][::7].astype(np.float64)
             r = np.abs(y - x - np.median(y - x))
             keep = r <= np.percentile(r, 70)
-            a, b = np.polyfit(x[keep], y[keep], 1)
-            warped[i] = a * warped[i] + b
+            if np.ptp(x[keep]) > 0:
+                a, b = np.polyfit(x[keep], y[keep], 1)
+                warped[i] = a * warped[i] + b
+            else:                       # a flat view: no gain to estimate, only the offset
+                warped[i] = warped[i] + np.median(y - x)
     med = _median(warped)
 
     mu_m = _box(med, window)

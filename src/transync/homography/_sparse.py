@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
@@ -13,6 +14,7 @@ import numpy as np
 from .._validation import (
     as_generator,
     check_array,
+    check_bool,
     check_choice,
     check_homographies,
     check_index_pairs,
@@ -273,7 +275,7 @@ def sift_features(gray, *, n_features=4000) -> tuple[np.ndarray, np.ndarray]:
     gray = check_image(gray, "gray", min_size=1, grey=True)
     if gray.dtype != np.uint8:
         raise TypeError(f"`gray` must be a uint8 image (see to_gray), got dtype {gray.dtype}")
-    n_features = check_int(n_features, "n_features", minimum=0)
+    n_features = check_int(n_features, "n_features", minimum=0, maximum=10**6)
     sift = cv2.SIFT_create(nfeatures=n_features)
     kp, desc = sift.detectAndCompute(gray, None)
     if desc is None or not kp:
@@ -357,6 +359,10 @@ def _pair_seeds(rng, n_pairs) -> list:
     return [np.random.default_rng(c) for c in ss.spawn(n_pairs)]
 
 
+MAX_RANSAC_ITER = 2**31 - 1
+"""Most robust-fit iterations OpenCV's ``findHomography`` takes (its ``maxIters`` is an int)."""
+
+
 def _robust_fit(src, dst, method, threshold, max_iter, confidence, refine, gen):
     """``cv2.findHomography`` on the correspondences in an order drawn from ``gen``.
 
@@ -381,10 +387,37 @@ def _robust_fit(src, dst, method, threshold, max_iter, confidence, refine, gen):
 
 
 def _check_features(features, n):
+    """One ``(points (m, 2), descriptors (m, k))`` pair per image, descriptors as float32 (what
+    FLANN takes) with one width ``k`` for all images; names the image and what is wrong."""
+    if isinstance(features, (str, bytes)) or not isinstance(features, (Sequence, np.ndarray)):
+        raise TypeError(f"`features` must be a list of (points, descriptors) pairs, got "
+                        f"{type(features).__name__}")
     if len(features) != n:
         raise ValueError(f"`features` must hold one (pts, desc) pair per image ({n}), "
                          f"got {len(features)}")
-    return features
+    out = []
+    width = None
+    for i, f in enumerate(features):
+        if isinstance(f, (str, bytes)) or not isinstance(f, (Sequence, np.ndarray)) or len(f) != 2:
+            raise TypeError(f"`features[{i}]` must be a (points, descriptors) pair, got "
+                            f"{type(f).__name__}")
+        pts = check_array(f[0], f"features[{i}][0] (points)", ndim=2)
+        desc = check_array(f[1], f"features[{i}][1] (descriptors)", ndim=2)
+        if pts.shape[1] != 2:
+            raise ValueError(f"`features[{i}][0]` (points) must have shape (m, 2), got "
+                             f"{pts.shape}")
+        if desc.shape[0] != pts.shape[0] or desc.shape[1] == 0:
+            raise ValueError(f"`features[{i}][1]` (descriptors) must have shape ({pts.shape[0]}, "
+                             f"k), k >= 1, one row per point, got {desc.shape}")
+        if np.abs(desc).max(initial=0.0) > np.finfo(np.float32).max:
+            raise ValueError(f"`features[{i}][1]` (descriptors) must fit float32, got a "
+                             f"largest magnitude of {np.abs(desc).max():.3g}")
+        if width is not None and desc.shape[1] != width:
+            raise ValueError(f"`features[{i}][1]` (descriptors) has width {desc.shape[1]}, "
+                             f"the images before it {width}: all must match")
+        width = desc.shape[1]
+        out.append((pts, np.ascontiguousarray(desc, dtype=np.float32)))
+    return out
 
 
 def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio=0.8,
@@ -408,7 +441,7 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
     threshold : float, default=3.0
         Reprojection threshold in pixels.
     max_iter : int, default=2000
-        Iterations of the robust estimator.
+        Iterations of the robust estimator, at most ``2**31 - 1`` (OpenCV's limit).
     confidence : float, default=0.995
         Confidence of the robust estimator.
     min_inliers : int, default=20
@@ -416,7 +449,9 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
     n_features : int, default=4000
         SIFT features per view.
     features : list of (pts, desc), default=None
-        Precomputed features (as returned by :func:`sift_features`).
+        Precomputed features (as returned by :func:`sift_features`), one pair per image:
+        points ``(m, 2)`` and descriptors ``(m, k)`` (any real dtype, matched as float32; one
+        ``k`` for all images).
     refine : bool, default=True
         After the robust fit, shrink the inlier set to 2.5 robust standard deviations of the
         inlier residuals (at most ``threshold``, at least 0.5 px) and refit by least squares
@@ -460,12 +495,13 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
     if ratio > 1:
         raise ValueError(f"`ratio` must lie in (0, 1], got {ratio!r}")
     threshold = check_positive(threshold, "threshold")
-    max_iter = check_int(max_iter, "max_iter", minimum=1)
+    max_iter = check_int(max_iter, "max_iter", minimum=1, maximum=MAX_RANSAC_ITER)
     confidence = check_positive(confidence, "confidence")
     if confidence >= 1:
         raise ValueError(f"`confidence` must lie in (0, 1), got {confidence!r}")
     min_inliers = check_int(min_inliers, "min_inliers", minimum=4)
     n_features = check_int(n_features, "n_features", minimum=1, maximum=10**6)
+    refine = check_bool(refine, "refine")
     imgs = load_images(images)
     n = len(imgs)
     if n < 2:

@@ -69,6 +69,7 @@ _LAZY = {
     "random_walk_kernel": "._baselines",
     "CVResult": "._evaluate",
     "DEFAULT_C_GRID": "._evaluate",
+    "MAX_KERNEL_TIMES_C": "._evaluate",
     "cosine_normalize": "._evaluate",
     "min_eigenvalue_ratio": "._evaluate",
     "paired_ttest": "._evaluate",

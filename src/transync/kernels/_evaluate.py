@@ -25,6 +25,7 @@ from ._checks import class_labels
 __all__ = [
     "CVResult",
     "DEFAULT_C_GRID",
+    "MAX_KERNEL_TIMES_C",
     "cosine_normalize",
     "min_eigenvalue_ratio",
     "paired_ttest",
@@ -327,6 +328,37 @@ def _select_C(K_train: np.ndarray, y_train: np.ndarray, C_grid: np.ndarray,
     return int(q), float(C_grid[c])
 
 
+MAX_KERNEL_TIMES_C = 1e12
+"""Largest ``max |K| * max(C_grid)`` :func:`repeated_cv` accepts.
+
+Scaling a kernel by ``s`` is the same SVM as scaling ``C`` by ``s``; libsvm's absolute
+stopping tolerance then needs ever more iterations (20 samples: 1 s at 1e12, 9 s at 1e13,
+minutes beyond 1e14)."""
+
+
+def _check_svm_kernels(Ks: np.ndarray, stack: bool, c_max: float) -> None:
+    """Refuse kernels libsvm cannot fit in reasonable time: asymmetric or too large.
+
+    An asymmetric precomputed kernel makes libsvm's solver cycle forever; the tolerance is
+    relative, ``1e-8`` of the largest entry, so round-off asymmetry passes.
+    """
+    for q, Kq in enumerate(Ks):
+        name = f"K[{q}]" if stack else "K"
+        top = float(np.abs(Kq).max(initial=0.0))
+        asym = float(np.abs(Kq - Kq.T).max(initial=0.0))
+        if asym > 1e-8 * top:
+            i, j = np.unravel_index(int(np.argmax(np.abs(Kq - Kq.T))), Kq.shape)
+            raise ValueError(f"`{name}` must be symmetric (an SVM kernel), got "
+                             f"{name}[{i}, {j}] = {Kq[i, j]:.6g} but {name}[{j}, {i}] = "
+                             f"{Kq[j, i]:.6g}; symmetrize it, e.g. (K + K.T) / 2")
+        if top * c_max > MAX_KERNEL_TIMES_C:
+            raise ValueError(f"`{name}` is too large for the SVM: its largest entry, {top:.3g}, "
+                             f"times the largest C, {c_max:.3g}, exceeds "
+                             f"{MAX_KERNEL_TIMES_C:.0e} (scaling K is scaling C; libsvm would "
+                             "run for hours); normalize it, e.g. with cosine_normalize, or lower "
+                             "`C_grid`")
+
+
 def repeated_cv(K, y, *, n_splits: int = 10, n_repeats: int = 10, C_grid=None,
                 inner_splits: int = 3, random_state: int = 0,
                 progress: bool = False) -> CVResult:
@@ -371,9 +403,10 @@ def repeated_cv(K, y, *, n_splits: int = 10, n_repeats: int = 10, C_grid=None,
     Raises
     ------
     ValueError
-        ``K`` not square (nor a stack of square matrices) or not finite, ``y`` of the wrong
-        length, a single class, a class with fewer than ``n_splits`` samples (or too few for
-        the inner folds), bad ``C_grid``.
+        ``K`` not square (nor a stack of square matrices), not finite, not symmetric, or
+        so large that ``max |K| * max(C_grid)`` exceeds :data:`MAX_KERNEL_TIMES_C`; ``y`` of
+        the wrong length, a single class, a class with fewer than ``n_splits`` samples (or too
+        few for the inner folds), bad ``C_grid``.
 
     Examples
     --------
@@ -402,6 +435,7 @@ def repeated_cv(K, y, *, n_splits: int = 10, n_repeats: int = 10, C_grid=None,
     C_grid = check_array(C_grid, "C_grid", ndim=1)
     if C_grid.size == 0 or C_grid.min() <= 0:
         raise ValueError(f"`C_grid` must be a non-empty list of values > 0, got {C_grid}")
+    _check_svm_kernels(Ks, K.ndim == 3, float(C_grid.max()))
     classes, y_idx = class_labels(y, "y")
     if classes.shape[0] < 2:
         raise ValueError(f"`y` must contain at least 2 classes, got {classes.shape[0]}")

@@ -154,6 +154,7 @@ def _residual(A, B, kind: str) -> np.ndarray:
 
 
 _MAX_ND = 20000   # the null-space method factorizes an (N d) x (N d) matrix
+_MIN_IMAGE_SIZE, _MAX_IMAGE_SIZE = 1e-6, 1e9     # image sizes synchronize_homographies takes
 _MAX_SCALE = 1e100  # observed maps with singular values beyond [1e-100, 1e100] overflow
 
 
@@ -171,65 +172,69 @@ def _triples_as_dict(T, name: str):
     return T
 
 
-def _parse_input(T, mask, n_objects):
+def _parse_input(T, mask, n_objects, name="T"):
     """Dense ``(N, N, d, d)`` maps and the observed entries, from an array, a dict or triples.
 
     ``mask`` has the meaning of every synchronization function (see
     ``_pairwise_input``): it selects pairs; a dense array is read in each masked direction.
     """
-    T = _triples_as_dict(T, "T")
+    T = _triples_as_dict(T, name)
     if not isinstance(T, (np.ndarray, Mapping)):
-        T = check_array(T, "T", finite=False)
+        T = check_array(T, name, finite=False)
     if isinstance(T, np.ndarray):
-        T = check_array(T, "T", ndim=4, finite=False)
+        T = check_array(T, name, ndim=4, finite=False)
         n, n2, d, d2 = T.shape
         if n != n2 or d != d2 or d == 0:
-            raise ValueError(f"`T` must have shape (N, N, d, d) with d >= 1, got shape {T.shape}")
+            raise ValueError(f"`{name}` must have shape (N, N, d, d) with d >= 1, got shape "
+                             f"{T.shape}")
         if n == 0:
-            raise ValueError(f"`T` must hold at least one object, got shape {T.shape}")
-        _check_size(n, d)
-        mask = check_mask(mask, n, against="T")
+            raise ValueError(f"`{name}` must hold at least one object, got shape {T.shape}")
+        _check_size(n, d, name)
+        if n_objects is not None and check_int(n_objects, "n_objects", minimum=1) != n:
+            raise ValueError(f"`n_objects` must match the {n} objects of the array `{name}` "
+                             f"(or be None), got {n_objects}")
+        mask = check_mask(mask, n, against=name)
         obs = ~np.eye(n, dtype=bool) if mask is None else mask
         bad = obs & ~np.all(np.isfinite(T), axis=(-2, -1))
         if bad.any():
             i, j = np.argwhere(bad)[0]
-            raise ValueError(f"`T[{i}, {j}]` must be finite where observed, got NaN or infinite "
-                             "entries")
+            raise ValueError(f"`{name}[{i}, {j}]` must be finite where observed, got NaN or "
+                             "infinite entries")
         return T, obs.copy()
     mask = check_mask(mask)
-    items = observations(T, mask, name="T", dense_both=True)
+    items = observations(T, mask, name=name, dense_both=True)
     if not items:
-        raise ValueError("`T` must contain at least one pair, got none" if mask is None else
-                         "`mask` selects no pair of `T`")
+        raise ValueError(f"`{name}` must contain at least one pair, got none" if mask is None
+                         else f"`mask` selects no pair of `{name}`")
     n = max(max(i, j) for i, j, _ in items) + 1
     if n_objects is not None:
         n_objects = check_int(n_objects, "n_objects", minimum=1)
         if n > n_objects:
-            raise ValueError(f"`T` has a pair index {n - 1} but `n_objects` is {n_objects}")
+            raise ValueError(f"`{name}` has a pair index {n - 1} but `n_objects` is {n_objects}")
         n = n_objects
     if mask is not None and mask.shape[0] > n:
         n = mask.shape[0]
-    first = check_array(items[0][2], f"T[{items[0][:2]}]", ndim=2)
+    first = check_array(items[0][2], f"{name}[{items[0][:2]}]", ndim=2)
     d = first.shape[0]
     if d == 0 or first.shape != (d, d):
-        raise ValueError(f"`T[{items[0][:2]}]` must be a square (d, d) matrix with d >= 1, got "
-                         f"shape {first.shape}")
-    _check_size(n, d)
+        raise ValueError(f"`{name}[{items[0][:2]}]` must be a square (d, d) matrix with "
+                         f"d >= 1, got shape {first.shape}")
+    _check_size(n, d, name)
     dense = np.zeros((n, n, d, d))
     obs = np.zeros((n, n), dtype=bool)
     for i, j, Tij in items:
-        Tij = check_array(Tij, f"T[{(i, j)}]", ndim=2)
+        Tij = check_array(Tij, f"{name}[{(i, j)}]", ndim=2)
         if Tij.shape != (d, d):
-            raise ValueError(f"`T[{(i, j)}]` must have shape ({d}, {d}) like the first pair, "
+            raise ValueError(f"`{name}[{(i, j)}]` must have shape ({d}, {d}) like the first pair, "
                              f"got shape {Tij.shape}")
         dense[i, j] = Tij
         obs[i, j] = True
     return dense, obs
 
 
-def _check_size(n: int, d: int) -> None:
+def _check_size(n: int, d: int, name: str = "T") -> None:
     if n * d > _MAX_ND:
-        raise ValueError(f"`T` holds {n} objects of dimension {d}: the null-space method "
+        raise ValueError(f"`{name}` holds {n} objects of dimension {d}: the null-space method "
                          f"factorizes an (N d) x (N d) matrix, N d = {n * d} > {_MAX_ND}; "
                          "renumber the objects without gaps or split the problem")
 
@@ -302,6 +307,13 @@ def _maps_from_nullspace(U, reference, group):
             U = U * np.r_[np.ones(U.shape[-1] - 1), -1.0]    # a reflection of the basis
         R = _project(U, "SO")
         return R[reference][None] @ np.swapaxes(R, 1, 2)
+    conds = np.linalg.cond(U)
+    bad = np.flatnonzero(~(conds < 1e12))
+    if bad.size:
+        raise DegenerateInputError(
+            f"the null-space block of object {int(bad[0])} is singular (condition "
+            f"{conds[bad[0]]:.3g}; {bad.size} object(s)); the observations do not determine "
+            "its map (they are far from consistent: T[i, j] @ T[j, i] should be about I)")
     maps = Ur[None] @ np.linalg.inv(U)
     return _project(maps, group)
 
@@ -445,7 +457,8 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
         :class:`~transync.exceptions.DegenerateInputError`, or synchronize the reference's
         component and give NaN maps to the other objects (listed in ``info["excluded"]``).
     n_objects : int, default=None
-        Number of objects when ``T`` is a dict (default: largest index + 1).
+        Number of objects when ``T`` is a dict (default: largest index + 1); for an array it
+        must be None or its N.
     residual_scale : float or array of shape (N,), default=1.0
         Factor applied to the reported residuals (e.g. pixels per normalized unit); an array
         gives one factor per object, applied to the residuals of the pairs ``(i, j)`` of row
@@ -482,6 +495,17 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
     >>> bool(np.allclose(res.maps[0], np.eye(3)))
     True
     """
+    return _synchronize_linear_maps(
+        T, name="T", mask=mask, weights=weights, reference=reference, group=group,
+        robust=robust, residual=residual, max_iter=max_iter, tol=tol,
+        disconnected=disconnected, n_objects=n_objects, residual_scale=residual_scale)
+
+
+def _synchronize_linear_maps(T, *, name, mask, weights, reference, group, robust, residual,
+                             max_iter, tol, disconnected, n_objects,
+                             residual_scale) -> LinearMapSyncResult:
+    """:func:`synchronize_linear_maps`, its messages naming the maps ``name`` (the caller's
+    argument: ``H`` for :func:`synchronize_homographies`)."""
     group = check_choice(group, "group", _GROUPS)
     residual = check_choice(residual, "residual", _RESIDUALS)
     disconnected = check_choice(disconnected, "disconnected", ("raise", "component"))
@@ -496,7 +520,7 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
     else:
         residual_scale = check_positive(residual_scale, "residual_scale")
     check_bool(robust, "robust")
-    T, obs = _parse_input(T, mask, n_objects)
+    T, obs = _parse_input(T, mask, n_objects, name)
     n, d = T.shape[0], T.shape[-1]
     if per_object and residual_scale.shape != (n,):
         raise ValueError(f"`residual_scale` must be a number or hold one factor per object "
@@ -508,7 +532,8 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
         residual = "frobenius"
     if residual == "corner" and d != 3:
         raise ValueError(f"`residual='corner'` needs 3x3 maps, got d = {d}")
-    T, obs, w0 = _prepare_observations(T, obs, weights, group, mask_given=mask is not None)
+    T, obs, w0 = _prepare_observations(T, obs, weights, group, mask_given=mask is not None,
+                                        name=name)
     keep, excluded, labels = _reference_component(obs, reference, disconnected)
     Tk = T[np.ix_(keep, keep)]
     ok = obs[np.ix_(keep, keep)]
@@ -527,7 +552,10 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
     inliers = obs & (weights_out > 1e-5 * max(float(weights_out.max()), 1e-300))
     kept = (w > 0) & ok
     finite = kept & np.isfinite(r_k)        # corner residuals: inf when a corner goes to infinity
-    objective = (float(np.sum(w[finite] * r_k[finite] ** 2) / max(np.sum(w[finite]), 1e-300))
+    # weights relative to the largest: only their ratios matter, and w * r**2 overflowed
+    # for weights ~1e250 (inf objective from finite residuals)
+    wf = w[finite] / max(float(w[finite].max(initial=0.0)), 1e-300)
+    objective = (float(np.sum(wf * r_k[finite] ** 2) / max(np.sum(wf), 1e-300))
                  if finite.any() or not kept.any() else np.inf)
     info = {
         "singular_values": sv,
@@ -542,13 +570,13 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
                                objective=objective, n_iter=n_iter, converged=converged, info=info)
 
 
-def _prepare_observations(T, obs, weights, group, *, mask_given):
+def _prepare_observations(T, obs, weights, group, *, mask_given, name="T"):
     """Weights, invertibility, SL(d) scaling and the missing directions (inverses)."""
     n, d = T.shape[0], T.shape[-1]
     if weights is not None:
         weights = check_array(weights, "weights", ndim=2)
         if weights.shape != (n, n):
-            raise ValueError(f"`weights` must have shape ({n}, {n}) to match `T`, "
+            raise ValueError(f"`weights` must have shape ({n}, {n}) to match `{name}`, "
                              f"got shape {weights.shape}")
         if weights.size and weights.min() < 0:
             raise ValueError(f"`weights` must be non-negative, got {float(weights.min())}")
@@ -556,7 +584,7 @@ def _prepare_observations(T, obs, weights, group, *, mask_given):
         check_weight_magnitude(weights[obs], d * d)
     if not obs.any():
         what = "`mask` and `weights` select" if mask_given or weights is not None else "it holds"
-        raise ValueError(f"`T` must hold at least one observed pair i != j, but {what} none "
+        raise ValueError(f"`{name}` must hold at least one observed pair i != j, but {what} none "
                          f"({n} object(s))")
     if group == "SL":            # scale-free group: rescale blocks of extreme magnitude
         top = np.abs(T[obs]).max(axis=(-2, -1), keepdims=True)
@@ -564,13 +592,13 @@ def _prepare_observations(T, obs, weights, group, *, mask_given):
         if extreme.any():
             T = T.copy()
             T[obs] = np.where(extreme, T[obs] / np.where(extreme, top, 1.0), T[obs])
-    _check_invertible(T, obs)
+    _check_invertible(T, obs, name)
     if group == "SL":
         det = np.linalg.det(T[obs])
         if d % 2 == 0 and np.any(det < 0):
             i, j = np.argwhere(obs)[np.flatnonzero(det < 0)[0]]
-            raise ValueError(f"`T[{i}, {j}]` has a negative determinant, which no scaling maps "
-                             f"into SL({d})")
+            raise ValueError(f"`{name}[{i}, {j}]` has a negative determinant, which no "
+                             f"scaling maps into SL({d})")
         T = T.copy()
         T[obs] = normalize_determinant(T[obs])
     T, obs, w0 = _symmetrize(T, obs, weights)
@@ -642,6 +670,10 @@ def _image_sizes(image_size, n):
     if arr.shape != (n, 2) or not np.all(arr > 0):
         raise ValueError(f"`image_size` must be (width, height) or an array of shape ({n}, 2) "
                          f"with positive entries, got {np.asarray(image_size).tolist()!r:.80}")
+    if arr.min() < _MIN_IMAGE_SIZE or arr.max() > _MAX_IMAGE_SIZE:
+        raise ValueError(f"`image_size` must lie in [{_MIN_IMAGE_SIZE:g}, {_MAX_IMAGE_SIZE:g}] "
+                         f"(pixels), got {arr.min():.3g} .. {arr.max():.3g}: the normalized "
+                         "homographies would lose their digits")
     return arr
 
 
@@ -681,7 +713,8 @@ def synchronize_homographies(H, *, mask=None, weights=None, reference=0, robust=
     Raises
     ------
     ValueError, TypeError
-        As :func:`synchronize_linear_maps`, and image sizes that are not positive.
+        As :func:`synchronize_linear_maps` (naming ``H``), and image sizes outside
+        [1e-6, 1e9].
     DegenerateInputError
         Disconnected observation graph (with ``disconnected="raise"``).
 
@@ -704,7 +737,11 @@ def synchronize_homographies(H, *, mask=None, weights=None, reference=0, robust=
             raise TypeError("`H` keys must be pairs (i, j) of view indices, got "
                             f"{next(k for k in H if not (isinstance(k, tuple) and len(k) == 2))!r}")
         n = max(check_int(k, "H key", minimum=0) for key in H for k in key) + 1
-        _check_size(n, 3)
+        _check_size(n, 3, "H")
+        for (i, j), Hij in H.items():
+            Hij = check_array(Hij, f"H[{(i, j)}]", ndim=2, finite=False)
+            if Hij.shape != (3, 3):
+                raise ValueError(f"`H[{(i, j)}]` must have shape (3, 3), got {Hij.shape}")
     else:
         H = check_array(H, "H", ndim=4, finite=False)
         n = H.shape[0]
@@ -733,11 +770,12 @@ def synchronize_homographies(H, *, mask=None, weights=None, reference=0, robust=
         Hn = H
         if not isinstance(H, Mapping) and H.shape[1:] != (n, 3, 3):
             raise ValueError(f"`H` must have shape (N, N, 3, 3), got shape {H.shape}")
-    res = synchronize_linear_maps(Hn, mask=mask, weights=weights, reference=reference,
-                                  group="SL", robust=robust, residual="corner",
-                                  max_iter=max_iter, tol=tol, disconnected=disconnected,
-                                  n_objects=n if isinstance(H, Mapping) else None,
-                                  residual_scale=scale)
+    res = _synchronize_linear_maps(Hn, name="H", mask=mask, weights=weights,
+                                   reference=reference, group="SL", robust=robust,
+                                   residual="corner", max_iter=max_iter, tol=tol,
+                                   disconnected=disconnected,
+                                   n_objects=n if isinstance(H, Mapping) else None,
+                                   residual_scale=scale)
     if sizes is None:
         return res
     maps = normalize_determinant(np.einsum("ab,ibc,icd->iad", Ninv[res.reference], res.maps, Nm))

@@ -38,6 +38,7 @@ FAST = dict(n_features=500, max_iter=1)
 # ------------------------------------------------------------------------------- options
 @pytest.mark.parametrize("kw, exc, match", [
     ({"dense_weight": float("nan")}, ValueError, r"`dense_weight` must be finite and > 0, got nan"),
+    ({"dense_weight": 1e300}, ValueError, r"`dense_weight` must lie in \(0, 1e\+06\]"),
     ({"canvas_margin": 1e6}, ValueError, r"`canvas_margin` must lie in \[0, 2\]"),
     ({"n_features": 0}, ValueError, r"`n_features` must be >= 1, got 0"),
     ({"n_features": 10**12}, ValueError, r"`n_features` must be <= 1000000"),
@@ -398,3 +399,39 @@ def test_evaluate_alignment_pairwise_keys_whatever_the_estimates():
     assert r["mean_error"] == 0.0
     assert np.isnan([r["pairwise_mean_error"], r["pairwise_max_error"],
                      r["pairwise_median_error"]]).all()
+
+
+def test_precomputed_pairs_are_checked_field_by_field(small):
+    """A hand-made PairwiseHomographies was only shape-checked: matches=None gave an
+    AttributeError, NaN or singular H and absurd weights surfaced as the synchronization's
+    `T` / `weights`."""
+    pw = estimate_pairwise_homographies(small.images, n_features=400, rng=0)
+    H_nan, H_sing, W, M = pw.H.copy(), pw.H.copy(), pw.weights.copy(), pw.mask.copy()
+    H_nan[0, 1] = np.nan
+    H_sing[1, 2] = 0.0
+    W[0, 1] = W[1, 0] = 1e300
+    M[0, 1] = False                                      # no longer symmetric
+    bad = [({"matches": None}, TypeError, r"`pairs.matches` must be a dict"),
+           ({"H": H_nan}, ValueError, r"`pairs.H\[0, 1\]` must be a finite invertible.*NaN"),
+           ({"H": H_sing}, ValueError, r"`pairs.H\[1, 2\]` must be a finite invertible.*"
+                                       r"singular"),
+           ({"H": pw.H[:3, :3]}, ValueError, r"`pairs.H` must have shape \(4, 4, 3, 3\)"),
+           ({"weights": W}, ValueError, r"`pairs.weights` must be finite, in \[0, 1e\+12\]"),
+           ({"mask": M}, ValueError, r"`pairs.mask` must be a symmetric")]
+    for change, exc, match in bad:
+        with pytest.raises(exc, match=match):
+            estimate_plane_homographies(small.images, pairs=dataclasses.replace(pw, **change),
+                                        **FAST, rng=0)
+    # the valid object is used as given, lists for arrays included
+    as_lists = dataclasses.replace(pw, H=pw.H.tolist(), weights=pw.weights.tolist())
+    a = estimate_plane_homographies(small.images, pairs=as_lists, dense=False, segment=False,
+                                    rng=0)
+    b = estimate_plane_homographies(small.images, pairs=pw, dense=False, segment=False, rng=0)
+    np.testing.assert_array_equal(a.homographies, b.homographies)
+
+
+@pytest.mark.parametrize("fn", [to_reference_homographies, chained_homographies])
+def test_baselines_refuse_pairs_by_name(fn):
+    """`pairs=` in the options passed on was a duplicate keyword (a raw TypeError)."""
+    with pytest.raises(TypeError, match=r"takes no `pairs`: the baseline matches"):
+        fn([np.zeros((32, 32), np.uint8)] * 2, pairs=[(0, 1)])

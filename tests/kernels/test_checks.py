@@ -201,3 +201,14 @@ def test_feature_values_beyond_the_limit_and_widths_near_float_limits():
         K = hks_oa_kernel([np.array([[0.0], [1e9]]), np.array([[1e9], [0.0]])],
                           sigma2=SIGMA2_MIN)
     np.testing.assert_allclose(K, 1.0)
+
+
+@pytest.mark.parametrize("name", ["hks_mean_kernel", "default_sigma2", "graph_descriptors",
+                                  "hks_oa_kernel"])
+def test_zero_width_features_are_refused_by_name(name):
+    """Node features with no column: "zero-size array to reduction operation maximum"."""
+    from transync import kernels
+
+    with pytest.raises(ValueError, match=r"`features\[0\]` must have at least one feature "
+                                         r"column, got shape \(2, 0\)"):
+        getattr(kernels, name)([np.ones((2, 0)), np.ones((3, 0))])

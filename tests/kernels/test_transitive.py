@@ -118,8 +118,12 @@ def test_synchronize_alignments_validation(rng):
         synchronize_alignments(A.astype(float), pairs, 4, n=3)
     with pytest.raises(ValueError, match="at least one pair"):
         synchronize_alignments(A[:0], pairs[:0], 4, n=3)
-    with pytest.raises(DegenerateInputError, match="disconnected"):
-        synchronize_alignments(A[[0, 5]], pairs[[0, 5]], 4, n=3)   # {0, 1} and {2, 3}
+    # {0, 1} and {2, 3}: the synchronization's message offered disconnected='separate', an
+    # option synchronize_alignments does not have
+    with pytest.raises(DegenerateInputError, match=r"`pairs` must connect all 4 graphs, got 2 "
+                                                   r"groups.*view_graph") as exc:
+        synchronize_alignments(A[[0, 5]], pairs[[0, 5]], 4, n=3)
+    assert "separate" not in str(exc.value)
 
 
 def _planted_padded(sizes, n, rng):
@@ -446,6 +450,19 @@ def test_assignment_kernel_validation(rng):
         assignment_kernel(X, X[:, :2])
     with pytest.raises(ValueError, match="dimensions"):
         assignment_kernel(X[0])
+    with pytest.raises(ValueError, match=r"`aligned` must have shape \(N, n, f\) with N, n, "
+                                         r"f >= 1"):
+        assignment_kernel(np.zeros((0, 3, 2)))                  # was a reshape error
+    with pytest.raises(ValueError, match="`other` must hold at least one graph"):
+        assignment_kernel(X, X[:0])
+    with pytest.raises(ValueError, match="the values of `other` are too large"):
+        assignment_kernel(X, np.full_like(X, 1e200))           # was named `aligned`
+    # gamma = 1e300 is allowed by the bound the message states (was refused "at most 1e+300,
+    # got 1e+300": the bound was computed as 1 / 1e-300, one ulp below)
+    K = assignment_kernel(X, kernel="gaussian", gamma=1e300)
+    assert np.isfinite(K).all()
+    with pytest.raises(ValueError, match=r"`gamma` must be at most 1e\+300"):
+        assignment_kernel(X, kernel="gaussian", gamma=1.01e300)
 
 
 # ---------------------------------------------------------------------------------------------

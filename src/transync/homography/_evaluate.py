@@ -17,6 +17,15 @@ from ._sparse import (check_image, check_masks, estimate_pairwise_homographies, 
 __all__ = ["chained_homographies", "evaluate_alignment", "to_reference_homographies"]
 
 
+def _no_pairs(kw: dict, fn: str, which: str) -> None:
+    """A baseline fixes its own view graph: ``pairs`` among the options passed on to
+    :func:`estimate_pairwise_homographies` is refused by name (it was a duplicate keyword)."""
+    if "pairs" in kw:
+        raise TypeError(f"{fn}() takes no `pairs`: the baseline matches {which}; call "
+                        "estimate_pairwise_homographies(images, pairs=...) for another view "
+                        "graph")
+
+
 def to_reference_homographies(images, *, reference=0, n_features=2000, features=None,
                               **kw) -> np.ndarray:
     """OpenCV baseline: every view matched to the reference (SIFT + ratio + RANSAC + LM).
@@ -63,6 +72,7 @@ def to_reference_homographies(images, *, reference=0, n_features=2000, features=
     >>> bool(corner_error(H[1], np.linalg.inv(M), image_size=(240, 180)) < 0.5)
     True
     """
+    _no_pairs(kw, "to_reference_homographies", "every view to the reference")
     images = load_images(images)
     n = len(images)
     reference = check_int(reference, "reference", minimum=0, maximum=max(n - 1, 0))
@@ -132,6 +142,7 @@ def chained_homographies(images, *, reference=0, n_features=2000, features=None,
     >>> H.shape
     (2, 3, 3)
     """
+    _no_pairs(kw, "chained_homographies", "consecutive views")
     images = load_images(images)
     n = len(images)
     reference = check_int(reference, "reference", minimum=0, maximum=max(n - 1, 0))

@@ -26,6 +26,7 @@ from .._validation import (
     check_choice,
     check_int,
     check_positive,
+    invertible_homographies,
 )
 from ..exceptions import DegenerateInputError, UnlinkedViewsWarning
 from ..geometry import image_corners, normalize_determinant, transfer_points, translation
@@ -51,6 +52,10 @@ logger = logging.getLogger("transync.homography")
 #: Largest canvas margin (fraction of the reference frame on every side): the canvas of the
 #: segmentation and of the mean image is at most 5 x 5 reference frames.
 MAX_CANVAS_MARGIN = 2.0
+#: Largest ``dense_weight``: beyond it the sparse pairs no longer count at all.
+MAX_DENSE_WEIGHT = 1e6
+#: Largest weight (inlier count) of a precomputed pair (``pairs=PairwiseHomographies``).
+MAX_PAIR_WEIGHT = 1e12
 
 
 @dataclass(frozen=True)
@@ -75,8 +80,8 @@ class DenseOptions:
         mean image from 4 views on.
     dense_weight : float, default=1.0
         Weight of a view's dense estimate in the re-synchronization relative to the sum of the
-        inlier counts of that view's sparse pairs (1: equal say). Raise it for coarse
-        pairwise inputs passed through ``pairs``.
+        inlier counts of that view's sparse pairs (1: equal say; at most 1e6). Raise it for
+        coarse pairwise inputs passed through ``pairs``.
     canvas_margin : float, default=0.5
         The canvas of the segmentation and of the mean warped image extends the reference
         frame by this fraction on every side (0 to :data:`MAX_CANVAS_MARGIN`).
@@ -120,6 +125,10 @@ class DenseOptions:
         set_(self, "dense_target", check_choice(self.dense_target, "dense_target",
                                                 ("auto", "mean", "reference")))
         set_(self, "dense_weight", check_positive(self.dense_weight, "dense_weight"))
+        if self.dense_weight > MAX_DENSE_WEIGHT:
+            raise ValueError(f"`dense_weight` must lie in (0, {MAX_DENSE_WEIGHT:g}] (a relative "
+                             f"weight; beyond it the sparse pairs no longer count), got "
+                             f"{self.dense_weight!r}")
         margin = check_positive(self.canvas_margin, "canvas_margin", allow_zero=True)
         if margin > MAX_CANVAS_MARGIN:
             raise ValueError(f"`canvas_margin` must lie in [0, {MAX_CANVAS_MARGIN:g}] "
@@ -529,11 +538,47 @@ def _dense_options(dense, options) -> tuple[bool, DenseOptions]:
     return check_bool(dense, "dense"), DenseOptions(**options)
 
 
+def _check_pairwise_homographies(pw: PairwiseHomographies, n: int) -> PairwiseHomographies:
+    """A hand-made (or loaded) ``PairwiseHomographies`` checked field by field, as ``pairs.*``:
+    the arrays of the shapes the pipeline reads, a symmetric mask with an empty diagonal,
+    finite invertible homographies and finite non-negative weights where the mask is set,
+    matches as a dict. Returns a copy with the arrays in their dtypes."""
+    H = check_array(pw.H, "pairs.H", ndim=4, finite=False)
+    if H.shape != (n, n, 3, 3):
+        raise ValueError(f"`pairs.H` must have shape ({n}, {n}, 3, 3) for the {n} images, got "
+                         f"{H.shape}")
+    mask = check_array(pw.mask, "pairs.mask", ndim=2, dtype=bool)
+    if mask.shape != (n, n) or (mask != mask.T).any() or mask.diagonal().any():
+        raise ValueError(f"`pairs.mask` must be a symmetric ({n}, {n}) boolean array with a "
+                         f"False diagonal, got shape {mask.shape}")
+    weights = check_array(pw.weights, "pairs.weights", ndim=2, finite=False)
+    if weights.shape != (n, n):
+        raise ValueError(f"`pairs.weights` must have shape ({n}, {n}), got {weights.shape}")
+    w = weights[mask]
+    if not (np.isfinite(w).all() and (w >= 0).all() and w.max(initial=0.0) <= MAX_PAIR_WEIGHT):
+        raise ValueError(f"`pairs.weights` must be finite, in [0, {MAX_PAIR_WEIGHT:g}] "
+                         f"(inlier counts) where `pairs.mask` is set, got {w.min():.3g} .. "
+                         f"{w.max():.3g}")
+    idx = np.argwhere(mask)
+    finite = np.isfinite(H[mask]).all(axis=(1, 2))
+    ok = finite.copy()
+    ok[finite] = invertible_homographies(H[mask][finite])
+    if not ok.all():
+        i, j = idx[np.flatnonzero(~ok)[0]]
+        what = "a singular matrix" if finite[np.flatnonzero(~ok)[0]] else "NaN or inf entries"
+        raise ValueError(f"`pairs.H[{i}, {j}]` must be a finite invertible homography where "
+                         f"`pairs.mask` is set, got {what}")
+    if not isinstance(pw.matches, dict):
+        raise TypeError(f"`pairs.matches` must be a dict {{(i, j): (pts_i, pts_j, inliers)}}, "
+                        f"got {type(pw.matches).__name__}")
+    failed = [] if pw.failed is None else list(pw.failed)
+    info = {} if pw.info is None else dict(pw.info)
+    return dataclasses.replace(pw, H=H, mask=mask, weights=weights, failed=failed, info=info)
+
+
 def _check_pairs_input(pairs, n):
     if isinstance(pairs, PairwiseHomographies):
-        if pairs.H.shape != (n, n, 3, 3) or np.shape(pairs.mask) != (n, n):
-            raise ValueError(f"`pairs` holds pairwise homographies of shape {pairs.H.shape}, "
-                             f"expected ({n}, {n}, 3, 3)")
+        pairs = _check_pairwise_homographies(pairs, n)
     elif isinstance(pairs, str):
         check_choice(pairs, "pairs", ("auto", "all"))
     elif pairs is None or not hasattr(pairs, "__iter__"):
@@ -584,7 +629,9 @@ def estimate_plane_homographies(images, *, reference=0, dense=True, segment=True
         Segment the plane in every round; with False the masks are all True and the dense
         refinement uses every pixel.
     pairs : "auto", "all", list of (i, j) or PairwiseHomographies, default="auto"
-        The view graph, or precomputed pairwise estimates (then no matching is done). "auto"
+        The view graph, or precomputed pairwise estimates (then no matching is done; their
+        fields are checked: shapes, a symmetric mask, finite invertible ``H`` and finite
+        weights in [0, 1e12] where the mask is set, ``matches`` a dict). "auto"
         matches all pairs up to ``EXHAUSTIVE_UP_TO = 40`` views and, beyond, every view to the
         reference and to its ``n_neighbors`` nearest views.
     n_neighbors : int, default=3

@@ -72,8 +72,10 @@ def check_width(value, name: str, *, inverse: bool = False) -> float:
     """A Gaussian width ``sigma2`` (>= :data:`SIGMA2_MIN`) or, with ``inverse``, a ``gamma``
     (<= 1 / :data:`SIGMA2_MIN`): positive, finite and with a finite inverse."""
     v = check_positive(value, name)
-    if (v > 1.0 / SIGMA2_MIN) if inverse else (v < SIGMA2_MIN):
-        bound = f"at most {1.0 / SIGMA2_MIN:g}" if inverse else f"at least {SIGMA2_MIN:g}"
+    # the literal bound: 1 / SIGMA2_MIN rounds one ulp below 1e300, so gamma = 1e300 was
+    # refused as "at most 1e+300, got 1e+300" (1 / 1e300 is still a positive float64)
+    if (v > 1e300) if inverse else (v < SIGMA2_MIN):
+        bound = "at most 1e+300" if inverse else f"at least {SIGMA2_MIN:g}"
         raise ValueError(f"`{name}` must be {bound} (its inverse must be a finite float64), "
                          f"got {v!r}")
     return v
@@ -98,6 +100,9 @@ def check_feature_list(features, name: str = "features", *,
         F = check_array(F, f"{name}[{g}]", ndim=ndim)
         out.append(F[:, None] if F.ndim == 1 else F)
     f = out[0].shape[1]
+    if f == 0:
+        raise ValueError(f"`{name}[0]` must have at least one feature column, got shape "
+                         f"{out[0].shape}")
     for g, F in enumerate(out):
         if F.shape[1] != f:
             raise ValueError(f"`{name}[{g}]` must have {f} columns like `{name}[0]`, got shape "

@@ -33,6 +33,7 @@ from .._validation import (
     check_int,
     check_positive,
 )
+from ..exceptions import DegenerateInputError
 from ..permutations import solve_lap
 from ..synchronization import synchronize_permutations
 from ._checks import (check_feature_list, check_int_array, check_node_labels, check_width,
@@ -456,6 +457,7 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
                                "degrees": deg, "eigenvalues": np.ones(n)})
     if pr.shape[0] == 0:
         raise ValueError(f"`pairs` must contain at least one pair for n_graphs={N}")
+    _check_connected(pr, N)
     t0 = time.perf_counter()
     keys = map(tuple, pr.tolist())
     if real is None:
@@ -968,7 +970,12 @@ def assignment_kernel(aligned, other=None, *, kernel: str = "linear", gamma=None
     """
     check_choice(kernel, "kernel", KERNELS)
     X = check_array(aligned, "aligned", ndim=3)
+    if 0 in X.shape:
+        raise ValueError(f"`aligned` must have shape (N, n, f) with N, n, f >= 1, got shape "
+                         f"{X.shape}")
     Y = X if other is None else check_array(other, "other", ndim=3)
+    if Y.shape[0] == 0:
+        raise ValueError(f"`other` must hold at least one graph, got shape {Y.shape}")
     if Y.shape[1:] != X.shape[1:]:
         raise ValueError(f"`other` must have shape (M, {X.shape[1]}, {X.shape[2]}) like "
                          f"`aligned`, got shape {Y.shape}")
@@ -989,7 +996,7 @@ def assignment_kernel(aligned, other=None, *, kernel: str = "linear", gamma=None
             K = Xf @ Yf.T
             dx = np.einsum("ij,ij->i", Xf, Xf)
             dy = dx if other is None else np.einsum("ij,ij->i", Yf, Yf)
-    _check_overflow(K, dx, dy, "aligned")
+    _check_overflow(K, dx, dy, "aligned", "aligned" if other is None else "other")
     if other is not None:
         return cosine_normalize(K, dx, dy) if normalize else K
     if normalize:
@@ -997,11 +1004,33 @@ def assignment_kernel(aligned, other=None, *, kernel: str = "linear", gamma=None
     return 0.5 * (K + K.T)                                   # exactly symmetric
 
 
-def _check_overflow(K: np.ndarray, dx: np.ndarray, dy: np.ndarray, name: str) -> None:
-    """A ``ValueError`` naming ``name`` when the kernel overflowed float64 (huge features)."""
-    if not (np.isfinite(K).all() and np.isfinite(dx).all() and np.isfinite(dy).all()):
-        raise ValueError(f"the values of `{name}` are too large: the kernel overflows float64; "
-                         f"rescale the node features")
+def _check_connected(pr: np.ndarray, N: int) -> None:
+    """Refuse ``pairs`` that leave the graphs in several groups (no universe links them),
+    saying how to fix it here; the synchronization's own message offers an option this
+    function does not have."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    G = coo_matrix((np.ones(pr.shape[0]), (pr[:, 0], pr[:, 1])), shape=(N, N))
+    n_comp, comp = connected_components(G, directed=False)
+    if n_comp > 1:
+        other = np.flatnonzero(comp != comp[0])
+        raise DegenerateInputError(
+            f"`pairs` must connect all {N} graphs, got {n_comp} groups (graph 0 is not linked "
+            f"to graph {int(other[0])}); add pairs between the groups, e.g. from view_graph()")
+
+
+def _check_overflow(K: np.ndarray, dx: np.ndarray, dy: np.ndarray, name: str,
+                    name_y: str | None = None) -> None:
+    """A ``ValueError`` naming the features (``name`` for the rows, ``name_y`` for the
+    columns) when the kernel overflowed float64 (huge features)."""
+    name_y = name if name_y is None else name_y
+    if np.isfinite(K).all() and np.isfinite(dx).all() and np.isfinite(dy).all():
+        return
+    which = (name if not np.isfinite(dx).all() else name_y if not np.isfinite(dy).all()
+             else name if name == name_y else f"{name}` and `{name_y}")
+    raise ValueError(f"the values of `{which}` are too large: the kernel overflows float64; "
+                     f"rescale the node features")
 
 
 def _matched_pairs(pairs, N: int) -> tuple[np.ndarray, np.ndarray]:

@@ -503,9 +503,10 @@ def check_image_size(size, name: str = "image_size", *, minimum: int = 1,
         if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
             raise TypeError(f"`{name}` must be (width, height) in pixels, got "
                             f"{type(v).__name__} {v!r} in {size!r}")
-        if not (np.isfinite(v) and float(v).is_integer() and minimum <= v <= maximum):
+        whole = isinstance(v, numbers.Integral) or (np.isfinite(v) and float(v).is_integer())
+        if not (whole and minimum <= v <= maximum):       # ints beyond float: no isfinite
             raise ValueError(f"`{name}` must be (width, height) in whole pixels, each in "
-                             f"[{minimum}, {maximum}], got {size!r}")
+                             f"[{minimum}, {maximum}], got {size!r:.80}")
         out.append(int(v))
     return out[0], out[1]
 

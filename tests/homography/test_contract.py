@@ -417,7 +417,13 @@ def test_precomputed_pairs_are_checked_field_by_field(small):
                                        r"singular"),
            ({"H": pw.H[:3, :3]}, ValueError, r"`pairs.H` must have shape \(4, 4, 3, 3\)"),
            ({"weights": W}, ValueError, r"`pairs.weights` must be finite, in \[0, 1e\+12\]"),
-           ({"mask": M}, ValueError, r"`pairs.mask` must be a symmetric")]
+           ({"mask": M}, ValueError, r"`pairs.mask` must be a symmetric"),
+           ({"matches": {(0, 9): next(iter(pw.matches.values()))}}, ValueError,
+            r"`pairs.matches` keys must be pairs \(i, j\) of view indices in \[0, 4\)"),
+           ({"matches": {(0, 1): (np.zeros((3, 2)), np.zeros((3, 2)))}}, TypeError,
+            r"`pairs.matches\[\(0, 1\)\]` must be \(pts_i, pts_j, inliers\)"),
+           ({"matches": {(0, 1): (np.zeros((3, 2)), np.zeros((4, 2)), np.ones(3, bool))}},
+            ValueError, r"two \(m, 2\) point arrays and m inlier flags")]
     for change, exc, match in bad:
         with pytest.raises(exc, match=match):
             estimate_plane_homographies(small.images, pairs=dataclasses.replace(pw, **change),

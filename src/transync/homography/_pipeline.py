@@ -571,9 +571,27 @@ def _check_pairwise_homographies(pw: PairwiseHomographies, n: int) -> PairwiseHo
     if not isinstance(pw.matches, dict):
         raise TypeError(f"`pairs.matches` must be a dict {{(i, j): (pts_i, pts_j, inliers)}}, "
                         f"got {type(pw.matches).__name__}")
+    matches = {}
+    for key, value in pw.matches.items():
+        where = f"pairs.matches[{key!r}]"
+        if (not isinstance(key, tuple) or len(key) != 2
+                or not all(isinstance(k, (int, np.integer)) and 0 <= k < n for k in key)):
+            raise ValueError(f"`pairs.matches` keys must be pairs (i, j) of view indices in "
+                             f"[0, {n}), got {key!r}")
+        if not isinstance(value, (tuple, list)) or len(value) != 3:
+            raise TypeError(f"`{where}` must be (pts_i, pts_j, inliers), got "
+                            f"{type(value).__name__}")
+        a = check_array(value[0], f"{where}[0]", ndim=2)
+        b = check_array(value[1], f"{where}[1]", ndim=2)
+        inl = check_array(value[2], f"{where}[2]", ndim=1, dtype=bool)
+        if a.shape[1:] != (2,) or b.shape != a.shape or inl.shape != a.shape[:1]:
+            raise ValueError(f"`{where}` must hold two (m, 2) point arrays and m inlier flags, "
+                             f"got shapes {a.shape}, {b.shape}, {inl.shape}")
+        matches[(int(key[0]), int(key[1]))] = (a, b, inl)
     failed = [] if pw.failed is None else list(pw.failed)
     info = {} if pw.info is None else dict(pw.info)
-    return dataclasses.replace(pw, H=H, mask=mask, weights=weights, failed=failed, info=info)
+    return dataclasses.replace(pw, H=H, mask=mask, weights=weights, failed=failed,
+                               matches=matches, info=info)
 
 
 def _check_pairs_input(pairs, n):

@@ -95,3 +95,17 @@ def test_hartley_normalization_of_tiny_point_sets():
     for scale in (1e-165, 1e-200, 1.0, 1e100):
         _, x = hartley_normalization(square * scale)
         np.testing.assert_allclose(np.hypot(x[:, 0], x[:, 1]).mean(), np.sqrt(2.0), rtol=1e-12)
+
+
+def test_integers_beyond_float64_are_named():
+    """translation(10**400, 0) hit numpy's "ufunc 'isfinite' not supported"; sizes of 2**1100
+    a raw OverflowError."""
+    from transync.geometry import image_corners, translation
+
+    with pytest.raises(ValueError, match=r"`tx` must be a finite real number"):
+        translation(10**400, 0)
+    with pytest.raises(ValueError, match=r"`ty` must be a finite real number"):
+        translation(0, float("nan"))
+    with pytest.raises(ValueError, match=r"`size` must fit in float64"):
+        image_corners((2**1100, 3))
+    np.testing.assert_array_equal(translation(2, -1)[:2, 2], [2.0, -1.0])

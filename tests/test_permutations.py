@@ -161,3 +161,19 @@ def test_cycle_inconsistency_of_maps_into_empty_objects():
 
     m = MultiMatching([np.array([], dtype=int), np.array([], dtype=int), np.array([0, 1])], 3)
     assert cycle_inconsistency(m.pairwise_dict())["cycle_error"] == 0.0
+
+
+def test_cycle_inconsistency_sparse_indices_sizes_and_self_keys():
+    """A key (0, 10**6) built a (10**6, 10**6) pair table (MemoryError, 7 TiB); sizes naming an
+    object of 10**9 nodes padded every map to that width (a hang); a self key (0, 0) was
+    ignored silently."""
+    a = np.array
+    assert cycle_inconsistency({(0, 10**6): a([0])})["n_triangles"] == 0
+    assert cycle_inconsistency({(0, 10**30): a([0])})["n_triangles"] == 0
+    tri = {(0, 1): a([1, 0]), (1, 2): a([1, 0]), (0, 2): a([0, 1])}
+    far = {(5, 70): a([1, 0]), (70, 900): a([1, 0]), (5, 900): a([0, 1])}
+    assert cycle_inconsistency(tri) == cycle_inconsistency(far)
+    with pytest.raises(ValueError, match=r"`sizes` gives object 2 1000000000 nodes"):
+        cycle_inconsistency(tri, sizes=[2, 2, 10**9])
+    with pytest.raises(ValueError, match=r"distinct non-negative object indices, got \(0, 0\)"):
+        cycle_inconsistency({(0, 0): a([0])})

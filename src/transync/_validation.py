@@ -86,6 +86,9 @@ def check_array(x, name: str, *, ndim: int | Sequence[int] | None = None, dtype=
     try:
         with np.errstate(over="ignore"):     # a narrowing cast (float32): reported below
             arr = np.array(src, dtype=dtype, copy=copy) if copy else np.asarray(src, dtype=dtype)
+    except OverflowError:                   # Python ints beyond the dtype's range
+        raise ValueError(f"`{name}` must fit in {np.dtype(dtype)}, got integers beyond its "
+                         "range") from None
     except (TypeError, ValueError) as exc:
         raise TypeError(f"`{name}` must be convertible to a {np.dtype(dtype)} array, "
                         f"got {_describe(x)}: {exc}") from None
@@ -484,7 +487,11 @@ def check_bool(value, name: str) -> bool:
 def check_positive(value, name: str, *, allow_zero: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise TypeError(f"`{name}` must be a real number, got {type(value).__name__} {value!r}")
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:                   # an int beyond float64
+        raise ValueError(f"`{name}` must be finite, got an integer of "
+                         f"{len(str(abs(value)))} digits (beyond float64)") from None
     if not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
         rel = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"`{name}` must be finite and {rel}, got {value!r}")

@@ -223,10 +223,18 @@ def translation(tx, ty) -> np.ndarray:
     >>> translation(2, -1) @ [1.0, 1.0, 1.0]
     array([3., 0., 1.])
     """
+    out = []
     for name, v in (("tx", tx), ("ty", ty)):
-        if isinstance(v, bool) or not isinstance(v, numbers.Real) or not np.isfinite(v):
+        if isinstance(v, bool) or not isinstance(v, numbers.Real):
             raise TypeError(f"`{name}` must be a finite real number, got {type(v).__name__} {v!r}")
-    return np.array([[1.0, 0.0, float(tx)], [0.0, 1.0, float(ty)], [0.0, 0.0, 1.0]])
+        try:
+            f = float(v)
+        except OverflowError:                   # an int beyond float64
+            f = np.inf
+        if not np.isfinite(f):
+            raise ValueError(f"`{name}` must be a finite real number, got {v!r:.40}")
+        out.append(f)
+    return np.array([[1.0, 0.0, out[0]], [0.0, 1.0, out[1]], [0.0, 0.0, 1.0]])
 
 
 def hartley_normalization(points) -> tuple[np.ndarray, np.ndarray]:

@@ -66,7 +66,11 @@ def _as_label_array(lab, name: str) -> np.ndarray:
     strings, complex and other dtypes refused with a message naming ``name``."""
     if isinstance(lab, (str, bytes)):
         raise TypeError(f"`{name}` must be a 1-d integer index array, got {type(lab).__name__}")
-    arr = np.asarray(lab)
+    try:
+        arr = np.asarray(lab)
+    except (TypeError, ValueError):                # ragged nesting
+        raise TypeError(f"`{name}` must be a 1-d integer index array, got a ragged "
+                        "sequence") from None
     if arr.ndim != 1:
         raise ValueError(f"`{name}` must be a 1-d index array, got shape {arr.shape}")
     kind = arr.dtype.kind
@@ -472,13 +476,12 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
             raise ValueError(f"`sizes` must be non-negative node counts, got {given.tolist()}")
     arrays: dict[tuple[int, int], np.ndarray] = {}
     seen: dict[int, int] = {}
-    n_obj = 0
     for key, a in pairwise.items():
         if (not isinstance(key, tuple) or len(key) != 2
                 or not all(isinstance(k, (int, np.integer)) and not isinstance(k, bool)
-                           for k in key) or min(key) < 0):
-            raise ValueError(f"`pairwise` keys must be pairs (i, j) of non-negative object "
-                             f"indices, got {key!r}")
+                           for k in key) or min(key) < 0 or key[0] == key[1]):
+            raise ValueError(f"`pairwise` keys must be pairs (i, j) of distinct non-negative "
+                             f"object indices, got {key!r}")
         i, j = int(key[0]), int(key[1])
         if given is not None and not (0 <= i < given.size and 0 <= j < given.size):
             raise ValueError(f"`pairwise` has the pair {(i, j)}, but `sizes` gives "
@@ -489,20 +492,29 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
             raise ValueError(f"`pairwise[{(i, j)}]` has {a.shape[0]} entries, but `sizes` "
                              f"gives object {i} {int(given[i])} nodes")
         arrays[(i, j)] = a
-        n_obj = max(n_obj, i + 1, j + 1)      # an object seen only through empty maps too
         seen[i] = max(seen.get(i, 0), a.shape[0])
         if a.size and a.max() >= 0:
             seen[j] = max(seen.get(j, 0), int(a.max()) + 1)
     if not arrays:
         return {"n_triangles": 0, "inconsistent_triangles": 0.0, "cycle_error": 0.0,
                 "sampled": False}
+    # only the objects in a key take part in a triangle: renumber them 0 .. m - 1 in order
+    # (a single key (0, 10**6) built a (10**6, 10**6) pair table)
+    objs = sorted({g for key in arrays for g in key})
+    rank = {g: r for r, g in enumerate(objs)}
     if given is not None:
-        size_arr = given.astype(np.int64)
+        size_arr = given[objs].astype(np.int64)
     else:
-        size_arr = np.zeros(n_obj, dtype=np.int64)
-        for g, n in seen.items():
-            size_arr[g] = n
+        size_arr = np.array([seen.get(g, 0) for g in objs], dtype=np.int64)
     n_max = int(size_arr.max())
+    if len(arrays) * n_max > MAX_NODES:
+        g = objs[int(np.argmax(size_arr))]
+        raise ValueError(f"`sizes` gives object {g} {n_max} nodes: the {len(arrays)} maps, "
+                         f"padded to that width, would need {len(arrays) * n_max:.3g} entries "
+                         f"(more than {MAX_NODES:.0e})" if given is not None else
+                         f"`pairwise` maps of up to {n_max} nodes would need "
+                         f"{len(arrays) * n_max:.3g} entries (more than {MAX_NODES:.0e})")
+    arrays = {(rank[i], rank[j]): a for (i, j), a in arrays.items()}
     canon: dict[tuple[int, int], np.ndarray] = {}
     for (i, j), a in arrays.items():
         if i < j:
@@ -570,6 +582,11 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
     check_int(max_triangles, "max_triangles", minimum=1)
     n_obj = int(sizes.shape[0])
     n_max = max(maps.shape[1], int(sizes.max(initial=0)))
+    if n_obj * n_obj > MAX_NODES or maps.shape[0] * n_max > MAX_NODES:
+        what = (f"{n_obj} objects (an {n_obj} x {n_obj} pair table)" if n_obj * n_obj > MAX_NODES
+                else f"{maps.shape[0]} maps padded to {n_max} nodes")
+        raise ValueError(f"`sizes` gives {what}: more than {MAX_NODES:.0e} entries; number "
+                         "only the objects in `pairs`, or check `sizes`")
     if maps.shape[1] < n_max:
         maps = np.concatenate([maps, np.full((maps.shape[0], n_max - maps.shape[1]),
                                              UNMATCHED, maps.dtype)], 1)

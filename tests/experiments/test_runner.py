@@ -203,6 +203,21 @@ def test_a_trial_returning_junk_fails_that_trial_only(tmp_path, out, what):
      "Sweep.methods"),
     (lambda s: Sweep(name="s", variable="x", values=[1], methods=["a"], base=3), TypeError,
      "Sweep.base"),
+    # the method overwrote the swept value: every summary row n = 0, mean NaN
+    (lambda s: Sweep(name="s", variable="method", values=["a"], methods=["a"]), ValueError,
+     "`Sweep.variable` must not be 'method'"),
+    # a repeated value ran twice and doubled its summary rows
+    (lambda s: Sweep(name="s", variable="x", values=[0.0, 0.0], methods=["a"]), ValueError,
+     r"`Sweep.values` must not repeat an entry .* got 0.0"),
+    (lambda s: Sweep(name="s", variable="x", values=[1], methods=["a", "a"]), ValueError,
+     r"`Sweep.methods` must not repeat"),
+    # json's raw "'<' not supported between 'str' and 'int'" at the first run
+    (lambda s: Sweep(name="s", variable="x", values=[1], methods=["a"], base={1: 2}), TypeError,
+     r"`Sweep.base` keys must be str"),
+    (lambda s: Sweep(name="s", variable="x", values=np.array(1.0), methods=["a"]), TypeError,
+     r"`Sweep.values` must be a list"),
+    (lambda s: Experiment(name="t", trial=noisy_trial, sweeps=[s], trials=10**30), ValueError,
+     r"`Experiment.trials` must be <= 1000000"),
 ])
 def test_malformed_experiments_are_refused_by_name(make, exc, match):
     sweep = Sweep(name="s", variable="x", values=np.arange(3), methods=("a",))   # arrays pass
@@ -218,6 +233,48 @@ def test_mean_se_of_huge_values_and_junk():
     with warnings.catch_warnings():
         warnings.simplefilter("error")              # no overflow in the squares
         assert mean_se([1e308, 1e308, None]) == (1e308, 0.0, 2)
-    for junk, exc in ((["a"], TypeError), (None, TypeError), ("12", TypeError)):
+    for junk, exc in ((["a"], TypeError), (None, TypeError), ("12", TypeError),
+                      (["1"], TypeError)):
         with pytest.raises(exc, match="`values`"):
             mean_se(junk)
+    assert mean_se([10**400, 1.0]) == (1.0, 0.0, 1)    # beyond float64: infinite, skipped
+
+
+def test_run_and_summarize_arguments_are_named(tmp_path):
+    from transync.experiments import summarize
+
+    exp = _experiment(trials=1)
+    for call, exc, match in (
+            (lambda: run_experiment(None, tmp_path), TypeError,
+             "`experiment` must be an Experiment"),
+            (lambda: run_experiment(exp, None), TypeError, "`out_dir` must be a folder path"),
+            (lambda: run_experiment(exp, tmp_path, workers=10**6), ValueError,
+             r"`workers` must be <= 256"),
+            (lambda: run_experiment(exp, tmp_path, trials=10**12), ValueError,
+             r"`trials` must be <= 1000000"),
+            (lambda: summarize(None, []), TypeError, "`experiment` must be an Experiment"),
+            (lambda: summarize(exp, [{"sweep": "s"}]), TypeError,
+             r"`records\[0\]` must be a dict with keys"),
+            (lambda: summarize(exp, "records"), TypeError, "`records` must be a list")):
+        with pytest.raises(exc, match=match):
+            call()
+    assert not (tmp_path / "results.sqlite").exists()
+
+
+def test_workers_beyond_the_trials_start_no_idle_process(tmp_path, monkeypatch):
+    """workers=40 for 2 trials started 40 processes."""
+    import concurrent.futures
+    import transync.experiments._runner as runner
+
+    sizes = []
+
+    class Recording(concurrent.futures.ProcessPoolExecutor):
+        def __init__(self, max_workers=None, **kw):
+            sizes.append(max_workers)
+            super().__init__(max_workers=max_workers, **kw)
+
+    monkeypatch.setattr(runner, "ProcessPoolExecutor", Recording)
+    exp = Experiment(name="t", trial=noisy_trial, trials=1, sweeps=[
+        Sweep(name="s", variable="x", values=[1], methods=["a", "b"], metrics=("value",))])
+    report = run_experiment(exp, tmp_path, workers=40, progress=False, plot=False)
+    assert report.n_new == 2 and sizes == [2]

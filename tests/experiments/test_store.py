@@ -324,3 +324,32 @@ def test_trials_of_other_seeds_are_counted_not_reported(tmp_path):
     second = run_experiment(_exp(), tmp_path / "s", seed=1, progress=False, plot=False)
     assert second.n_new == len(second.records) == len(first.records)
     assert second.n_other == len(first.records)
+
+
+def test_a_bad_row_leaves_the_store_open_and_intact(tmp_path):
+    """add(None, ...) was reported as "not a readable experiment store ... salvage" and closed
+    the connection: every later call raised AttributeError. Rows are checked before the
+    transaction now; a closed store says so."""
+    from transync.experiments import ExperimentStore
+
+    store = ExperimentStore(tmp_path / "r.sqlite")
+    store.add("e", "k", 0, "s", {"x": 1}, {"a": 1.0}, None, 0.1)
+    bad = [((None, "k", 0, "s", {}, {}, None, 0.1), TypeError, "`experiment` must be a non-empty"),
+           (("e", "k", 2**70, "s", {}, {}, None, 0.1), ValueError, r"`trial` must lie in"),
+           (("e", "k", "zero", "s", {}, {}, None, 0.1), TypeError, "`trial` must be an int"),
+           (("e", "k", 1, "s", {}, {"a": "x"}, None, 0.1), TypeError,
+            "`metrics` must map str names to real numbers"),
+           (("e", "k", 1, "s", {1: 2}, {}, None, 0.1), TypeError, "`config` must be a dict"),
+           (("e", "k", 1, "s", {}, {}, 3, 0.1), TypeError, "`error` must be None or a str"),
+           (("e", "k", 1, "s", {}, {}, None, float("nan")), ValueError, "`seconds` must be")]
+    for args, exc, match in bad:
+        with pytest.raises(exc, match=match):
+            store.add(*args)
+    rows = store.records("e")
+    assert len(rows) == 1 and rows[0]["metrics"] == {"a": 1.0}
+    assert store.done("e") == {("k", 0)}
+    store.close()
+    with pytest.raises(ExperimentStoreError, match="is closed"):
+        store.records("e")
+    with pytest.raises(TypeError, match="`path` must be a file path"):
+        ExperimentStore(None)

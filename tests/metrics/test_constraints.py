@@ -244,3 +244,38 @@ def test_one_node_graphs_and_single_pair():
 def test_bad_input(X, kw, exc, match):
     with pytest.raises(exc, match=match):
         constraint_violations(X, **kw)
+
+
+def test_object_indices_far_apart_cost_nothing():
+    """One key (0, 3000) built an O(N^3) loop over 3001 objects (minutes); only objects in a
+    key take part now. Indices beyond 1e7 are refused by name (was numpy's "maximum allowed
+    dimension exceeded")."""
+    import time
+
+    t0 = time.perf_counter()
+    res = constraint_violations({(0, 3000): np.array([0])})
+    assert time.perf_counter() - t0 < 5
+    assert res.info["n_object_triples"] == 0
+    with pytest.raises(ValueError, match=r"`X` keys name object 10+: object indices must stay"):
+        constraint_violations({(0, 10**30): np.array([0])})
+    # the same triples, numbered densely or sparsely
+    a, b = np.array([1, 0]), np.array([0, 1])
+    dense = constraint_violations({(0, 1): a, (1, 2): a, (0, 2): b})
+    sparse = constraint_violations({(5, 70): a, (70, 900): a, (5, 900): b})
+    assert dense.transitivity == sparse.transitivity
+    assert dense.info["n_object_triples"] == sparse.info["n_object_triples"] == 3
+
+
+def test_soft_values_and_sizes_beyond_float_are_refused():
+    """1e308 soft entries gave cvvr = NaN and acvv = inf with overflow warnings; sizes = 1e300
+    a wrapped int64 in the message; tol = 2**1100 a raw OverflowError."""
+    with pytest.raises(ValueError, match=r"`X\[\(0, 1\)\]` has values up to 1e\+308"):
+        constraint_violations({(0, 1): [[1e308, 1e308]]})
+    with pytest.raises(ValueError, match=r"`X\[0\]` has values up to 1e\+300"):
+        constraint_violations([np.full((2, 2), 1e300)] * 2)
+    a = np.array
+    with pytest.raises(ValueError, match=r"`sizes` must hold integers in \[0, 1e\+08\]"):
+        constraint_violations({(0, 1): a([0, 1]), (1, 2): a([0, 1]), (0, 2): a([1, 0])},
+                              sizes=[1e300, 2, 2])
+    with pytest.raises(ValueError, match=r"`tol` must be finite, got an integer of 332 digits"):
+        constraint_violations({(0, 1): a([0, 1])}, tol=2**1100)

@@ -58,3 +58,43 @@ def test_affinity_score_input_contract():
     with pytest.raises(ValueError, match="`affinity` is too large"):
         affinity_score(np.full((4, 4), 1e308), [0, 1], n2=2)
     assert affinity_score(K, [0, 1], n2=2, normalize_by=[1, 0]) == 1.0
+
+
+def test_affinity_score_names_what_is_wrong():
+    """normalize_by out of range was reported as `assignment`; an object with score() but no
+    n2 raised AttributeError."""
+    with pytest.raises(ValueError, match=r"`normalize_by` entries must be < n2=2, got 5"):
+        affinity_score(np.ones((4, 4)), [0, 1], n2=2, normalize_by=[5, 0])
+
+    class NoN2:
+        def score(self, X):
+            return 1.0
+
+    with pytest.raises(TypeError, match=r"`affinity` must be an Affinity .* without .n2"):
+        affinity_score(NoN2(), [0, 1])
+    with pytest.raises(ValueError, match=r"`affinity` must fit in float64"):
+        affinity_score([[2**1100] * 4] * 4, [0, 1], n2=2)
+
+
+def test_ragged_assignments_are_named():
+    with pytest.raises(TypeError, match=r"`assignment` must be a 1-d integer index array, got a "
+                                        r"ragged sequence"):
+        matching_accuracy([[0], [1, 2]], [0, 1])
+
+
+def test_homography_metric_inputs_are_checked():
+    from transync.metrics import brenner_focus, segmentation_scores
+
+    img = np.zeros((8, 8))
+    img[:, 4:] = 1e154                      # each square finite, their mean not
+    with pytest.raises(ValueError, match=r"`image` values are too large for the focus measure"):
+        brenner_focus(img)
+    with pytest.raises(TypeError, match=r"`image` must be an array, got a ragged"):
+        brenner_focus([[0.0, 1.0], [1.0]])
+    with pytest.raises(ValueError, match=r"`valid` must have the shape of `pred` \(1, 3\)"):
+        segmentation_scores([[1, 1, 0]], [[1, 0, 0]], valid=np.ones((2, 2), bool))
+    with pytest.raises(TypeError, match=r"`pred` must be a boolean \(or numeric\) mask"):
+        segmentation_scores(["False", "False"], [False, False])      # "False" read as True
+    with pytest.raises(ValueError, match=r"`truth` must be finite"):
+        segmentation_scores([0.0, 1.0], [np.nan, 1.0])
+    assert segmentation_scores([1, 0], [1.0, 0.0])["f1"] == 1.0

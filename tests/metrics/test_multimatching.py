@@ -111,3 +111,26 @@ def test_dict_prediction_keys_are_checked_by_both_metrics(key):
         multimatching_accuracy([np.array([0, 1])] * 2, truth)
     good = {(0, 1): np.array([1, 0]), (2, 1): np.array([1, 0])}     # (2, 1): inverted for (1, 2)
     assert multimatching_accuracy(good, truth) == pytest.approx(2 / 3)
+
+
+def test_truth_and_pairs_are_named():
+    """Errors about `truth` said `labels`; a self-pair (0, 0) counted a perfect prediction's
+    recall as 0; an unsynchronized result whose pairwise_dict() is None raised
+    UnboundLocalError."""
+    t = [np.array([0, 1]), np.array([1, 0])]
+    with pytest.raises(TypeError, match=r"^`truth`: "):
+        multimatching_accuracy([np.array([0])], None)
+    with pytest.raises(ValueError, match=r"^`truth`: `labels\[0\]` must be injective"):
+        multimatching_precision_recall([np.array([0, 1])], [np.array([0, 0])])
+    with pytest.raises(ValueError, match=r"`pairs` must hold pairs of distinct objects, got "
+                                         r"\(0, 0\)"):
+        multimatching_precision_recall({(0, 1): np.array([1, 0])}, t, pairs=[[0, 0]])
+
+    class Unsynced:
+        matching = None
+
+        def pairwise_dict(self):
+            return None
+
+    with pytest.raises(TypeError, match=r"`prediction.pairwise_dict\(\)` must return a dict"):
+        multimatching_precision_recall(Unsynced(), t)

@@ -65,6 +65,10 @@ __all__ = ["Experiment", "ExperimentReport", "ExperimentStore", "Sweep", "run_ex
 
 #: an experiment's name names its figure on disk: no folder separators, not "." or ".."
 _FILE_NAME = re.compile(r"(?![.]{1,2}$)[^/\\\x00]+")
+#: Most trials per configuration and most worker processes a run takes (a plan of 10**12
+#: trials never finished planning; 10**6 workers would fork without end).
+MAX_TRIALS = 10**6
+MAX_WORKERS = 256
 
 
 def _check_name(value, name: str) -> str:
@@ -115,17 +119,30 @@ class Sweep:
     def __post_init__(self):
         for attr in ("name", "variable"):
             _check_name(getattr(self, attr), f"Sweep.{attr}")
+        if self.variable == "method":
+            raise ValueError("`Sweep.variable` must not be 'method': every configuration's "
+                             "'method' is one of `Sweep.methods` (sweep methods there)")
         for attr in ("values", "methods", "metrics"):
             seq = getattr(self, attr)
-            if isinstance(seq, (str, bytes)) or not isinstance(seq, (Sequence, np.ndarray)):
+            if (isinstance(seq, (str, bytes)) or not isinstance(seq, (Sequence, np.ndarray))
+                    or np.ndim(seq) == 0):
                 raise TypeError(f"`Sweep.{attr}` must be a list, got {type(seq).__name__}")
             if attr != "metrics" and len(seq) == 0:
                 raise ValueError(f"`Sweep.{attr}` must not be empty (sweep {self.name!r})")
+            keys = [json.dumps(v, sort_keys=True, default=str) for v in seq]
+            if len(set(keys)) != len(keys):
+                dup = next(v for v, k in zip(seq, keys) if keys.count(k) > 1)
+                raise ValueError(f"`Sweep.{attr}` must not repeat an entry (it would run and "
+                                 f"count twice), got {dup!r} more than once in sweep "
+                                 f"{self.name!r}")
         for attr in ("methods", "metrics"):
             for item in getattr(self, attr):
                 _check_name(item, f"Sweep.{attr}")
         if not isinstance(self.base, Mapping):
             raise TypeError(f"`Sweep.base` must be a mapping, got {type(self.base).__name__}")
+        if not all(isinstance(k, str) for k in self.base):
+            raise TypeError(f"`Sweep.base` keys must be str (configuration names), got "
+                            f"{[k for k in self.base if not isinstance(k, str)][:5]!r}")
         if self.xlabel is not None and not isinstance(self.xlabel, str):
             raise TypeError(f"`Sweep.xlabel` must be a string or None, got {self.xlabel!r}")
 
@@ -151,7 +168,7 @@ class Experiment:
         experiment, sweep, value, trial index and seed (the same for every method). It must be
         picklable (a module-level function) to run on several workers.
     trials : int, default=20
-        Trials per configuration (:func:`run_experiment` may override it).
+        Trials per configuration, 1 to 10**6 (:func:`run_experiment` may override it).
     description : str, default=""
         One line shown by ``transync experiment --list``.
     finish : callable, optional
@@ -191,7 +208,7 @@ class Experiment:
         if not callable(self.trial):
             raise TypeError(f"`Experiment.trial` must be callable (config, rng) -> metrics, got "
                             f"{type(self.trial).__name__}")
-        check_int(self.trials, "Experiment.trials", minimum=1)
+        check_int(self.trials, "Experiment.trials", minimum=1, maximum=MAX_TRIALS)
         if not isinstance(self.description, str):
             raise TypeError(f"`Experiment.description` must be a string, got "
                             f"{type(self.description).__name__}")
@@ -304,10 +321,13 @@ class ExperimentStore:
     """
 
     def __init__(self, path) -> None:
+        if not isinstance(path, (str, os.PathLike)) or not str(path):
+            raise TypeError(f"`path` must be a file path (str or path-like), got "
+                            f"{type(path).__name__} {path!r:.60}")
         self.path = Path(path)
         _prepare_folder(self.path.parent)
         self._con = None
-        with self._guard():
+        with self._guard(opening=True):
             self._con = sqlite3.connect(str(self.path), timeout=30)
             # a store written by an older version in WAL mode is checkpointed into the main file
             self._con.execute("PRAGMA journal_mode=TRUNCATE")
@@ -323,8 +343,12 @@ class ExperimentStore:
             self._con.commit()
 
     @contextlib.contextmanager
-    def _guard(self):
-        """Turn SQLite errors into :class:`ExperimentStoreError` naming the file."""
+    def _guard(self, *, opening: bool = False):
+        """Turn SQLite errors into :class:`ExperimentStoreError` naming the file; a closed
+        store (after :meth:`close` or an error) says so."""
+        if self._con is None and not opening:
+            raise ExperimentStoreError(f"the experiment store {self.path} is closed (after "
+                                       "close() or an error); open a new ExperimentStore")
         try:
             yield
         except sqlite3.DatabaseError as exc:
@@ -360,12 +384,13 @@ class ExperimentStore:
 
     def add(self, experiment: str, key: str, trial: int, sweep: str, config: Mapping,
             metrics: Mapping, error: str | None, seconds: float) -> None:
+        """Store one finished trial (replacing a stored one with the same key); the arguments
+        are checked before the transaction, so a bad one leaves the store open and intact."""
+        row = _check_row(experiment, key, trial, sweep, config, metrics, error, seconds)
         with self._guard(), self._con:  # one transaction per trial
             self._con.execute(
                 "INSERT OR REPLACE INTO trials VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                (experiment, key, trial, sweep, json.dumps(dict(config), default=str),
-                 json.dumps({k: float(v) for k, v in metrics.items()}), error, seconds,
-                 time.time()))
+                row + (time.time(),))
 
     def records(self, experiment: str, keys=None) -> list[dict]:
         """Stored trials of ``experiment``; only those whose configuration hash is in ``keys``
@@ -384,6 +409,34 @@ class ExperimentStore:
                 self._con.execute("PRAGMA journal_mode=DELETE")   # remove the empty journal
             self._con.close()
             self._con = None
+
+
+def _check_row(experiment, key, trial, sweep, config, metrics, error, seconds) -> tuple:
+    """The columns of one trial row, each argument checked by name."""
+    for name, v in (("experiment", experiment), ("key", key), ("sweep", sweep)):
+        if not isinstance(v, str) or not v:
+            raise TypeError(f"`{name}` must be a non-empty str, got {type(v).__name__} {v!r:.60}")
+    if isinstance(trial, bool) or not isinstance(trial, numbers.Integral):
+        raise TypeError(f"`trial` must be an int, got {type(trial).__name__} {trial!r:.60}")
+    if not 0 <= trial < 2**63:
+        raise ValueError(f"`trial` must lie in [0, 2**63), got {trial!r:.60}")
+    if not isinstance(config, Mapping) or not all(isinstance(k, str) for k in config):
+        raise TypeError(f"`config` must be a dict with str keys, got {config!r:.80}")
+    if not isinstance(metrics, Mapping):
+        raise TypeError(f"`metrics` must be a dict of numbers, got {type(metrics).__name__}")
+    values = {}
+    for k, v in metrics.items():
+        if not isinstance(k, str) or isinstance(v, bool) or not isinstance(v, numbers.Real):
+            raise TypeError(f"`metrics` must map str names to real numbers, got {k!r}: "
+                            f"{type(v).__name__} {v!r:.40}")
+        values[k] = float(v)
+    if error is not None and not isinstance(error, str):
+        raise TypeError(f"`error` must be None or a str, got {type(error).__name__}")
+    if isinstance(seconds, bool) or not isinstance(seconds, numbers.Real) \
+            or not (math.isfinite(seconds) and seconds >= 0):
+        raise ValueError(f"`seconds` must be a finite number >= 0, got {seconds!r:.40}")
+    return (experiment, key, int(trial), sweep, json.dumps(dict(config), default=str),
+            json.dumps(values), error, float(seconds))
 
 
 def _prepare_folder(folder: Path) -> None:
@@ -586,9 +639,9 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
     out_dir : str or path-like
         Folder for ``results.sqlite``, ``summary.csv``, ``summary.md`` and ``<name>.png``.
     trials : int, optional
-        Trials per configuration (default: ``experiment.trials``).
+        Trials per configuration, 1 to 10**6 (default: ``experiment.trials``).
     workers : int, default=1
-        Processes; 1 runs in this process.
+        Processes, 1 to 256 (never more than the trials to run); 1 runs in this process.
     seed : int, default=0
         Changes every trial's random problem; part of the configuration key, so trials stored
         under another seed are neither skipped nor reported.
@@ -629,8 +682,14 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
     >>> first.n_new, again.n_new, len(again.records)
     (8, 0, 8)
     """
-    n_trials = check_int(trials if trials is not None else experiment.trials, "trials", minimum=1)
-    workers = check_int(workers, "workers", minimum=1)
+    if not isinstance(experiment, Experiment):
+        raise TypeError(f"`experiment` must be an Experiment, got {type(experiment).__name__}")
+    if not isinstance(out_dir, (str, os.PathLike)) or not str(out_dir):
+        raise TypeError(f"`out_dir` must be a folder path (str or path-like), got "
+                        f"{type(out_dir).__name__} {out_dir!r:.60}")
+    n_trials = check_int(trials if trials is not None else experiment.trials, "trials", minimum=1,
+                         maximum=MAX_TRIALS)
+    workers = check_int(workers, "workers", minimum=1, maximum=MAX_WORKERS)
     seed = check_int(seed, "seed")
     out = Path(out_dir)
     created = not out.exists()
@@ -730,8 +789,8 @@ def _execute(experiment: Experiment, store: ExperimentStore, todo: list, workers
                 n_failed += error is not None
                 bar.update(1)
             return n_failed
-        pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init,
-                                   initargs=(os.getpid(),))
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)),   # no idle processes
+                                   initializer=_worker_init, initargs=(os.getpid(),))
         try:
             pending = {}
             it = iter(todo)
@@ -786,10 +845,18 @@ def mean_se(values) -> tuple[float, float, int]:
     """
     if isinstance(values, (str, bytes)) or not isinstance(values, Iterable):
         raise TypeError(f"`values` must be an iterable of numbers, got {type(values).__name__}")
-    try:
-        vals = np.array([v for v in values if v is not None], dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"`values` must hold numbers (or None), got {exc}") from None
+    vals = []
+    for v in values:
+        if v is None:
+            continue
+        if isinstance(v, (str, bytes)) or not isinstance(v, numbers.Real):
+            raise TypeError(f"`values` must hold numbers (or None), got {type(v).__name__} "
+                            f"{v!r:.40}")
+        try:
+            vals.append(float(v))
+        except OverflowError:           # an int beyond float64: infinite, skipped as such
+            vals.append(math.inf)
+    vals = np.array(vals, dtype=float)
     vals = vals[np.isfinite(vals)]
     n = vals.size
     # values beyond 1e150 would overflow the squares: their statistics are taken scaled
@@ -879,6 +946,21 @@ def summarize(experiment: Experiment, records: list[dict]) -> list[dict]:
     >>> row["metric"], row["mean"], row["se"], row["n"], row["failed"]
     ('accuracy', 0.75, 0.25, 2, 0)
     """
+    if not isinstance(experiment, Experiment):
+        raise TypeError(f"`experiment` must be an Experiment, got {type(experiment).__name__}")
+    if isinstance(records, (str, bytes, Mapping)) or not isinstance(records, Iterable):
+        raise TypeError(f"`records` must be a list of trial records, got "
+                        f"{type(records).__name__}")
+    records = list(records)
+    for k, r in enumerate(records):
+        missing = ([f for f in ("sweep", "config", "metrics", "error") if f not in r]
+                   if isinstance(r, Mapping) else None)
+        if missing is None or missing:
+            raise TypeError(f"`records[{k}]` must be a dict with keys 'sweep', 'config', "
+                            f"'metrics' and 'error' (as ExperimentReport.records), got "
+                            + (type(r).__name__ if missing is None else f"no {missing}"))
+        if not isinstance(r["config"], Mapping) or not isinstance(r["metrics"], Mapping):
+            raise TypeError(f"`records[{k}]`: 'config' and 'metrics' must be dicts")
     by_sweep = {sw.name: sw for sw in experiment.sweeps}
     groups: dict[tuple, list[dict]] = {}
     failures: dict[tuple, int] = {}

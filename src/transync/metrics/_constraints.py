@@ -156,10 +156,27 @@ class _Pairs:
     dense: np.ndarray | None       # (Q, n_max, n_max) float block i -> j, zero padded
 
 
+MAX_OBJECTS = 10**7      # largest object index + 1 (one size per object is kept)
+
+
 def _check_work(n_entries: int, what: str) -> None:
     if n_entries > MAX_NODES:
         raise ValueError(f"`X` would need {what} of {n_entries:.3g} entries (more than "
                          f"{MAX_NODES:.0e}); evaluate fewer or smaller objects")
+
+
+#: largest absolute value of a soft correspondence entry: sums and products of two entries
+#: over up to MAX_NODES terms stay finite (1e308 entries made NaN rates and inf magnitudes)
+SOFT_LIMIT = 1e100
+
+
+def _soft_block(v, name: str) -> np.ndarray:
+    M = check_array(v, name, ndim=2)
+    top = float(np.abs(M).max(initial=0.0))
+    if top > SOFT_LIMIT:
+        raise ValueError(f"`{name}` has values up to {top:.3g}: soft correspondences must stay "
+                         f"within +-{SOFT_LIMIT:g} (they are about 0 .. 1)")
+    return M
 
 
 def _is_partial_permutation(M: np.ndarray) -> bool:
@@ -178,8 +195,9 @@ def _check_sizes(sizes, n_needed: int | None) -> np.ndarray | None:
     if sizes is None:
         return None
     arr = check_array(sizes, "sizes", ndim=1)
-    if arr.size and (np.any(arr != np.round(arr)) or arr.min() < 0):
-        raise ValueError(f"`sizes` must hold non-negative integers, got {arr.tolist()[:10]}")
+    if arr.size and (np.any(arr != np.round(arr)) or arr.min() < 0 or arr.max() > MAX_NODES):
+        raise ValueError(f"`sizes` must hold integers in [0, {MAX_NODES:.0e}], got "
+                         f"{arr.tolist()[:10]}")
     arr = arr.astype(np.int64)
     if n_needed is not None and arr.size < n_needed:
         raise ValueError(f"`sizes` must give the size of every object (at least {n_needed}), "
@@ -198,6 +216,9 @@ def _parse_pairwise(X: Mapping, sizes) -> _Pairs:
                              f"indices, got {key!r}")
         keys.append((int(key[0]), int(key[1])))
     n_obj = max((max(k) for k in keys), default=-1) + 1
+    if n_obj > MAX_OBJECTS:
+        raise ValueError(f"`X` keys name object {n_obj - 1}: object indices must stay below "
+                         f"{MAX_OBJECTS:.0e} (number the objects 0 .. N - 1)")
     given = _check_sizes(sizes, n_obj)
     known: dict[int, int] = {}
     lower: dict[int, int] = {}
@@ -220,7 +241,7 @@ def _parse_pairwise(X: Mapping, sizes) -> _Pairs:
                 lower[j] = max(lower.get(j, 0), int(a.max()) + 1)
             values[(i, j)] = a
         else:
-            M = check_array(v, f"X[{(i, j)}]", ndim=2)
+            M = _soft_block(v, f"X[{(i, j)}]")
             fix(i, M.shape[0], (i, j))
             fix(j, M.shape[1], (i, j))
             values[(i, j)] = M
@@ -295,7 +316,7 @@ def _parse_absolute(X, tol: float) -> tuple[_Pairs, ConstraintStats]:
         return _Pairs(sizes, pairs, fwd, bwd, None), cap
     mats = []
     for g, M in enumerate(X):
-        M = check_array(M, f"X[{g}]", ndim=2)
+        M = _soft_block(M, f"X[{g}]")
         if mats and M.shape[1] != mats[0].shape[1]:
             raise ValueError(f"`X[{g}]` must have {mats[0].shape[1]} columns (universe slots) "
                              f"like `X[0]`, got shape {M.shape}")
@@ -355,30 +376,50 @@ def _pairwise_capacity(p: _Pairs, tol: float) -> ConstraintStats:
 
 
 def _object_triples(p: _Pairs) -> np.ndarray:
-    """``(T, 3)`` triples ``(i, j, k)``, ``i < k``, ``j`` not in ``{i, k}``, all pairs present."""
-    N = p.sizes.shape[0]
-    have = np.zeros((N, N), dtype=bool)
-    have[p.pairs[:, 0], p.pairs[:, 1]] = True
+    """``(T, 3)`` triples ``(i, j, k)``, ``i < k``, ``j`` not in ``{i, k}``, all pairs present.
+
+    Built over the objects that appear in a pair only (renumbered in order, then mapped back):
+    a single key ``(0, 3000)`` made a 3001-object O(N^3) loop.
+    """
+    ids, local = np.unique(p.pairs, return_inverse=True)
+    local = local.reshape(-1, 2)
+    m = ids.shape[0]
+    _check_work(m * m, "an object adjacency")
+    have = np.zeros((m, m), dtype=bool)
+    have[local[:, 0], local[:, 1]] = True
     have |= have.T
     out = []
-    for i in range(N):
+    for i in range(m):
         # j, k with have[i, j], have[j, k], have[i, k], k > i
-        jk = have[i][:, None] & have & have[i][None, :]
-        jk[:, : i + 1] = False
-        jk[i, :] = False
+        nb = np.flatnonzero(have[i])
+        nb_k = nb[nb > i]
+        if not nb_k.size:
+            continue
+        jk = have[np.ix_(nb, nb_k)]
         j, k = np.nonzero(jk)
         if j.size:
-            out.append(np.column_stack([np.full(j.size, i), j, k]))
-    return np.concatenate(out) if out else np.zeros((0, 3), dtype=np.int64)
+            out.append(np.column_stack([np.full(j.size, i), nb[j], nb_k[k]]))
+    return ids[np.concatenate(out)] if out else np.zeros((0, 3), dtype=np.int64)
 
 
-def _pair_index(p: _Pairs) -> np.ndarray:
-    N = p.sizes.shape[0]
-    pid = np.full((N, N), -1, dtype=np.int64)
-    q = np.arange(p.pairs.shape[0])
-    pid[p.pairs[:, 0], p.pairs[:, 1]] = q
-    pid[p.pairs[:, 1], p.pairs[:, 0]] = q
-    return pid
+class _PairIndex:
+    """``pid[a, b]``: the row of pair ``{a, b}`` in ``p.pairs``, for arrays of present pairs
+    (sorted keys and a binary search: no (N, N) table, whatever the object indices)."""
+
+    def __init__(self, p: _Pairs):
+        self._n = np.int64(p.sizes.shape[0])
+        keys = p.pairs[:, 0] * self._n + p.pairs[:, 1]          # pairs are stored i < j
+        self._order = np.argsort(keys, kind="stable")
+        self._keys = keys[self._order]
+
+    def __getitem__(self, ab) -> np.ndarray:
+        a, b = (np.asarray(v, dtype=np.int64) for v in ab)
+        keys = np.minimum(a, b) * self._n + np.maximum(a, b)
+        return self._order[np.searchsorted(self._keys, keys)]
+
+
+def _pair_index(p: _Pairs) -> _PairIndex:
+    return _PairIndex(p)
 
 
 def _transitivity_exact(p: _Pairs, tri: np.ndarray) -> ConstraintStats:
@@ -449,7 +490,7 @@ def _transitivity_dense(p: _Pairs, tri: np.ndarray, tol: float) -> ConstraintSta
     return ConstraintStats(n_tot, n_tot, n_bad, viol, mag)
 
 
-def _entries(flat: np.ndarray, pid: np.ndarray, n: int, a, c, x, y) -> np.ndarray:
+def _entries(flat: np.ndarray, pid: _PairIndex, n: int, a, c, x, y) -> np.ndarray:
     """``X_ac[x, y]`` elementwise from the raveled ``(Q, n, n)`` blocks (stored for ``a < c``)."""
     fw = a < c
     return flat.take((pid[a, c] * n + np.where(fw, x, y)) * n + np.where(fw, y, x))

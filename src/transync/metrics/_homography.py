@@ -198,6 +198,26 @@ def pairwise_corner_error(H_est, H_true, *, image_size, min_overlap=0.05) -> np.
     return np.asarray(out, dtype=float)
 
 
+def _as_array(x, name: str) -> np.ndarray:
+    """``np.asarray`` whose ragged-nesting error names the argument."""
+    try:
+        return np.asarray(x)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"`{name}` must be an array, got a ragged or odd sequence: "
+                        f"{str(exc).splitlines()[0]}") from None
+
+
+def _as_mask(x, name: str) -> np.ndarray:
+    """A boolean mask from bools or finite numbers (non-zero: True); text is refused (numpy
+    reads "False" as True), NaN too."""
+    arr = _as_array(x, name)
+    if arr.dtype.kind not in "biuf":
+        raise TypeError(f"`{name}` must be a boolean (or numeric) mask, got dtype {arr.dtype}")
+    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+        raise ValueError(f"`{name}` must be finite, got NaN or infinite entries")
+    return arr.astype(bool)
+
+
 def brenner_focus(image, mask=None) -> float:
     """Brenner focus measure: mean of ``max(|I(x+2,y) - I(x,y)|, |I(x,y+2) - I(x,y)|)^2``.
 
@@ -231,7 +251,7 @@ def brenner_focus(image, mask=None) -> float:
     >>> round(brenner_focus(img), 4)
     0.3333
     """
-    img = np.asarray(image)
+    img = _as_array(image, "image")
     if img.dtype.kind not in "biuf":
         raise TypeError(f"`image` must be a real-valued image, got dtype {img.dtype}")
     if img.dtype.kind == "f" and not np.all(np.isfinite(img)):
@@ -260,7 +280,7 @@ def brenner_focus(image, mask=None) -> float:
     valid = np.zeros(img.shape, dtype=bool)
     valid[:-2, :-2] = True
     if mask is not None:
-        m = np.asarray(mask, dtype=bool)
+        m = _as_mask(mask, "mask")
         if m.shape != img.shape:
             raise ValueError(f"`mask` must have the image's shape {img.shape}, got {m.shape}")
         # both samples of each difference must be inside the mask
@@ -270,7 +290,13 @@ def brenner_focus(image, mask=None) -> float:
         valid &= m2
     if not valid.any():
         return 0.0
-    return float(fm[valid].mean())
+    with np.errstate(over="ignore"):
+        focus = float(fm[valid].mean())
+    if not np.isfinite(focus):                  # each square finite, their sum not
+        raise ValueError("`image` values are too large for the focus measure (the mean of the "
+                         "squared differences overflows); scale the image to [0, 1] or "
+                         "[0, 255]")
+    return focus
 
 
 def segmentation_scores(pred, truth, *, valid=None) -> dict:
@@ -301,13 +327,15 @@ def segmentation_scores(pred, truth, *, valid=None) -> dict:
     >>> segmentation_scores([[True, True, False]], [[True, False, False]])
     {'precision': 0.5, 'recall': 1.0, 'f1': 0.666..., 'iou': 0.5}
     """
-    p = np.asarray(pred, dtype=bool)
-    t = np.asarray(truth, dtype=bool)
+    p = _as_mask(pred, "pred")
+    t = _as_mask(truth, "truth")
     if p.shape != t.shape:
         raise ValueError(f"`pred` and `truth` must have the same shape, got {p.shape} and "
                          f"{t.shape}")
     if valid is not None:
-        v = np.asarray(valid, dtype=bool)
+        v = _as_mask(valid, "valid")
+        if v.shape != p.shape:
+            raise ValueError(f"`valid` must have the shape of `pred` {p.shape}, got {v.shape}")
         p, t = p[v], t[v]
     tp = float(np.sum(p & t))
     fp = float(np.sum(p & ~t))

@@ -189,7 +189,10 @@ def affinity_score(affinity, assignment, *, n2: int | None = None,
     """
     a = check_assignment(assignment, "assignment")
     if hasattr(affinity, "score"):
-        n2 = affinity.n2
+        if not isinstance(getattr(affinity, "n2", None), (int, np.integer)):
+            raise TypeError(f"`affinity` must be an Affinity (with .score and an int .n2) or a "
+                            f"matrix, got {type(affinity).__name__} without .n2")
+        n2 = int(affinity.n2)
         score = affinity.score
     else:
         if n2 is None:
@@ -205,9 +208,10 @@ def affinity_score(affinity, assignment, *, n2: int | None = None,
         def score(X):
             x = X.ravel(order="F")
             return float(x @ K @ x)
+    a = check_assignment(a, "assignment", n2=n2)
     value = score(assignment_to_matrix(a, n2))
     if normalize_by is not None:
-        b = check_assignment(normalize_by, "normalize_by")
+        b = check_assignment(normalize_by, "normalize_by", n2=n2)
         if b.shape != a.shape:
             raise ValueError(f"`normalize_by` must be an assignment of the same {a.shape[0]} "
                              f"nodes as `assignment`, got shape {b.shape}")

@@ -29,7 +29,11 @@ def _prediction(prediction, truth: MultiMatching):
         return prediction
     if (not isinstance(prediction, MultiMatching) and getattr(prediction, "matching", 0) is None
             and callable(getattr(prediction, "pairwise_dict", None))):
-        return prediction.pairwise_dict()     # an unsynchronized result: its observed pairs
+        maps = prediction.pairwise_dict()     # an unsynchronized result: its observed pairs
+        if not isinstance(maps, Mapping):
+            raise TypeError(f"`prediction.pairwise_dict()` must return a dict {{(i, j): "
+                            f"assignment}}, got {type(maps).__name__}")
+        return maps
     if (not isinstance(prediction, MultiMatching)
             and isinstance(getattr(prediction, "matching", None), MultiMatching)):
         prediction = prediction.matching
@@ -94,8 +98,14 @@ def multimatching_precision_recall(prediction, truth, *, pairs=None) -> dict[str
     >>> multimatching_precision_recall(pred, truth)
     {'precision': 0.6, 'recall': 0.75, 'f1': 0.666..., 'accuracy': 0.75}
     """
-    truth = MultiMatching.from_labels(truth)
+    try:
+        truth = MultiMatching.from_labels(truth)
+    except (TypeError, ValueError) as exc:
+        raise type(exc)(f"`truth`: {exc}") from None
     pairs = truth.check_pairs(pairs)
+    if pairs.size and np.any(pairs[:, 0] == pairs[:, 1]):
+        i = int(pairs[np.flatnonzero(pairs[:, 0] == pairs[:, 1])[0], 0])
+        raise ValueError(f"`pairs` must hold pairs of distinct objects, got ({i}, {i})")
     pred = _prediction(prediction, truth)
     if isinstance(pred, Mapping):
         # one implementation of dict -> pairwise maps: the one behind MultiMatching.accuracy

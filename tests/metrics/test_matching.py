@@ -98,3 +98,13 @@ def test_homography_metric_inputs_are_checked():
     with pytest.raises(ValueError, match=r"`truth` must be finite"):
         segmentation_scores([0.0, 1.0], [np.nan, 1.0])
     assert segmentation_scores([1, 0], [1.0, 0.0])["f1"] == 1.0
+
+
+def test_corner_error_of_identical_maps_is_zero_or_refused():
+    """image_size = 1e308 gave inf for two identical homographies (corners overflow)."""
+    from transync.metrics import corner_error
+
+    H = 2 * np.eye(3)
+    with pytest.raises(ValueError, match=r"`image_size` .* entries in \[1, 1e\+12\]"):
+        corner_error(H, H, image_size=(1e308, 1e308))
+    assert corner_error(H, H, image_size=(1e12, 1e12)) == 0.0

@@ -691,6 +691,10 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
                          maximum=MAX_TRIALS)
     workers = check_int(workers, "workers", minimum=1, maximum=MAX_WORKERS)
     seed = check_int(seed, "seed")
+    for name, flag in (("progress", progress), ("plot", plot)):
+        if not isinstance(flag, (bool, np.bool_)):
+            raise TypeError(f"`{name}` must be True or False, got {type(flag).__name__} "
+                            f"{flag!r:.40}")
     out = Path(out_dir)
     created = not out.exists()
     t_start = time.perf_counter()

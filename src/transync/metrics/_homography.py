@@ -27,10 +27,17 @@ def _sizes(image_size, n):
     arr = check_array(image_size, "image_size", finite=False)
     if arr.shape == (2,):
         arr = np.broadcast_to(arr, (n, 2))
-    if arr.shape != (n, 2) or not np.all(np.isfinite(arr)) or not np.all(arr >= 1):
-        raise ValueError(f"`image_size` must be (width, height) or of shape ({n}, 2), with finite "
-                         f"entries >= 1, got {np.asarray(image_size).tolist()!r}")
+    if (arr.shape != (n, 2) or not np.all(np.isfinite(arr)) or not np.all(arr >= 1)
+            or not np.all(arr <= MAX_IMAGE_SIDE)):
+        raise ValueError(f"`image_size` must be (width, height) or of shape ({n}, 2), with "
+                         f"entries in [1, {MAX_IMAGE_SIDE:.0e}] pixels, got "
+                         f"{np.asarray(image_size).tolist()!r:.80}")
     return arr
+
+
+#: largest image side the homography metrics take: corners beyond it made the transfer error
+#: of two identical homographies inf (1e308 * 2 overflows)
+MAX_IMAGE_SIDE = 1e12
 
 
 def corner_error(H_est, H_true, *, image_size) -> np.ndarray:

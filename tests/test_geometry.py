@@ -108,4 +108,7 @@ def test_integers_beyond_float64_are_named():
         translation(0, float("nan"))
     with pytest.raises(ValueError, match=r"`size` must fit in float64"):
         image_corners((2**1100, 3))
+    with pytest.raises(TypeError, match=r"`size` must be \(width, height\) in pixels, got "
+                                        r"booleans"):
+        image_corners((True, True))
     np.testing.assert_array_equal(translation(2, -1)[:2, 2], [2.0, -1.0])

@@ -177,3 +177,19 @@ def test_cycle_inconsistency_sparse_indices_sizes_and_self_keys():
         cycle_inconsistency(tri, sizes=[2, 2, 10**9])
     with pytest.raises(ValueError, match=r"distinct non-negative object indices, got \(0, 0\)"):
         cycle_inconsistency({(0, 0): a([0])})
+
+
+def test_cycle_inconsistency_arrays_scales_past_ten_thousand_objects():
+    """The (N, N) pair table refused (and before that allocated) N**2 entries: a chain of
+    20 000 objects, which synchronize_permutations reports on, failed after its solve."""
+    from transync.permutations import cycle_inconsistency_arrays
+
+    N = 20_000
+    pairs = np.column_stack([np.arange(N - 1), np.arange(1, N)])
+    maps = np.tile([1, 0], (N - 1, 1))
+    rep = cycle_inconsistency_arrays(pairs, maps, np.full(N, 2))
+    assert rep["n_triangles"] == 0 and rep["sampled"]
+    tri = np.array([[0, 1], [1, 2], [0, 2]])
+    rep = cycle_inconsistency_arrays(tri, np.array([[1, 0], [1, 0], [1, 0]]), [2, 2, 2])
+    assert rep == {"n_triangles": 1, "inconsistent_triangles": 1.0, "cycle_error": 1.0,
+                   "sampled": False}

@@ -484,14 +484,30 @@ def check_bool(value, name: str) -> bool:
     return bool(value)
 
 
+def short_repr(x, limit: int = 80) -> str:
+    """``repr(x)`` cut to ``limit`` characters; safe for ints too long for ``str`` (Python
+    refuses more than 4300 digits)."""
+    try:
+        text = repr(x)
+    except ValueError:
+        text = f"<{type(x).__name__} with an integer of about 10^{int_magnitude(x)}>"
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def int_magnitude(x) -> int:
+    """Order of magnitude of the largest int inside ``x`` (an int, or a flat sequence)."""
+    ints = [x] if isinstance(x, int) else [v for v in x if isinstance(v, int)]
+    return int(max(abs(v).bit_length() for v in ints) * 0.30103) if ints else 0
+
+
 def check_positive(value, name: str, *, allow_zero: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise TypeError(f"`{name}` must be a real number, got {type(value).__name__} {value!r}")
     try:
         value = float(value)
     except OverflowError:                   # an int beyond float64
-        raise ValueError(f"`{name}` must be finite, got an integer of "
-                         f"{len(str(abs(value)))} digits (beyond float64)") from None
+        raise ValueError(f"`{name}` must be finite, got an integer of about "
+                         f"10^{int_magnitude(int(value))} (beyond float64)") from None
     if not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
         rel = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"`{name}` must be finite and {rel}, got {value!r}")
@@ -509,11 +525,18 @@ def check_image_size(size, name: str = "image_size", *, minimum: int = 1,
     for v in size:
         if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
             raise TypeError(f"`{name}` must be (width, height) in pixels, got "
-                            f"{type(v).__name__} {v!r} in {size!r}")
-        whole = isinstance(v, numbers.Integral) or (np.isfinite(v) and float(v).is_integer())
-        if not (whole and minimum <= v <= maximum):       # ints beyond float: no isfinite
+                            f"{type(v).__name__} {short_repr(v, 40)} in {short_repr(size)}")
+        if isinstance(v, numbers.Integral):     # ints beyond float64 compare exactly
+            ok = minimum <= v <= maximum
+        else:
+            try:
+                f = float(v)
+            except OverflowError:
+                f = float("inf")
+            ok = bool(np.isfinite(f)) and f.is_integer() and minimum <= f <= maximum
+        if not ok:
             raise ValueError(f"`{name}` must be (width, height) in whole pixels, each in "
-                             f"[{minimum}, {maximum}], got {size!r:.80}")
+                             f"[{minimum}, {maximum}], got {short_repr(size)}")
         out.append(int(v))
     return out[0], out[1]
 

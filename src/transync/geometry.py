@@ -301,6 +301,9 @@ def _image_size(size, name: str) -> tuple[float, float]:
     """``(width, height)`` as two finite positive floats."""
     if isinstance(size, (str, bytes)) or size is None:
         raise TypeError(f"`{name}` must be (width, height), got {type(size).__name__} {size!r}")
+    if (isinstance(size, (list, tuple)) and any(isinstance(v, (bool, np.bool_)) for v in size)
+            or getattr(size, "dtype", None) == bool):
+        raise TypeError(f"`{name}` must be (width, height) in pixels, got booleans {size!r}")
     arr = check_array(size, name, finite=False)
     if arr.shape != (2,) or not np.all(np.isfinite(arr)) or not np.all(arr > 0):
         raise ValueError(f"`{name}` must be (width, height) with finite positive entries, "

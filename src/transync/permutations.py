@@ -582,11 +582,12 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
     check_int(max_triangles, "max_triangles", minimum=1)
     n_obj = int(sizes.shape[0])
     n_max = max(maps.shape[1], int(sizes.max(initial=0)))
-    if n_obj * n_obj > MAX_NODES or maps.shape[0] * n_max > MAX_NODES:
-        what = (f"{n_obj} objects (an {n_obj} x {n_obj} pair table)" if n_obj * n_obj > MAX_NODES
-                else f"{maps.shape[0]} maps padded to {n_max} nodes")
-        raise ValueError(f"`sizes` gives {what}: more than {MAX_NODES:.0e} entries; number "
-                         "only the objects in `pairs`, or check `sizes`")
+    if maps.shape[0] * n_max > MAX_NODES:
+        raise ValueError(f"`sizes` gives an object of {n_max} nodes: the {maps.shape[0]} maps "
+                         f"padded to that width would need more than {MAX_NODES:.0e} entries; "
+                         "check `sizes`")
+    if n_obj > 2**31:
+        raise ValueError(f"`sizes` must describe at most 2**31 objects, got {n_obj}")
     if maps.shape[1] < n_max:
         maps = np.concatenate([maps, np.full((maps.shape[0], n_max - maps.shape[1]),
                                              UNMATCHED, maps.dtype)], 1)
@@ -595,9 +596,17 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
         inv = np.full_like(maps, UNMATCHED)
         q, u = np.nonzero(maps >= 0)
         inv[q, maps[q, u]] = u
-    pid = np.full((n_obj, n_obj), -1, dtype=np.int64)
-    q_rev = np.arange(pairs.shape[0])[::-1]
-    pid[pairs[q_rev, 0], pairs[q_rev, 1]] = q_rev          # first occurrence wins
+    # pair (i, j) -> its row, first occurrence winning: sorted keys i * N + j and a binary
+    # search (an (N, N) table was N**2 entries: 10**4 objects and up failed)
+    keys, key_row = np.unique(pairs[:, 0] * n_obj + pairs[:, 1], return_index=True)
+
+    def pid(a, b):
+        k = np.asarray(a, dtype=np.int64) * n_obj + b
+        if not keys.size:
+            return np.full(k.shape, -1, dtype=np.int64)
+        pos = np.minimum(np.searchsorted(keys, k), keys.size - 1)
+        return np.where(keys[pos] == k, key_row[pos], -1)
+
     # a column of -1 so that "unmatched" indexes to unmatched: ajk_pad[-1] = -1
     maps_pad = np.concatenate([maps, np.full((maps.shape[0], 1), UNMATCHED, maps.dtype)], 1)
     total = n_obj * (n_obj - 1) * (n_obj - 2) // 6
@@ -615,21 +624,22 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
                 left -= m
                 yield tri
         else:
-            for i in range(n_obj - 2):
-                row = pid[i]
-                js = np.flatnonzero(row[i + 1:] >= 0) + i + 1
+            heads, tails = keys // n_obj, keys % n_obj      # sorted by i, then j
+            bounds = np.flatnonzero(np.diff(heads)) + 1
+            for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, heads.size]):
+                js = tails[lo:hi]
                 if js.size < 2:
                     continue
                 jj, kk = np.triu_indices(js.size, 1)
-                yield np.column_stack([np.full(jj.size, i), js[jj], js[kk]])
+                yield np.column_stack([np.full(jj.size, heads[lo]), js[jj], js[kk]])
 
     n_tri = 0
     bad = 0
     err = 0.0
     for tri in _chunks():
-        qij = pid[tri[:, 0], tri[:, 1]]
-        qjk = pid[tri[:, 1], tri[:, 2]]
-        qik = pid[tri[:, 0], tri[:, 2]]
+        qij = pid(tri[:, 0], tri[:, 1])
+        qjk = pid(tri[:, 1], tri[:, 2])
+        qik = pid(tri[:, 0], tri[:, 2])
         ok = (qij >= 0) & (qjk >= 0) & (qik >= 0)
         if not ok.any():
             continue

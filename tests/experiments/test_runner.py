@@ -187,6 +187,13 @@ def test_a_trial_returning_junk_fails_that_trial_only(tmp_path, out, what):
     assert all(what in r["error"] for r in rep.records)
 
 
+def test_sweep_values_of_any_shape_are_accepted():
+    """Ragged and mixed values (lists of different lengths, None beside a tuple) are valid
+    sweep values; the 0-d check must not turn them into an array."""
+    for values in ([[1], [1, 2]], [None, (320, 240)], ["auto", (1, 2)], [{"a": 1, 2: "b"}]):
+        assert list(Sweep(name="s", variable="x", values=values, methods=["a"]).values) == values
+
+
 @pytest.mark.parametrize("make, exc, match", [
     (lambda s: Experiment(name="", trial=noisy_trial, sweeps=[s]), TypeError, "Experiment.name"),
     (lambda s: Experiment(name="a/b", trial=noisy_trial, sweeps=[s]), ValueError, "figure file"),

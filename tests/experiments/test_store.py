@@ -341,13 +341,20 @@ def test_a_bad_row_leaves_the_store_open_and_intact(tmp_path):
             "`metrics` must map str names to real numbers"),
            (("e", "k", 1, "s", {1: 2}, {}, None, 0.1), TypeError, "`config` must be a dict"),
            (("e", "k", 1, "s", {}, {}, 3, 0.1), TypeError, "`error` must be None or a str"),
-           (("e", "k", 1, "s", {}, {}, None, float("nan")), ValueError, "`seconds` must be")]
+           (("e", "k", 1, "s", {}, {}, None, float("nan")), ValueError, "`seconds` must be"),
+           (("e", "k", 1, "s", {}, {}, None, 10**400), ValueError, "`seconds` must be a finite"),
+           (("e", "k", 1, "s", {}, {}, None, "1"), TypeError, "`seconds` must be a number"),
+           (("e", "k", 1, "s", {}, {"a": 10**400}, None, 0.1), ValueError,
+            r"`metrics\['a'\]` must fit in float64")]
     for args, exc, match in bad:
         with pytest.raises(exc, match=match):
             store.add(*args)
     rows = store.records("e")
     assert len(rows) == 1 and rows[0]["metrics"] == {"a": 1.0}
-    assert store.done("e") == {("k", 0)}
+    store.add("e", "k", 1, "s", {}, {"ok": True}, None, 0.1)   # bools count 0/1, as in trials
+    assert store.records("e")[1]["metrics"] == {"ok": 1.0}
+    store.add("e", "k", 1, "s", {}, {"a": 1.0}, None, 0.1)     # replaces trial 1
+    assert store.done("e") == {("k", 0), ("k", 1)}
     store.close()
     with pytest.raises(ExperimentStoreError, match="is closed"):
         store.records("e")

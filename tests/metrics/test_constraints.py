@@ -277,5 +277,5 @@ def test_soft_values_and_sizes_beyond_float_are_refused():
     with pytest.raises(ValueError, match=r"`sizes` must hold integers in \[0, 1e\+08\]"):
         constraint_violations({(0, 1): a([0, 1]), (1, 2): a([0, 1]), (0, 2): a([1, 0])},
                               sizes=[1e300, 2, 2])
-    with pytest.raises(ValueError, match=r"`tol` must be finite, got an integer of 332 digits"):
+    with pytest.raises(ValueError, match=r"`tol` must be finite, got an integer of about 10\^331"):
         constraint_violations({(0, 1): a([0, 1])}, tol=2**1100)

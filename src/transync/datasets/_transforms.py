@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import (as_generator, check_choice, check_image_size, check_int,
-                           check_positive, check_probability)
+                           check_positive, check_probability, int_magnitude, short_repr)
 from ..geometry import image_corners, normalize_determinant, transfer_points
 from ._graphs import _MAX_ENTRIES
 
@@ -61,8 +61,9 @@ def _check_size(n: int, d: int, given: str) -> None:
     """Refuse problems whose (N, N, d, d) observations would not fit (``given``: the arguments
     as the user gave them, for the message)."""
     if n * n * d * d > _MAX_ENTRIES:
-        raise ValueError(f"{given} would need {n * n * d * d:.3g} observed entries "
-                         f"(N * N * d * d, more than {_MAX_ENTRIES:.0e}); use a smaller problem")
+        raise ValueError(f"{given} would need about 10^{int_magnitude(n * n * d * d)} observed "
+                         f"entries (N * N * d * d, more than {_MAX_ENTRIES:.0e}); use a smaller "
+                         "problem")
 
 
 def _observation_graph(n, density, rng):
@@ -129,7 +130,7 @@ def make_noisy_linear_maps(n_objects=10, dim=3, *, group="GL", noise=0.05, outli
     """
     n = check_int(n_objects, "n_objects", minimum=2)
     d = check_int(dim, "dim", minimum=1)
-    _check_size(n, d, f"`n_objects`={n} and `dim`={d}")
+    _check_size(n, d, f"`n_objects`={short_repr(n, 30)} and `dim`={short_repr(d, 30)}")
     group = check_choice(group, "group", ("GL", "SL", "SO"))
     noise = check_positive(noise, "noise", allow_zero=True)
     outlier_fraction = check_probability(outlier_fraction, "outlier_fraction")
@@ -231,7 +232,7 @@ def make_noisy_homographies(n_views=10, *, image_size=(640, 480), noise=0.5, out
     True
     """
     n = check_int(n_views, "n_views", minimum=2)
-    _check_size(n, 3, f"`n_views`={n} (3 x 3 homographies)")
+    _check_size(n, 3, f"`n_views`={short_repr(n, 30)} (3 x 3 homographies)")
     w, h = check_image_size(image_size, "image_size", minimum=2, maximum=2**20)
     max_angle = check_positive(max_angle, "max_angle", allow_zero=True)
     noise = check_positive(noise, "noise", allow_zero=True)

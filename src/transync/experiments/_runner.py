@@ -57,7 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from .._progress import progress_bar
-from .._validation import check_int
+from .._validation import check_int, short_repr
 from ..exceptions import ExperimentStoreError
 
 __all__ = ["Experiment", "ExperimentReport", "ExperimentStore", "Sweep", "run_experiment",
@@ -125,11 +125,11 @@ class Sweep:
         for attr in ("values", "methods", "metrics"):
             seq = getattr(self, attr)
             if (isinstance(seq, (str, bytes)) or not isinstance(seq, (Sequence, np.ndarray))
-                    or np.ndim(seq) == 0):
+                    or (isinstance(seq, np.ndarray) and seq.ndim == 0)):
                 raise TypeError(f"`Sweep.{attr}` must be a list, got {type(seq).__name__}")
             if attr != "metrics" and len(seq) == 0:
                 raise ValueError(f"`Sweep.{attr}` must not be empty (sweep {self.name!r})")
-            keys = [json.dumps(v, sort_keys=True, default=str) for v in seq]
+            keys = [json.dumps(v, default=str) for v in seq]
             if len(set(keys)) != len(keys):
                 dup = next(v for v, k in zip(seq, keys) if keys.count(k) > 1)
                 raise ValueError(f"`Sweep.{attr}` must not repeat an entry (it would run and "
@@ -425,18 +425,27 @@ def _check_row(experiment, key, trial, sweep, config, metrics, error, seconds) -
     if not isinstance(metrics, Mapping):
         raise TypeError(f"`metrics` must be a dict of numbers, got {type(metrics).__name__}")
     values = {}
-    for k, v in metrics.items():
-        if not isinstance(k, str) or isinstance(v, bool) or not isinstance(v, numbers.Real):
+    for k, v in metrics.items():          # bools count 0/1, as in a trial's own metrics
+        if not isinstance(k, str) or not isinstance(v, numbers.Real):
             raise TypeError(f"`metrics` must map str names to real numbers, got {k!r}: "
-                            f"{type(v).__name__} {v!r:.40}")
-        values[k] = float(v)
+                            f"{type(v).__name__} {short_repr(v, 40)}")
+        try:
+            values[k] = float(v)
+        except OverflowError:
+            raise ValueError(f"`metrics[{k!r}]` must fit in float64, got an integer beyond "
+                             "it") from None
     if error is not None and not isinstance(error, str):
         raise TypeError(f"`error` must be None or a str, got {type(error).__name__}")
-    if isinstance(seconds, bool) or not isinstance(seconds, numbers.Real) \
-            or not (math.isfinite(seconds) and seconds >= 0):
-        raise ValueError(f"`seconds` must be a finite number >= 0, got {seconds!r:.40}")
+    if isinstance(seconds, bool) or not isinstance(seconds, numbers.Real):
+        raise TypeError(f"`seconds` must be a number, got {type(seconds).__name__}")
+    try:
+        sec = float(seconds)
+    except OverflowError:
+        sec = math.inf
+    if not (math.isfinite(sec) and sec >= 0):
+        raise ValueError(f"`seconds` must be a finite number >= 0, got {short_repr(seconds, 40)}")
     return (experiment, key, int(trial), sweep, json.dumps(dict(config), default=str),
-            json.dumps(values), error, float(seconds))
+            json.dumps(values), error, sec)
 
 
 def _prepare_folder(folder: Path) -> None:

@@ -73,8 +73,9 @@ def segment_plane(images, homographies, *, reference=0, window=7, margin=0.2, sm
     Parameters
     ----------
     images : list of (h_i, w_i) or (h_i, w_i, c) images
-        The views, at least 8 x 8 pixels; grey levels as :func:`to_gray` makes them (uint8 as
-        is, floats up to 2 as [0, 1], larger values rescaled to [0, 255]).
+        The views, at least 8 x 8 pixels, brought to grey levels by :func:`to_gray` (uint8 as
+        is; floats with maximum <= 2 read as [0, 1], floats and ints with maximum > 255
+        rescaled to [0, 255]; the result is rounded to uint8, negatives clipped to 0).
     homographies : ndarray of shape (N, 3, 3)
         ``homographies[i]`` maps pixels of view ``i`` into the reference view.
     reference, window, margin, smooth, min_views, threshold, rng
@@ -154,8 +155,9 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
     Parameters
     ----------
     images : list of (h_i, w_i) or (h_i, w_i, c) images
-        The views, at least 8 x 8 pixels; grey levels as :func:`to_gray` makes them (uint8 as
-        is, floats up to 2 as [0, 1], larger values rescaled to [0, 255]).
+        The views, at least 8 x 8 pixels, brought to grey levels by :func:`to_gray` (uint8 as
+        is; floats with maximum <= 2 read as [0, 1], floats and ints with maximum > 255
+        rescaled to [0, 255]; the result is rounded to uint8, negatives clipped to 0).
     homographies : ndarray (N, 3, 3)
         ``homographies[i]`` maps pixels of view ``i`` into the reference view.
     reference : int, default=0

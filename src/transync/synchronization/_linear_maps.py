@@ -313,7 +313,8 @@ def _maps_from_nullspace(U, reference, group):
         raise DegenerateInputError(
             f"the null-space block of object {int(bad[0])} is singular (condition "
             f"{conds[bad[0]]:.3g}; {bad.size} object(s)); the observations do not determine "
-            "its map (they are far from consistent: T[i, j] @ T[j, i] should be about I)")
+            "its map (they are far from consistent: the two directions of a pair should be "
+            "about each other's inverse)")
     maps = Ur[None] @ np.linalg.inv(U)
     return _project(maps, group)
 

@@ -507,13 +507,12 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
     else:
         size_arr = np.array([seen.get(g, 0) for g in objs], dtype=np.int64)
     n_max = int(size_arr.max())
-    if len(arrays) * n_max > MAX_NODES:
-        g = objs[int(np.argmax(size_arr))]
+    longest = max(a.shape[0] for a in arrays.values())
+    if given is not None and n_max > longest and len(arrays) * n_max > MAX_NODES:
+        g = objs[int(np.argmax(size_arr))]      # padding to a size no map has
         raise ValueError(f"`sizes` gives object {g} {n_max} nodes: the {len(arrays)} maps, "
                          f"padded to that width, would need {len(arrays) * n_max:.3g} entries "
-                         f"(more than {MAX_NODES:.0e})" if given is not None else
-                         f"`pairwise` maps of up to {n_max} nodes would need "
-                         f"{len(arrays) * n_max:.3g} entries (more than {MAX_NODES:.0e})")
+                         f"(more than {MAX_NODES:.0e})")
     arrays = {(rank[i], rank[j]): a for (i, j), a in arrays.items()}
     canon: dict[tuple[int, int], np.ndarray] = {}
     for (i, j), a in arrays.items():
@@ -582,7 +581,7 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
     check_int(max_triangles, "max_triangles", minimum=1)
     n_obj = int(sizes.shape[0])
     n_max = max(maps.shape[1], int(sizes.max(initial=0)))
-    if maps.shape[0] * n_max > MAX_NODES:
+    if n_max > maps.shape[1] and maps.shape[0] * n_max > MAX_NODES:   # padding, not input
         raise ValueError(f"`sizes` gives an object of {n_max} nodes: the {maps.shape[0]} maps "
                          f"padded to that width would need more than {MAX_NODES:.0e} entries; "
                          "check `sizes`")

@@ -120,3 +120,15 @@ def test_tiny_distances_and_angles_of_1d_points():
     np.testing.assert_allclose(g.distances()[0, 1], 5e-170, rtol=1e-12)
     with pytest.raises(ValueError, match="angles need points of at least 2 coordinates"):
         Graph.from_points(np.array([[0.0], [1.0], [3.0]]), edges="full").angles()
+
+
+def test_to_networkx_keeps_object_labels():
+    """Labels Graph accepts (None, ints beyond int64: what from_networkx builds from mixed node
+    data) crashed to_networkx on `.item()`."""
+    A = np.array([[0, 1], [1, 0.0]])
+    G = Graph(A, node_labels=[None, None]).to_networkx()
+    assert [G.nodes[v]["label"] for v in G] == [None, None]
+    G = Graph(A, node_labels=[2**70, 1]).to_networkx()
+    assert [G.nodes[v]["label"] for v in G] == [2**70, 1]
+    G = Graph(A, node_labels=[3, 1]).to_networkx()
+    assert [type(G.nodes[v]["label"]) for v in G] == [int, int]

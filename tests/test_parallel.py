@@ -382,3 +382,11 @@ def test_worker_processes_tune_the_allocator_and_the_caller_does_not():
         import ctypes.util
         expected = hasattr(ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6"), "mallopt")
         assert done == [(expected, expected)] * 2        # set once before the first chunk
+
+
+def test_split_chunks_refuses_index_arrays_beyond_memory():
+    """split_chunks(2**40) tried to allocate an 8 TiB index array (MemoryError)."""
+    from transync.parallel import split_chunks
+
+    with pytest.raises(ValueError, match=r"`n_items` must be <= 1000000000"):
+        split_chunks(2**40)

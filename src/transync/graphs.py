@@ -272,7 +272,8 @@ class Graph:
             if self.node_features is not None:
                 G.nodes[v]["features"] = self.node_features[v].copy()
             if self.node_labels is not None:
-                G.nodes[v]["label"] = self.node_labels[v].item()
+                lab = self.node_labels[v]
+                G.nodes[v]["label"] = lab.item() if isinstance(lab, np.generic) else lab
         return G
 
 

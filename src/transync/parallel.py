@@ -213,7 +213,7 @@ def split_chunks(n_items: int, executor=None, *, min_chunk: int = 8,
     >>> [len(c) for c in split_chunks(5, "serial")]
     [5]
     """
-    n_items = check_int(n_items, "n_items", minimum=0)
+    n_items = check_int(n_items, "n_items", minimum=0, maximum=10**9)   # an index array
     min_chunk = check_int(min_chunk, "min_chunk", minimum=1)
     chunks_per_worker = check_int(chunks_per_worker, "chunks_per_worker", minimum=1)
     kind, handle = _resolve(executor)

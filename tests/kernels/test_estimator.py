@@ -888,3 +888,21 @@ def test_bool_node_labels_and_a_bad_random_state():
     for bad, exc in (("seed", TypeError), (True, TypeError), (-1, ValueError)):
         with pytest.raises(exc, match="`random_state` must be None"):
             TransitiveAssignmentKernel(matcher="node", random_state=bad).fit(graphs)
+
+
+def test_parameter_bounds_and_names_from_the_fourth_fuzz():
+    """n_alignments = 2**70 looped for ever; n_universe = 2**70 reached numpy's "maximum
+    allowed dimension"; node_labels=np.True_ missed the "has no node labels" check (raw
+    TypeError); a directed graph was named `graphs[0]`, the HKS helper's argument."""
+    path = np.diag(np.ones(3), 1)
+    path = path + path.T
+    graphs = [Graph(path, node_labels=[0, 1, 0, 1]), Graph(path)]
+    with pytest.raises(ValueError, match=r"`n_alignments` must be <= 1000"):
+        TransitiveAssignmentKernel(matcher="node", n_alignments=2**70).fit(graphs)
+    with pytest.raises(ValueError, match=r"`n_universe` must be <= 1000000"):
+        TransitiveAssignmentKernel(matcher="node", n_universe=2**70).fit(graphs)
+    with pytest.raises(ValueError, match=r"node_labels=True but `X\[1\]` has no node labels"):
+        TransitiveAssignmentKernel(matcher="node", node_labels=np.True_).fit(graphs)
+    directed = Graph(np.triu(path), directed=True)
+    with pytest.raises(ValueError, match=r"`X\[0\]` must be an undirected graph"):
+        TransitiveAssignmentKernel(matcher="node").fit([directed, Graph(path)])

@@ -95,6 +95,17 @@ def test_huge_coordinates_refused_with_sigma2_hint(method):
         match_graphs(g1, g2, method=method)
 
 
+def test_sigma2_hint_for_attributes_whose_square_overflows():
+    """Edge weights ~1e300: building the hint (0.6 * scale**2) raised OverflowError instead of
+    the DegenerateInputError it was explaining."""
+    from transync import match_collection
+
+    A = np.ones((3, 3)) - np.eye(3)
+    with pytest.raises(DegenerateInputError, match=r"too small for edge attributes .*Rescale "
+                                                   r"the data \(its squared scale is beyond"):
+        match_collection([Graph(A * 1e300 * (k + 1)) for k in range(3)], progress=False)
+
+
 def test_suggested_sigma2_recovers_the_unit_scale_result():
     p = make_point_matching_problem(12, 0, 0.02, edges="full", rng=3)
     g1 = Graph.from_points(1e6 * p.g1.points, edges="full")

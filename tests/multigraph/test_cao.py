@@ -387,3 +387,18 @@ def test_bad_score_and_parameters():
         cao(truth, pairs, 4, score, max_iter=2.5)
     with pytest.raises(ValueError, match=r"`pairs` must hold graph indices in \[0, 3\)"):
         cao(truth, pairs, 3, score)
+
+
+def test_sizes_beyond_what_can_run_are_refused():
+    """max_iter = 2**70 built its schedule for ever; n_graphs = 2**70 reached numpy's
+    "maximum allowed dimension"."""
+    pairs = [(0, 1), (0, 2), (1, 2)]
+    init = [[1, 0], [0, 1], [0, 1]]
+
+    def score(p, a):
+        return np.ones(len(p))
+
+    with pytest.raises(ValueError, match=r"`max_iter` must be <= 100000"):
+        cao(init, pairs, 3, score, max_iter=2**70)
+    with pytest.raises(ValueError, match=r"`n_graphs` must be <= 10000000"):
+        cao([[0, 1]] * 3, pairs, 2**70, score)

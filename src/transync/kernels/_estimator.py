@@ -48,6 +48,9 @@ def _check_graphs(X, name: str = "X") -> list[Graph]:
                             f"{type(g).__name__}")
         if g.adjacency.shape[0] == 0:
             raise ValueError(f"`{name}[{k}]` has no nodes; every graph needs at least one")
+        if g.directed:          # checked here so that the message names `X`, not hks' input
+            raise ValueError(f"`{name}[{k}]` must be an undirected graph (the heat kernel "
+                             "signature needs a symmetric Laplacian)")
         if g.node_labels is not None:
             check_label_array(g.node_labels, f"{name}[{k}].node_labels")
     return graphs
@@ -193,7 +196,7 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
     normalize : bool, default=True
         Cosine normalization (each graph's own self-similarity, new graphs included).
     n_alignments : int, default=1
-        Ensemble size ``R``: the Gram matrix is the mean of the kernels of ``R``
+        Ensemble size ``R`` (1 to 1000): the Gram matrix is the mean of the kernels of ``R``
         synchronizations of the same pairwise matches -- the first on all matched pairs (the
         single-alignment kernel: ``n_alignments=1`` is exactly it), the others each on a random
         subsample of the pairs (bagging, ``pair_fraction``). A mean of PSD matrices is PSD
@@ -353,10 +356,10 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
             raise ValueError(f"`node_labels` must be 'auto', True or False, got "
                              f"{self.node_labels!r}")
         if self.n_universe is not None:
-            check_int(self.n_universe, "n_universe", minimum=1)
+            check_int(self.n_universe, "n_universe", minimum=1, maximum=10**6)
         if self.n_neighbors is not None:
             check_int(self.n_neighbors, "n_neighbors", minimum=1)
-        check_int(self.n_alignments, "n_alignments", minimum=1)
+        check_int(self.n_alignments, "n_alignments", minimum=1, maximum=1000)
         if check_positive(self.pair_fraction, "pair_fraction") > 1:
             raise ValueError(f"`pair_fraction` must lie in (0, 1], got {self.pair_fraction!r}")
         for name in ("normalize", "progress", "sync_dummies", "drop_label_mismatches"):
@@ -442,7 +445,8 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
                                  f"nodes), got {self.n_universe}")
             n = int(self.n_universe)
         has_labels = [g.node_labels is not None for g in graphs]
-        if self.node_labels is True and not all(has_labels):
+        # True or np.True_ (validated: a bool or "auto")
+        if not isinstance(self.node_labels, str) and self.node_labels and not all(has_labels):
             k = has_labels.index(False)
             raise ValueError(f"node_labels=True but `X[{k}]` has no node labels")
         use_labels = (bool(all(has_labels)) if isinstance(self.node_labels, str)

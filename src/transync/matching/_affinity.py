@@ -664,13 +664,14 @@ def _refuse_underflow(alive: int, needed: int, sigma2: float, what: str, scale: 
     """
     if alive >= needed:
         return
-    suggestion = 0.6 * scale**2
+    fix = (f"Set `sigma2` to the squared scale of the data (e.g. sigma2={0.6 * scale**2:.3g}, "
+           f"as the default 0.15 is for a unit square) in {how}, or rescale the data"
+           if scale < 1e150 else        # its square is beyond float64: no sigma2 can help
+           "Rescale the data (its squared scale is beyond float64)")
     raise DegenerateInputError(
         f"`sigma2`={sigma2:g} is too small for {what} of magnitude ~{scale:.3g}: only {alive} "
         f"pair(s) keep a Gaussian affinity exp(-d^2 / sigma2) above 1e-300 (at least {needed} "
-        f"needed), so any matching would score about 0. Set `sigma2` to the squared scale of the "
-        f"data (e.g. sigma2={suggestion:.3g}, as the default 0.15 is for a unit square) in {how}, "
-        f"or rescale the data")
+        f"needed), so any matching would score about 0. {fix}")
 
 
 def _count_close(x_sorted: np.ndarray, y: np.ndarray, radius: float) -> int:

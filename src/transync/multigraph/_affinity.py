@@ -550,7 +550,7 @@ class PairAffinities:
         pairs = check_pairs(pairs, len(graphs))
         sizes = np.array([g.n_nodes for g in graphs])
         if n_pad is not None:
-            n_pad = check_int(n_pad, "n_pad", minimum=int(sizes.max()))
+            n_pad = check_int(n_pad, "n_pad", minimum=int(sizes.max()), maximum=10**5)
         n = int(sizes.max()) if n_pad is None else n_pad
         padded = bool(np.any(sizes != n))
         opts = _fast_gaussian_options(affinity)

@@ -161,7 +161,7 @@ def cao(initial, pairs, n_graphs: int, score: Callable, *, variant: str = "cao-p
     lambda_max : float in [0, 1], default=1.0
         Upper bound of the weight.
     max_iter : int, default=6
-        Number of sweeps.
+        Number of sweeps, at most 10**5.
     immune_iter : int, default=2
         Leading affinity-only sweeps (``constIterImmune`` / ``iter_boost``).
     update : {"jacobi", "sequential"}, default="jacobi"
@@ -218,7 +218,7 @@ def cao(initial, pairs, n_graphs: int, score: Callable, *, variant: str = "cao-p
     [[0, 1], [0, 1], [0, 1]]
     """
     t0 = time.perf_counter()
-    N = check_int(n_graphs, "n_graphs", minimum=2)
+    N = check_int(n_graphs, "n_graphs", minimum=2, maximum=10**7)
     pairs = _check_pairs(pairs, N)
     X = _check_initial(initial, len(pairs))
     if not callable(score):
@@ -234,7 +234,7 @@ def cao(initial, pairs, n_graphs: int, score: Callable, *, variant: str = "cao-p
     lambda_step = check_positive(lambda_step, "lambda_step")
     if lambda_step < 1:
         raise ValueError(f"`lambda_step` must be >= 1, got {lambda_step!r}")
-    max_iter = check_int(max_iter, "max_iter", minimum=0)
+    max_iter = check_int(max_iter, "max_iter", minimum=0, maximum=MAX_SWEEPS)
     immune_iter = check_int(immune_iter, "immune_iter", minimum=0)
 
     state = _State(X, pairs, N, score)
@@ -302,6 +302,10 @@ def _check_initial(initial, P: int) -> np.ndarray:
                          f"CAO does not handle unmatched nodes), got row {r} = "
                          f"{arr[r].tolist()}")
     return arr
+
+
+#: Most CAO sweeps accepted (its schedule is built up front; 2**70 never returned).
+MAX_SWEEPS = 10**5
 
 
 def _schedule(variant, max_iter, immune_iter, lambda_init, lambda_step, lambda_max):

@@ -132,3 +132,10 @@ def test_to_networkx_keeps_object_labels():
     assert [G.nodes[v]["label"] for v in G] == [2**70, 1]
     G = Graph(A, node_labels=[3, 1]).to_networkx()
     assert [type(G.nodes[v]["label"]) for v in G] == [int, int]
+
+
+def test_from_points_weighted_must_be_a_bool():
+    """weighted="no" was read by truthiness and built a weighted graph."""
+    P = np.random.default_rng(0).random((6, 2))
+    with pytest.raises(TypeError, match="`weighted` must be a bool"):
+        Graph.from_points(P, edges="full", weighted="no")

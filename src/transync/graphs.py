@@ -233,7 +233,7 @@ class Graph:
         M = M | M.T
         np.fill_diagonal(M, False)
         A = M.astype(float)
-        if weighted:
+        if check_bool(weighted, "weighted"):
             A = A * _distances(P)
         return cls(A, points=P, node_features=node_features, node_labels=node_labels)
 

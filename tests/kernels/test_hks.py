@@ -147,3 +147,13 @@ def test_mutag_features_are_fast_and_valid(require_dataset):
     for g, h in zip(data.graphs, feats):
         assert h.shape == (g.n_nodes, 10)
         assert np.all((h > 0) & (h <= 1 + 1e-12))
+
+
+def test_boolean_times_are_refused():
+    """times=[True] was read as t = 1.0 (TransitiveAssignmentKernel(times=[True]) accepted)."""
+    path = np.diag(np.ones(3), 1)
+    path = path + path.T
+    with pytest.raises(TypeError, match="`times` must hold positive numbers, got booleans"):
+        hks_features([Graph(path)], [True])
+    with pytest.raises(TypeError, match="`times`"):
+        hks_features([Graph(path)], [[0.1], [0.1, 1.0]])          # ragged: named too

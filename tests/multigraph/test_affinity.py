@@ -260,6 +260,8 @@ def test_directed_graphs_separable(rng):
     aff = functools.partial(gaussian_edge_affinity, sigma2=0.1, backend="separable")
     A = PairAffinities.from_graphs(graphs, affinity=aff)
     assert A.backend == "separable" and A.asymmetric().all()
+    with pytest.raises(ValueError, match="`rtol` must be finite"):
+        A.asymmetric(rtol=np.nan)               # NaN made every pair look symmetric
     affs = [aff(graphs[i], graphs[j]) for i, j in A.pairs]
     X = rng.random((3, 6, 6))
     np.testing.assert_allclose(A.matvec(X), _reference(affs, X), atol=1e-8)

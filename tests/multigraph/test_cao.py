@@ -402,3 +402,10 @@ def test_sizes_beyond_what_can_run_are_refused():
         cao(init, pairs, 3, score, max_iter=2**70)
     with pytest.raises(ValueError, match=r"`n_graphs` must be <= 10000000"):
         cao([[0, 1]] * 3, pairs, 2**70, score)
+
+
+def test_progress_must_be_a_bool():
+    """progress="no" showed a progress bar."""
+    with pytest.raises(TypeError, match="`progress` must be a bool"):
+        cao([[1, 0], [0, 1], [0, 1]], [(0, 1), (0, 2), (1, 2)], 3,
+            lambda p, a: np.ones(len(p)), progress="no")

@@ -52,6 +52,12 @@ _STACK_BYTES = 64 << 20
 def _check_times(times) -> np.ndarray:
     if times is None:
         return HKS_TIMES.copy()
+    try:
+        booleans = not isinstance(times, (str, bytes)) and np.asarray(times).dtype == bool
+    except (TypeError, ValueError):         # ragged: check_array names it
+        booleans = False
+    if booleans:
+        raise TypeError(f"`times` must hold positive numbers, got booleans {times!r:.60}")
     t = check_array(times, "times", ndim=1)
     if t.size == 0:
         raise ValueError("`times` must hold at least one time, got an empty array")

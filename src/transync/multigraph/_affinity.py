@@ -888,6 +888,7 @@ class PairAffinities:
     def asymmetric(self, *, rtol: float = 1e-10) -> np.ndarray:
         """(P,) bool: pairs whose ``K_p`` is not symmetric, tested as the pairwise solvers do
         (one fixed random probe, relative tolerance ``rtol``)."""
+        rtol = check_positive(rtol, "rtol", allow_zero=True)     # NaN made every pair symmetric
         probe = np.random.default_rng(12345).random((self.n1, self.n2))
         Xp = np.broadcast_to(probe, (len(self), self.n1, self.n2)).copy()
         a = self._impl.product(Xp, None)

@@ -38,8 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._progress import progress_bar
-from .._validation import (check_choice, check_int, check_int_array, check_positive,
-                           check_probability)
+from .._validation import (check_bool, check_choice, check_int, check_int_array,
+                           check_positive, check_probability)
 from ._affinity import check_pairs
 
 __all__ = ["CAOOutcome", "cao", "CAO_VARIANTS", "CAO_UPDATES"]
@@ -246,7 +246,8 @@ def cao(initial, pairs, n_graphs: int, score: Callable, *, variant: str = "cao-p
     converged = False
     n_iter = 0
     last = object()                      # fitness weight of the last sweep run
-    bar = progress_bar(max_iter, variant, enabled=bool(progress), unit="sweep")
+    bar = progress_bar(max_iter, variant, enabled=check_bool(progress, "progress"),
+                       unit="sweep")
     try:
         for t, weight in enumerate(schedule):
             if np.all(pc == 1.0):

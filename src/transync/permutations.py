@@ -53,12 +53,54 @@ __all__ = [
     "invert",
     "is_partial_permutation_matrix",
     "matrix_to_assignment",
+    "pair_rows",
     "random_permutation",
     "solve_lap",
 ]
 
 UNMATCHED = -1
 MAX_NODES = 10**8      # largest object (and dense matching matrix) the converters build
+
+
+def pair_rows(pairs, n_objects: int):
+    """A lookup ``rows(a, b)`` of the row of the unordered pair ``{a, b}`` in ``pairs``.
+
+    Built from sorted keys ``min * N + max`` and a binary search: no ``(N, N)`` table, whatever
+    the object indices (up to ``2**31`` objects). On duplicate rows the first wins; a pair not in
+    ``pairs`` gives ``-1``.
+
+    Parameters
+    ----------
+    pairs : array_like of shape (Q, 2), int
+        Pairs of object indices in ``[0, n_objects)``.
+    n_objects : int
+        Number of objects ``N``.
+
+    Returns
+    -------
+    callable
+        ``rows(a, b)`` for int arrays ``a``, ``b`` of one shape: the rows, ``-1`` where absent.
+
+    Examples
+    --------
+    >>> rows = pair_rows(np.array([[0, 1], [2, 1], [0, 1]]), 3)
+    >>> rows(np.array([1, 1, 0]), np.array([0, 2, 2])).tolist()
+    [0, 1, -1]
+    """
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    n = np.int64(n_objects)
+    keys, first = np.unique(pairs.min(1) * n + pairs.max(1), return_index=True)
+
+    def rows(a, b) -> np.ndarray:
+        a = np.asarray(a, dtype=np.int64)
+        b = np.asarray(b, dtype=np.int64)
+        k = np.minimum(a, b) * n + np.maximum(a, b)
+        if not keys.size:
+            return np.full(k.shape, -1, dtype=np.int64)
+        pos = np.minimum(np.searchsorted(keys, k), keys.size - 1)
+        return np.where(keys[pos] == k, first[pos], -1)
+
+    return rows
 
 
 def _as_label_array(lab, name: str) -> np.ndarray:
@@ -595,16 +637,9 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
         inv = np.full_like(maps, UNMATCHED)
         q, u = np.nonzero(maps >= 0)
         inv[q, maps[q, u]] = u
-    # pair (i, j) -> its row, first occurrence winning: sorted keys i * N + j and a binary
-    # search (an (N, N) table was N**2 entries: 10**4 objects and up failed)
-    keys, key_row = np.unique(pairs[:, 0] * n_obj + pairs[:, 1], return_index=True)
-
-    def pid(a, b):
-        k = np.asarray(a, dtype=np.int64) * n_obj + b
-        if not keys.size:
-            return np.full(k.shape, -1, dtype=np.int64)
-        pos = np.minimum(np.searchsorted(keys, k), keys.size - 1)
-        return np.where(keys[pos] == k, key_row[pos], -1)
+    # pair (i, j) -> its row, first occurrence winning (an (N, N) table was N**2 entries:
+    # 10**4 objects and up failed)
+    pid = pair_rows(pairs, n_obj)
 
     # a column of -1 so that "unmatched" indexes to unmatched: ajk_pad[-1] = -1
     maps_pad = np.concatenate([maps, np.full((maps.shape[0], 1), UNMATCHED, maps.dtype)], 1)
@@ -623,7 +658,8 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
                 left -= m
                 yield tri
         else:
-            heads, tails = keys // n_obj, keys % n_obj      # sorted by i, then j
+            uniq = np.unique(pairs, axis=0)                  # sorted by i, then j
+            heads, tails = uniq[:, 0], uniq[:, 1]
             bounds = np.flatnonzero(np.diff(heads)) + 1
             for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, heads.size]):
                 js = tails[lo:hi]

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import as_generator, check_array, check_int, check_positive
-from ..permutations import MAX_NODES, MultiMatching, check_assignment
+from ..permutations import MAX_NODES, MultiMatching, check_assignment, pair_rows
 
 __all__ = ["ConstraintStats", "ConstraintViolations", "constraint_violations"]
 
@@ -402,24 +402,9 @@ def _object_triples(p: _Pairs) -> np.ndarray:
     return ids[np.concatenate(out)] if out else np.zeros((0, 3), dtype=np.int64)
 
 
-class _PairIndex:
-    """``pid[a, b]``: the row of pair ``{a, b}`` in ``p.pairs``, for arrays of present pairs
-    (sorted keys and a binary search: no (N, N) table, whatever the object indices)."""
-
-    def __init__(self, p: _Pairs):
-        self._n = np.int64(p.sizes.shape[0])
-        keys = p.pairs[:, 0] * self._n + p.pairs[:, 1]          # pairs are stored i < j
-        self._order = np.argsort(keys, kind="stable")
-        self._keys = keys[self._order]
-
-    def __getitem__(self, ab) -> np.ndarray:
-        a, b = (np.asarray(v, dtype=np.int64) for v in ab)
-        keys = np.minimum(a, b) * self._n + np.maximum(a, b)
-        return self._order[np.searchsorted(self._keys, keys)]
-
-
-def _pair_index(p: _Pairs) -> _PairIndex:
-    return _PairIndex(p)
+def _pair_index(p: _Pairs):
+    """``pid(a, b)``: the row of pair ``{a, b}`` in ``p.pairs``."""
+    return pair_rows(p.pairs, p.sizes.shape[0])
 
 
 def _transitivity_exact(p: _Pairs, tri: np.ndarray) -> ConstraintStats:
@@ -433,7 +418,7 @@ def _transitivity_exact(p: _Pairs, tri: np.ndarray) -> ConstraintStats:
     maps[1::2, :n_max] = p.bwd
 
     def oriented(a, b):                       # (t, n_max + 1) maps a -> b
-        return maps[2 * pid[a, b] + (a > b)]
+        return maps[2 * pid(a, b) + (a > b)]
 
     sizes = p.sizes.astype(np.float64)
     n_tot = viol = 0
@@ -459,8 +444,8 @@ def _transitivity_exact(p: _Pairs, tri: np.ndarray) -> ConstraintStats:
     return ConstraintStats(n_tot, n_tot, viol, float(viol), mag)
 
 
-def _oriented_dense(p: _Pairs, pid: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    blocks = p.dense[pid[a, b]]
+def _oriented_dense(p: _Pairs, pid, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    blocks = p.dense[pid(a, b)]
     return np.where((a < b)[:, None, None], blocks, blocks.transpose(0, 2, 1))
 
 
@@ -490,10 +475,10 @@ def _transitivity_dense(p: _Pairs, tri: np.ndarray, tol: float) -> ConstraintSta
     return ConstraintStats(n_tot, n_tot, n_bad, viol, mag)
 
 
-def _entries(flat: np.ndarray, pid: _PairIndex, n: int, a, c, x, y) -> np.ndarray:
+def _entries(flat: np.ndarray, pid, n: int, a, c, x, y) -> np.ndarray:
     """``X_ac[x, y]`` elementwise from the raveled ``(Q, n, n)`` blocks (stored for ``a < c``)."""
     fw = a < c
-    return flat.take((pid[a, c] * n + np.where(fw, x, y)) * n + np.where(fw, y, x))
+    return flat.take((pid(a, c) * n + np.where(fw, x, y)) * n + np.where(fw, y, x))
 
 
 def _transitivity_sampled(p: _Pairs, tri: np.ndarray, weights: np.ndarray, total: int,

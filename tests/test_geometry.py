@@ -111,4 +111,7 @@ def test_integers_beyond_float64_are_named():
     with pytest.raises(TypeError, match=r"`size` must be \(width, height\) in pixels, got "
                                         r"booleans"):
         image_corners((True, True))
+    with pytest.raises(ValueError, match=r"`size` must be \(width, height\) of at least one "
+                                         r"pixel each, got \(0.5, 3\)"):
+        image_corners((0.5, 3))             # gave a corner at x = -0.5
     np.testing.assert_array_equal(translation(2, -1)[:2, 2], [2.0, -1.0])

@@ -139,3 +139,24 @@ def test_from_points_weighted_must_be_a_bool():
     P = np.random.default_rng(0).random((6, 2))
     with pytest.raises(TypeError, match="`weighted` must be a bool"):
         Graph.from_points(P, edges="full", weighted="no")
+
+
+def test_graph_owns_its_arrays(rng):
+    """A frozen Graph does not change when the caller edits the arrays it was built from (it
+    kept references: zeroing a row of the caller's adjacency made the graph asymmetric)."""
+    A = np.ones((4, 4)) - np.eye(4)
+    P, F, L, E = rng.random((4, 2)), rng.random((4, 3)), np.arange(4), A * 2.0
+    g = Graph(A, points=P, node_features=F, node_labels=L, edge_features=E)
+    before = [x.copy() for x in (g.adjacency, g.points, g.node_features, g.node_labels,
+                                 g.edge_features)]
+    for x in (A, P, F, L, E):
+        x[0] = 7
+    after = (g.adjacency, g.points, g.node_features, g.node_labels, g.edge_features)
+    for b, a in zip(before, after):
+        assert np.array_equal(a, b) and not a.flags.writeable
+    with pytest.raises(ValueError, match="read-only"):
+        g.adjacency[0, 1] = 3.0
+    h = Graph(np.asarray(A[1:, 1:]), node_features=F[1:, 0])      # views of the caller's memory
+    A[1, 2] = A[2, 1] = 0.0
+    F[1, 0] = -5.0
+    assert h.adjacency[0, 1] == 1.0 and h.node_features[0, 0] != -5.0

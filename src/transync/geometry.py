@@ -105,7 +105,7 @@ def image_corners(size) -> np.ndarray:
     Parameters
     ----------
     size : (width, height)
-        Image size in pixels (positive).
+        Image size in pixels, each at least 1 (one pixel).
 
     Returns
     -------
@@ -115,7 +115,7 @@ def image_corners(size) -> np.ndarray:
     Raises
     ------
     ValueError, TypeError
-        ``size`` not two positive finite numbers.
+        ``size`` not two finite numbers of at least 1.
 
     Examples
     --------
@@ -123,6 +123,9 @@ def image_corners(size) -> np.ndarray:
     [[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]]
     """
     w, h = _image_size(size, "size")
+    if min(w, h) < 1:           # the corners (w - 1, h - 1) would lie left of / above the origin
+        raise ValueError(f"`size` must be (width, height) of at least one pixel each, got "
+                         f"({w:g}, {h:g})")
     return np.array([[0.0, 0.0], [w - 1, 0.0], [w - 1, h - 1], [0.0, h - 1]])
 
 

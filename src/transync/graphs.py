@@ -47,7 +47,8 @@ class Graph:
         undirected graph's adjacency must be symmetric; one that is so up to rounding
         (``numpy.allclose``) is stored as its exactly symmetric part.
     points : ndarray of shape (n, dim), optional
-        Node coordinates (keypoints, landmarks).
+        Node coordinates (keypoints, landmarks), at most ``1e300`` in magnitude (so that
+        distances between them stay finite).
     node_features : ndarray of shape (n, f), optional
         Node descriptors.
     node_labels : ndarray of shape (n,), optional
@@ -104,30 +105,30 @@ class Graph:
                 raise ValueError("`adjacency` must be symmetric for an undirected graph "
                                  "(pass directed=True otherwise)")
             A = np.where(A == A.T, A, 0.5 * A + 0.5 * A.T)    # rounding noise: exactly symmetric
-        object.__setattr__(self, "adjacency", A)
+        object.__setattr__(self, "adjacency", _owned(A, self.adjacency))
         n = A.shape[0]
         if self.points is not None:
-            P = check_array(self.points, "points", ndim=2)
+            P = _check_coordinates(check_array(self.points, "points", ndim=2))
             check_shape(P, (n, None), "points")
-            object.__setattr__(self, "points", P)
+            object.__setattr__(self, "points", _owned(P, self.points))
         if self.node_features is not None:
             F = check_array(self.node_features, "node_features", ndim=(1, 2))
             if F.ndim == 1:
                 F = F[:, None]
             check_shape(F, (n, None), "node_features")
-            object.__setattr__(self, "node_features", F)
+            object.__setattr__(self, "node_features", _owned(F, self.node_features))
         if self.edge_features is not None:
             E = check_array(self.edge_features, "edge_features", ndim=2)
             check_shape(E, (n, n), "edge_features")
             if not self.directed and not np.allclose(E[A != 0], E.T[A != 0]):
                 raise ValueError("`edge_features` must be symmetric on the edges of an undirected "
                                  "graph")
-            object.__setattr__(self, "edge_features", E)
+            object.__setattr__(self, "edge_features", _owned(E, self.edge_features))
         if self.node_labels is not None:
             L = _check_labels(self.node_labels)
             if L.shape != (n,):
                 raise ValueError(f"`node_labels` must have shape ({n},), got {L.shape}")
-            object.__setattr__(self, "node_labels", L)
+            object.__setattr__(self, "node_labels", _owned(L, self.node_labels))
 
     # ------------------------------------------------------------------ basic properties
     @property
@@ -205,7 +206,7 @@ class Graph:
             No points, non-finite coordinates, ``edges="delaunay"`` on points that are not 2-d
             or that no triangulation covers (e.g. all at one place).
         """
-        P = check_array(points, "points", ndim=2)
+        P = _check_coordinates(check_array(points, "points", ndim=2))
         n = P.shape[0]
         if n == 0:
             raise ValueError("`points` must hold at least one point, got 0")
@@ -245,19 +246,33 @@ class Graph:
 
         if not isinstance(G, nx.Graph):
             raise TypeError(f"`G` must be a networkx graph, got {type(G).__name__}")
+        for arg, key in (("weight", weight), ("points", points), ("features", features),
+                         ("label", label)):
+            if key is not None and not isinstance(key, str):
+                raise TypeError(f"`{arg}` must be an attribute name (str) or None, got "
+                                f"{type(key).__name__}")
         nodes = list(G.nodes)
         if not nodes:
             raise ValueError("`G` must have at least one node")
-        A = nx.to_numpy_array(G, nodelist=nodes, weight=weight, dtype=float)
+        try:
+            A = nx.to_numpy_array(G, nodelist=nodes, weight=weight, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"`G`'s edge attribute {weight!r} (`weight`) must hold numbers: "
+                             f"{exc}") from None
         np.fill_diagonal(A, 0.0)
 
-        def collect(key):
+        def collect(key, arg):
             if key is None or not all(key in G.nodes[v] for v in nodes):
                 return None
-            return np.asarray([G.nodes[v][key] for v in nodes])
+            try:
+                return np.asarray([G.nodes[v][key] for v in nodes])
+            except (TypeError, ValueError) as exc:      # ragged: "inhomogeneous shape"
+                raise ValueError(f"`G`'s node attribute {key!r} (`{arg}`) must have one shape "
+                                 f"at every node: {exc}") from None
 
-        return cls(A, points=collect(points), node_features=collect(features),
-                   node_labels=collect(label), directed=G.is_directed(),
+        return cls(A, points=collect(points, "points"),
+                   node_features=collect(features, "features"),
+                   node_labels=collect(label, "label"), directed=G.is_directed(),
                    meta={"nodes": nodes})
 
     def to_networkx(self):
@@ -275,6 +290,29 @@ class Graph:
                 lab = self.node_labels[v]
                 G.nodes[v]["label"] = lab.item() if isinstance(lab, np.generic) else lab
         return G
+
+
+def _owned(arr: np.ndarray, given) -> np.ndarray:
+    """``arr`` as the Graph's own read-only array: a copy where it is still the caller's
+    ``given`` object or a view of someone's memory (a frozen Graph must not change when the
+    caller later edits the array it was built from)."""
+    if arr is given or not arr.flags.owndata:
+        arr = arr.copy()
+    arr.flags.writeable = False
+    return arr
+
+
+_MAX_COORDINATE = 1e300
+
+
+def _check_coordinates(P: np.ndarray) -> np.ndarray:
+    """Refuse coordinates whose differences could overflow (points at -1.7e308 and 1.7e308
+    are finite, their distance is not)."""
+    top = float(np.abs(P).max(initial=0.0))
+    if top > _MAX_COORDINATE:
+        raise ValueError(f"`points` must have coordinates of magnitude <= {_MAX_COORDINATE:g} "
+                         f"(their distances must be finite), got {top:.6g}")
+    return P
 
 
 def _distances(P: np.ndarray) -> np.ndarray:

@@ -289,6 +289,25 @@ def test_graph_other_entry_points_refuse(rng):
         Graph.from_networkx(np.zeros((2, 2)))
     with pytest.raises(ValueError, match="`G` must have at least one node"):
         Graph.from_networkx(nx.Graph())
+    huge = np.array([[-1.7e308, 0], [1.7e308, 0], [0, 1], [0, -1.0]])     # finite, far apart
+    for make in (Graph.from_points, lambda P: Graph(np.ones((4, 4)) - np.eye(4), points=P)):
+        with pytest.raises(ValueError, match=r"`points` must have coordinates of magnitude <= "
+                                             r"1e\+300 .*got 1.7e\+308"):
+            make(huge)          # distances were inf with an overflow warning; delaunay misreported
+    g = Graph.from_points(huge / 1.7e8, edges="full", weighted=True)
+    assert np.isfinite(g.distances()).all() and g.adjacency.max() == pytest.approx(2e300)
+    G = nx.Graph()
+    G.add_edge(0, 1, weight="a")            # these three were numpy's or Python's words
+    with pytest.raises(ValueError, match=r"`G`'s edge attribute 'weight' \(`weight`\) must hold"):
+        Graph.from_networkx(G)
+    G = nx.Graph()
+    G.add_node(0, pos=(0, 0))
+    G.add_node(1, pos=(1,))
+    G.add_edge(0, 1)
+    with pytest.raises(ValueError, match=r"node attribute 'pos' \(`points`\) must have one shape"):
+        Graph.from_networkx(G)
+    with pytest.raises(TypeError, match=r"`weight` must be an attribute name \(str\) or None"):
+        Graph.from_networkx(nx.path_graph(3), weight=[])
     with pytest.raises(TypeError, match="`points` must be real"):
         Graph.from_points(np.zeros((3, 2)) + 1j)
     with pytest.raises(ValueError, match="`points` must hold at least one point, got 0"):

@@ -244,6 +244,11 @@ def test_validation(coll):
         PairAffinities.from_blocks({(0, 1): np.ones((4, 4))}, [(0, 2)], n=2)
     with pytest.raises(TypeError, match="`n`"):
         PairAffinities.from_blocks(np.ones((2, 2, 4, 4)))
+    with pytest.raises(TypeError, match="`pairs` must be an array of integer graph indices"):
+        PairAffinities.from_blocks({(0, 1): np.eye(4)}, "ab", n=2)     # was a raw ufunc error
+    for one in (np.zeros((1, 1, 4, 4)), [[np.eye(4)]]):                 # named `n_graphs` before
+        with pytest.raises(ValueError, match="`K` must hold blocks for at least 2 graphs, got 1"):
+            PairAffinities.from_blocks(one, n=2)
     with pytest.raises(ValueError, match=r"\[-1, 8\)"):
         A.score_assignments([0], [[9] + [0] * 7])
     with pytest.raises(ValueError, match=r"`assignments` must have shape \(c, n1\)"):

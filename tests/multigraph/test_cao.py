@@ -373,6 +373,10 @@ def test_bad_score_and_parameters():
         cao(truth, pairs, 4, lambda p, a: np.zeros(3))
     with pytest.raises(ValueError, match="`score` must return finite values"):
         cao(truth, pairs, 4, lambda p, a: np.full(len(p), np.nan))
+    with pytest.raises(TypeError, match="`score` must return real values, got complex"):
+        cao(truth, pairs, 4, lambda p, a: np.ones(len(p)) * 1j)     # ComplexWarning before
+    with pytest.raises(TypeError, match="`score` must return real numbers"):
+        cao(truth, pairs, 4, lambda p, a: ["x"] * len(p))
     with pytest.raises(ValueError, match="`variant` must be one of"):
         cao(truth, pairs, 4, score, variant="cdao")
     with pytest.raises(ValueError, match="`update`='sequential'.*got variant='cao-pc'"):

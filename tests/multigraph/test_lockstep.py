@@ -217,6 +217,9 @@ def test_options_validated_and_defaults():
         run_lockstep(A, solver="rrwm", sync="birkhoff")
     with pytest.raises(ValueError, match=r"must return an array of shape \(3, 5, 5\)"):
         run_lockstep(A, solver="ga", sync=lambda X: X[:2])
+    for solver in ("pf", "rrwm", "ga"):     # PF met NaN in its Frank-Wolfe LAP at 1e300
+        with pytest.raises(ValueError, match=r"entries in \[0, 1\].*maximum \d.*e\+29\d"):
+            run_lockstep(A, solver=solver, sync=lambda X: X * 1e300, sync_every=1)
     out = run_lockstep(A, solver="rrwm", options={"max_iter": 3})
     assert out.info["options"]["variant"] == "pygmtools" and out.n_iter <= 3
 

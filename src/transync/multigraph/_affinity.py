@@ -736,7 +736,9 @@ class PairAffinities:
             if pairs is None:
                 raise TypeError("`pairs` is required when `K` is a dict")
             keys = _dict_keys(K, name)
-            top = np.asarray(pairs).max(initial=0) if np.size(pairs) else 0
+            given = check_int_array(pairs, "pairs", integral_floats=True,
+                                    what="integer graph indices")
+            top = given.max(initial=0) if given.size else 0
             N = 1 + max([int(top)] + [max(i, j) for i, j in keys])
             if n_graphs is not None and N > n_graphs:
                 raise ValueError(f"`{name}` has a block for graph {N - 1}, but there are only "
@@ -1001,6 +1003,8 @@ def _all_separable(graphs, pairs) -> bool:
 
 
 def _check_count(N: int, n_graphs, name: str) -> None:
+    if N < 2:
+        raise ValueError(f"`{name}` must hold blocks for at least 2 graphs, got {N}")
     if n_graphs is not None and N != n_graphs:
         raise ValueError(f"`{name}` holds blocks for {N} graphs, but {n_graphs} graphs were given")
 

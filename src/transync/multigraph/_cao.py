@@ -381,7 +381,13 @@ class _State:
     # scoring ---------------------------------------------------------------------------
 
     def _score(self, p_idx, assign) -> np.ndarray:
-        s = np.asarray(self.score_fn(p_idx, assign), dtype=float)
+        out = self.score_fn(p_idx, assign)
+        if np.iscomplexobj(out):            # numpy would drop the imaginary part with a warning
+            raise TypeError("`score` must return real values, got complex ones")
+        try:
+            s = np.asarray(out, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"`score` must return real numbers: {exc}") from None
         if s.shape != (len(p_idx),):
             raise ValueError(f"`score` must return an array of shape ({len(p_idx)},) for "
                              f"{len(p_idx)} candidates, got shape {s.shape}")

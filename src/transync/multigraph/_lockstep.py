@@ -590,7 +590,8 @@ def run_lockstep(affinities: PairAffinities, *, solver: str, sync=None,
     sync : callable, optional
         ``Y = sync(X)``: ``X`` the ``(P, n1, n2)`` current iterates made doubly stochastic (to
         rounding: RRWM's and GA's iterates are only approximately so, see
-        :func:`doubly_stochastic_iterates`), ``Y`` the synchronized ``(P, n1, n2)`` blocks.
+        :func:`doubly_stochastic_iterates`), ``Y`` the synchronized ``(P, n1, n2)`` blocks,
+        entries in [0, 1] (to 1e-6; a doubly stochastic or sub-stochastic block is).
         ``None``: plain pairwise matching of every pair (each reproduces the pairwise solver).
     sync_every : int, optional
         Synchronize after every ``sync_every`` outer steps. Default: RRWM 5 iterations, GA 4
@@ -627,7 +628,7 @@ def run_lockstep(affinities: PairAffinities, *, solver: str, sync=None,
     ------
     TypeError, ValueError
         Not a :class:`PairAffinities`, unknown solver or option, invalid option values,
-        ``sync`` not callable or returning the wrong shape or non-finite/negative values,
+        ``sync`` not callable or returning the wrong shape or values outside [0, 1],
         ``damping`` outside (0, 1].
 
     Examples
@@ -772,4 +773,9 @@ def _check_sync_output(Y, shape):
         raise ValueError("`sync` returned NaN or infinite entries")
     if Y.size and Y.min() < -1e-9:
         raise ValueError(f"`sync` must return non-negative blocks, got minimum {Y.min():.6g}")
-    return np.maximum(Y, 0.0)
+    if Y.size and Y.max() > 1.0 + 1e-6:
+        # a doubly stochastic (or sub-stochastic) block has entries <= 1; scaled blocks
+        # overflow the solvers' products (PF's Frank-Wolfe LAP met NaN at 1e300)
+        raise ValueError(f"`sync` must return blocks with entries in [0, 1] (doubly stochastic "
+                         f"or sub-stochastic), got maximum {Y.max():.6g}")
+    return np.clip(Y, 0.0, 1.0)

@@ -607,6 +607,39 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
     array([[0, 1, 2]])
     """
     check_choice(method, "method", SYNC_METHODS)
+    A, lab, nbr = _check_placement_maps(assignments, labels, fitted)
+    M, K, n = A.shape
+    N = lab.shape[0]
+    real, fit_real, L_new, L_fit = _check_placement_sizes(sizes, fitted_sizes, node_labels,
+                                                          fitted_node_labels, M, N, n)
+    E = lam_inv = Q = None
+    if embedding is not None:
+        E, lam_inv = _placement_embedding(embedding, method, degrees, eigenvalues, N, n)
+        Q = np.zeros((M, n, E.shape[2]))
+    out = np.empty((M, n), dtype=np.int64)
+    step = max(1, _SLOT_BLOCK_ELEMENTS // max(K * n, 1))
+    for s in range(0, M, step):                           # blocks of new graphs bound memory
+        blk = A[s:s + step]
+        b = blk.shape[0]
+        jj = (np.arange(K)[None, :, None] if nbr is None
+              else nbr[s:s + b, :, None])                 # fitted graph of each vote
+        valid = None
+        if real is not None:                              # real u -> real partner only
+            valid = ((np.arange(n)[None, None, :] < real[s:s + b, None, None])
+                     & (blk < fit_real[jj]))
+            if L_new is not None:                         # ... of the same label
+                valid &= L_new[s:s + b, None, :] == L_fit[jj, blk]
+        out[s:s + b] = _vote_slots(lab[jj, blk], valid, None if real is None else real[s:s + b])
+        if E is not None:
+            Q[s:s + b] = _vote_rows(E, jj, blk, valid, method, lam_inv)
+    if E is None:
+        return out, None
+    return out, _finish_placed_rows(Q, method, real)
+
+
+def _check_placement_maps(assignments, labels, fitted):
+    """place_graphs' maps: ``assignments`` (M, K, n) of permutation rows, ``labels`` (N, n),
+    ``fitted`` (M, K) distinct fitted-graph indices or None."""
     A = check_int_array(assignments, "assignments", 3, keep_dtype=True)
     lab = check_int_array(labels, "labels", 2)
     M, K, n = A.shape
@@ -618,9 +651,8 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
         want = f"(N, n) = ({K}, {n})" if fitted is None else f"(N, {n})"
         raise ValueError(f"`labels` must have shape {want} to match `assignments`, got shape "
                          f"{lab.shape}")
-    if fitted is None:
-        nbr = None
-    else:
+    nbr = None
+    if fitted is not None:
         nbr = check_int_array(fitted, "fitted", 2)
         if nbr.shape != (M, K):
             raise ValueError(f"`fitted` must have shape (M, k) = ({M}, {K}) like the first two "
@@ -635,6 +667,11 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
                              f"votes once), row {int(dup[0])} repeats one: "
                              f"{nbr[dup[0]].tolist()!r:.80}")
     _check_permutation_rows(A, "assignments")
+    return A, lab, nbr
+
+
+def _check_placement_sizes(sizes, fitted_sizes, node_labels, fitted_node_labels, M, N, n):
+    """place_graphs' real node counts and padded node labels (None where not given)."""
     if (sizes is None) != (fitted_sizes is None):
         raise ValueError("`sizes` and `fitted_sizes` must be given together")
     if (node_labels is None) != (fitted_node_labels is None):
@@ -652,77 +689,88 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
             raise ValueError("`node_labels` needs `sizes` and `fitted_sizes`")
         L_new = _padded_node_labels(node_labels, real, n, "node_labels")
         L_fit = _padded_node_labels(fitted_node_labels, fit_real, n, "fitted_node_labels")
-    E = None
-    if embedding is not None:
-        E = check_array(embedding, "embedding", ndim=3)
-        if E.shape[:2] != (N, n):
-            raise ValueError(f"`embedding` must have shape (N, n, d) = ({N}, {n}, d), got "
-                             f"shape {E.shape}")
-        Q = np.zeros((M, n, E.shape[2]))
-        if method == "orthogonal":
-            # polar(sum_j P_tj Q_j) does not change when E is scaled: a power of two that brings
-            # its largest entry to [0.5, 1) keeps the vote sums and the SVD inside float64
-            E, = _scaled(E)
-        else:
-            if degrees is None or eigenvalues is None:
-                raise ValueError("`degrees` and `eigenvalues` (Alignment.info) are needed to "
-                                 "place a spectral embedding")
-            deg = check_array(degrees, "degrees", ndim=2)
-            lam = check_array(eigenvalues, "eigenvalues", ndim=1)
-            if deg.shape != (N, n):
-                raise ValueError(f"`degrees` must have shape (N, n) = ({N}, {n}), got shape "
-                                 f"{deg.shape}")
-            if lam.shape[0] < E.shape[2]:
-                raise ValueError(f"`eigenvalues` must hold the {E.shape[2]} leading "
-                                 f"eigenvalues of the embedding, got {lam.shape[0]}")
-            lam = lam[: E.shape[2]]
-            # a column whose eigenvalue is not positive cannot be extended: left at zero
-            lam_inv = np.where(lam > 1e-12, 1.0 / np.where(lam > 1e-12, lam, 1.0), 0.0)
-            dinv = np.where(deg > 0, 1.0 / np.sqrt(np.where(deg > 0, deg, 1.0)), 0.0)
-            with np.errstate(over="ignore", invalid="ignore"):
-                E = E * dinv[:, :, None]                  # D^{-1/2} U, once
-    out = np.empty((M, n), dtype=np.int64)
-    step = max(1, _SLOT_BLOCK_ELEMENTS // max(K * n, 1))
-    for s in range(0, M, step):                           # blocks of new graphs bound memory
-        blk = A[s:s + step]
-        b = blk.shape[0]
-        jj = (np.arange(K)[None, :, None] if nbr is None
-              else nbr[s:s + b, :, None])                 # fitted graph of each vote
-        slots = lab[jj, blk]                                              # (b, K, n)
-        code = (np.arange(b)[:, None, None] * n + np.arange(n)[None, None, :]) * n + slots
-        valid = None
-        if real is not None:                              # real u -> real partner only
-            valid = ((np.arange(n)[None, None, :] < real[s:s + b, None, None])
-                     & (blk < fit_real[jj]))
-            if L_new is not None:                         # ... of the same label
-                valid &= L_new[s:s + b, None, :] == L_fit[jj, blk]
-        votes = None if valid is None else valid.ravel().astype(float)
-        S = np.bincount(code.ravel(), weights=votes, minlength=b * n * n).reshape(b, n, n)
-        for t in range(b):                                # one LAP per new graph
-            k = n if real is None else int(real[s + t])
-            c = solve_lap(S[t, :k])                       # k <= n rows: all placed
-            out[s + t, :k] = c
-            if k < n:
-                out[s + t, k:] = np.setdiff1d(np.arange(n), c)
-        if E is None:
-            continue
-        with np.errstate(over="ignore", invalid="ignore"):   # spectral: checked below
-            for t in range(b):                            # (K, n, d) gathered per new graph
-                rows = E[jj[min(t, jj.shape[0] - 1)], blk[t]]
-                if valid is None:
-                    Q[s + t] = rows.sum(0)
-                    cnt = np.full(n, float(K))
-                else:
-                    Q[s + t] = np.einsum("ju,jud->ud", valid[t], rows)
-                    cnt = valid[t].sum(0).astype(float)
-                if method == "spectral":                  # eigenvector equation, row by row
-                    c = np.where(cnt > 0, 1.0 / np.sqrt(np.maximum(cnt, 1.0)), 0.0)
-                    Q[s + t] *= c[:, None] * lam_inv[None, :]
-    if E is not None and method == "spectral" and not np.isfinite(Q).all():
+    return real, fit_real, L_new, L_fit
+
+
+def _placement_embedding(embedding, method, degrees, eigenvalues, N, n):
+    """The fitted embedding as the votes use it: scaled by a power of two (orthogonal) or
+    ``D^{-1/2} U`` with the inverse eigenvalues (spectral; ``lam_inv`` None otherwise)."""
+    E = check_array(embedding, "embedding", ndim=3)
+    if E.shape[:2] != (N, n):
+        raise ValueError(f"`embedding` must have shape (N, n, d) = ({N}, {n}, d), got "
+                         f"shape {E.shape}")
+    if method == "orthogonal":
+        # polar(sum_j P_tj Q_j) does not change when E is scaled: a power of two that brings
+        # its largest entry to [0.5, 1) keeps the vote sums and the SVD inside float64
+        E, = _scaled(E)
+        return E, None
+    if degrees is None or eigenvalues is None:
+        raise ValueError("`degrees` and `eigenvalues` (Alignment.info) are needed to "
+                         "place a spectral embedding")
+    deg = check_array(degrees, "degrees", ndim=2)
+    lam = check_array(eigenvalues, "eigenvalues", ndim=1)
+    if deg.shape != (N, n):
+        raise ValueError(f"`degrees` must have shape (N, n) = ({N}, {n}), got shape "
+                         f"{deg.shape}")
+    if lam.shape[0] < E.shape[2]:
+        raise ValueError(f"`eigenvalues` must hold the {E.shape[2]} leading "
+                         f"eigenvalues of the embedding, got {lam.shape[0]}")
+    lam = lam[: E.shape[2]]
+    # a column whose eigenvalue is not positive cannot be extended: left at zero
+    lam_inv = np.where(lam > 1e-12, 1.0 / np.where(lam > 1e-12, lam, 1.0), 0.0)
+    dinv = np.where(deg > 0, 1.0 / np.sqrt(np.where(deg > 0, deg, 1.0)), 0.0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        E = E * dinv[:, :, None]                  # D^{-1/2} U, once
+    return E, lam_inv
+
+
+def _vote_slots(slots: np.ndarray, valid, real) -> np.ndarray:
+    """Labels (b, n) of a block of new graphs from the slots (b, K, n) their correspondences
+    vote for (only the ``valid`` ones, if given): one LAP per graph on its real rows, then the
+    dummies fill the free slots in order."""
+    b, _, n = slots.shape
+    code = (np.arange(b)[:, None, None] * n + np.arange(n)[None, None, :]) * n + slots
+    votes = None if valid is None else valid.ravel().astype(float)
+    S = np.bincount(code.ravel(), weights=votes, minlength=b * n * n).reshape(b, n, n)
+    out = np.empty((b, n), dtype=np.int64)
+    for t in range(b):                                # one LAP per new graph
+        k = n if real is None else int(real[t])
+        c = solve_lap(S[t, :k])                       # k <= n rows: all placed
+        out[t, :k] = c
+        if k < n:
+            out[t, k:] = np.setdiff1d(np.arange(n), c)
+    return out
+
+
+def _vote_rows(E, jj, blk, valid, method, lam_inv) -> np.ndarray:
+    """Relaxed rows (b, n, d) of a block of new graphs: the sum of their partners' rows
+    (orthogonal: the polar factor is taken afterwards), or the spectral eigenvector equation."""
+    b, K, n = blk.shape
+    Q = np.empty((b, n, E.shape[2]))
+    with np.errstate(over="ignore", invalid="ignore"):   # spectral: checked by the caller
+        for t in range(b):                            # (K, n, d) gathered per new graph
+            rows = E[jj[min(t, jj.shape[0] - 1)], blk[t]]
+            if valid is None:
+                Q[t] = rows.sum(0)
+                cnt = np.full(n, float(K))
+            else:
+                Q[t] = np.einsum("ju,jud->ud", valid[t], rows)
+                cnt = valid[t].sum(0).astype(float)
+            if method == "spectral":                  # eigenvector equation, row by row
+                c = np.where(cnt > 0, 1.0 / np.sqrt(np.maximum(cnt, 1.0)), 0.0)
+                Q[t] *= c[:, None] * lam_inv[None, :]
+    return Q
+
+
+def _finish_placed_rows(Q: np.ndarray, method: str, real) -> np.ndarray:
+    """Spectral rows checked finite; orthogonal vote sums replaced by their polar factors (of
+    the real rows); dummy rows zero."""
+    M, n = Q.shape[:2]
+    if method == "spectral" and not np.isfinite(Q).all():
         raise ValueError("the spectral placement overflows float64: `embedding` is too large "
                          "for its `degrees` and `eigenvalues` (the fitted Alignment's own "
                          "values never are)")
-    if E is not None and method == "orthogonal":
+    if method == "orthogonal":
         if real is None:
             U, _, Vt = np.linalg.svd(Q, full_matrices=False)   # polar factor, batched
             Q = U @ Vt
@@ -731,11 +779,9 @@ def place_graphs(assignments, labels, *, sizes=None, fitted_sizes=None, node_lab
                 k = int(real[t])
                 U, _, Vt = np.linalg.svd(Q[t, :k], full_matrices=False)
                 Q[t, :k] = U @ Vt
-    if E is None:
-        Q = None
-    elif real is not None:
+    if real is not None:
         Q[np.arange(n)[None, :] >= real[:, None]] = 0.0
-    return out, Q
+    return Q
 
 
 def _padded_features(feats: list[np.ndarray], n: int) -> np.ndarray:

@@ -204,39 +204,58 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
     >>> seg.probability.shape[0], seg.probability.shape[1:] == seg.count.shape
     (3, True)
     """
-    from sklearn.linear_model import LogisticRegression
-
     imgs, homographies, o = _check_inputs(images, homographies, reference, window, margin,
                                           smooth, min_views, threshold)
-    reference, window, margin, smooth = o["reference"], o["window"], o["margin"], o["smooth"]
-    min_views, threshold = o["min_views"], o["threshold"]
-    n = len(imgs)
-    h0, w0 = imgs[reference].shape[:2]
-    (W, Hc), (ox, oy) = margin_canvas((w0, h0), margin)
+    h0, w0 = imgs[o["reference"]].shape[:2]
+    (W, Hc), (ox, oy) = margin_canvas((w0, h0), o["margin"])
     T = translation(ox, oy)
+    warped, valid = _warp_views(imgs, homographies, T, (W, Hc))
+    count = valid.sum(axis=0)
+    _match_photometry(warped, valid, count)
+    med = _consensus(warped, valid, count)
+    zs, rs, tex = _local_evidence(warped, valid, med, o["window"])
+    prob = _plane_probability(zs, rs, tex, valid, count, o["min_views"], as_generator(rng))
+    masks, canvas_masks = _view_masks(prob, valid, imgs, homographies, T, o["smooth"],
+                                      o["threshold"])
+    return PlaneSegmentation(masks=masks, canvas_masks=canvas_masks, median=med, count=count,
+                             offset=(ox, oy), probability=prob)
+
+
+_ERODE = np.ones((5, 5), np.uint8)      # valid regions lose a 2-pixel rim (interpolated border)
+
+
+def _warp_views(imgs, homographies, T, canvas):
+    """Every view warped onto the canvas (float32), with its eroded valid region."""
+    W, Hc = canvas
+    n = len(imgs)
     warped = np.empty((n, Hc, W), np.float32)
     valid = np.empty((n, Hc, W), bool)
-    kern = np.ones((5, 5), np.uint8)
     for i, (im, H) in enumerate(zip(imgs, homographies)):
         M = T @ H
         warped[i] = cv2.warpPerspective(im, M, (W, Hc), flags=cv2.INTER_LINEAR)
         ones = np.ones(im.shape[:2], np.uint8)
         valid[i] = cv2.erode(cv2.warpPerspective(ones, M, (W, Hc), flags=cv2.INTER_NEAREST),
-                             kern) > 0
-    count = valid.sum(axis=0)
+                             _ERODE) > 0
+    return warped, valid
 
-    def _median(stack):
-        s = np.where(valid, stack, np.inf)
-        s.sort(axis=0)
-        idx = np.clip((count - 1) // 2, 0, n - 1)
-        idx2 = np.clip(count // 2, 0, n - 1)
-        med = 0.5 * (np.take_along_axis(s, idx[None], 0)[0]
-                     + np.take_along_axis(s, idx2[None], 0)[0])
-        return np.where(count > 0, med, 0.0).astype(np.float32)
 
-    med = _median(warped)
-    # photometric normalization of every view against the consensus, then a new consensus
-    for i in range(n):
+def _consensus(warped, valid, count):
+    """Per-pixel median of the views that see the pixel (0 where none does)."""
+    n = len(warped)
+    s = np.where(valid, warped, np.inf)
+    s.sort(axis=0)
+    idx = np.clip((count - 1) // 2, 0, n - 1)
+    idx2 = np.clip(count // 2, 0, n - 1)
+    med = 0.5 * (np.take_along_axis(s, idx[None], 0)[0]
+                 + np.take_along_axis(s, idx2[None], 0)[0])
+    return np.where(count > 0, med, 0.0).astype(np.float32)
+
+
+def _match_photometry(warped, valid, count):
+    """In place: every view's grey levels mapped to the consensus by a robust gain and offset
+    (a flat view: offset only)."""
+    med = _consensus(warped, valid, count)
+    for i in range(len(warped)):
         v = valid[i] & (count >= 2)
         if v.sum() > 100:
             x = warped[i][v][::7].astype(np.float64)     # a subsample is plenty for 2 numbers
@@ -248,13 +267,16 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
                 warped[i] = a * warped[i] + b
             else:                       # a flat view: no gain to estimate, only the offset
                 warped[i] = warped[i] + np.median(y - x)
-    med = _median(warped)
 
+
+def _local_evidence(warped, valid, med, window):
+    """Per view and pixel: local ZNCC against the consensus ``zs``, mean absolute residual
+    ``rs`` (both float32, (n, H, W)), and the consensus' log texture ``tex`` (H, W)."""
     mu_m = _box(med, window)
     var_m = np.maximum(_box(med * med, window) - mu_m ** 2, 0)
     tex = np.log1p(np.sqrt(var_m))
     zs, rs = [], []
-    for i in range(n):
+    for i in range(len(warped)):
         wi = np.where(valid[i], warped[i], med)   # windows at the view border see the consensus
         mu_i = _box(wi, window)
         var_i = np.maximum(_box(wi * wi, window) - mu_i ** 2, 0)
@@ -263,8 +285,15 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
         r = _box(np.abs(wi - med), 5)
         zs.append(z.astype(np.float32))
         rs.append(r.astype(np.float32))
-    zs = np.stack(zs)
-    rs = np.stack(rs)
+    return np.stack(zs), np.stack(rs), tex
+
+
+def _plane_probability(zs, rs, tex, valid, count, min_views, gen):
+    """Plane probability per view and pixel: a logistic regression self-trained on confident
+    pixels (high ZNCC and low residual vs low ZNCC on texture or a large residual), or a ZNCC
+    threshold when too few are confident; pixels seen by few views lean to the plane."""
+    from sklearn.linear_model import LogisticRegression
+
     sel = valid & (count >= min_views)[None]
     r_scale = float(np.median(rs[sel])) + 1e-3 if sel.any() else 1.0
     lr = np.log1p(rs / np.float32(r_scale))
@@ -272,8 +301,6 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
         else np.ones_like(sel)
     pos = sel & (((zs > 0.85) & (rs < 1.5 * r_scale)) | (~textured & (rs < 0.7 * r_scale)))
     neg = sel & (((zs < 0.3) & textured) | (rs > 5 * r_scale))
-    gen = as_generator(rng)
-    prob = np.zeros(zs.shape, np.float32)
     if pos.sum() > 50 and neg.sum() > 50:
         ip = np.flatnonzero(pos.ravel())
         ineg = np.flatnonzero(neg.ravel())
@@ -294,17 +321,20 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
         prob = (zs > 0.6).astype(np.float32)
     # few views: no evidence against the plane unless the residual says so
     few = valid & ~(count >= min_views)[None]
-    prob = np.where(few, np.maximum(prob, 0.6 * (zs > 0.5)), prob)
+    return np.where(few, np.maximum(prob, 0.6 * (zs > 0.5)), prob)
 
+
+def _view_masks(prob, valid, imgs, homographies, T, smooth, threshold):
+    """Smoothed, thresholded and cleaned canvas masks, and the view masks warped back."""
     masks, canvas_masks = [], []
     k3 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
-    for i in range(n):
+    for i in range(len(imgs)):
         p = cv2.GaussianBlur(prob[i], (0, 0), smooth) if smooth > 0 else prob[i]
         cm = ((p > threshold) & valid[i]).astype(np.uint8)
         cm = cv2.morphologyEx(cm, cv2.MORPH_OPEN, k3)
         cm = cv2.morphologyEx(cm, cv2.MORPH_CLOSE, k3)
         # pixels outside the eroded valid region keep the label of their neighbourhood
-        cm_full = cv2.dilate(cm, kern)
+        cm_full = cv2.dilate(cm, _ERODE)
         cm = np.where(valid[i], cm, cm_full)
         canvas_masks.append(cm > 0)
         hi, wi_ = imgs[i].shape[:2]
@@ -312,5 +342,4 @@ def segment_plane_evidence(images, homographies, *, reference=0, window=7, margi
                                    flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
                                    borderMode=cv2.BORDER_CONSTANT, borderValue=1)
         masks.append(back > 0)
-    return PlaneSegmentation(masks=masks, canvas_masks=canvas_masks, median=med, count=count,
-                             offset=(ox, oy), probability=prob)
+    return masks, canvas_masks

@@ -303,3 +303,66 @@ def test_frame_number_beyond_int64_and_a_byte_order_mark(tmp_path):
     f = other / "label" / "hotel2"
     f.write_bytes(b"\xef\xbb\xbf" + f.read_bytes())
     np.testing.assert_array_equal(load_cmu_sequence(other).points, plain.points)
+
+
+def test_numbers_and_lines_are_read_strictly(tmp_path):
+    """`1_5` read as 15 and full-width digits as numbers; a form feed split a row of four
+    numbers into two rows (30 landmarks from 15 lines) and shifted the line numbers."""
+    _sequence(tmp_path, n_frames=3)
+    bad = tmp_path / "label" / "hotel2"
+    for token in ("1_5", "\uff11", "2\x00"):
+        bad.write_text(_rows(BASE[:4]) + f"1.0 {token}\n" + _rows(BASE[5:]))
+        _err(ValueError, tmp_path, f"{bad}, line 5: expected two numbers `x y`, got "
+                                   f"{('1.0 ' + token).strip()!r}")
+    bad.write_text(_rows(BASE[:2]).replace("\n", "\x0c", 1) + _rows(BASE[2:]))
+    with pytest.raises(ValueError, match=re.escape(f"{bad}, line 1: expected 2 columns `x y`, "
+                                                   "got 4")):
+        load_cmu_sequence(tmp_path)
+    bad.write_text(_rows(BASE).replace("\n", "\r"))              # old Mac line ends: still rows
+    assert load_cmu_sequence(tmp_path).n_landmarks == 12
+
+
+def test_label_files_not_silently_skipped(tmp_path):
+    """`hotel6.txt` beside hotel1..5 was skipped without a word; a prefix with a digit
+    (`cam2_1`) was not recognized at all."""
+    _sequence(tmp_path, n_frames=5)
+    (tmp_path / "label" / "hotel6.txt").write_text(_rows(BASE))
+    _err(ValueError, tmp_path,
+         f"{tmp_path / 'label' / 'hotel6.txt'}: looks like frame 6 of 'hotel' but label files are "
+         "named `hotel<N>` without an extension; rename or remove it")
+    seq = load_cmu_sequence(_sequence(tmp_path / "cam", name="cam2_", n_frames=3))
+    assert seq.name == "cam2_" and seq.frames.tolist() == [0, 1, 2]
+
+
+def test_png_size_beyond_the_format_and_bad_paths(tmp_path):
+    _sequence(tmp_path, n_frames=2, images=True)
+    _png(tmp_path / "images" / "hotel.seq1.png", 2**32 - 1, 30)
+    _err(ValueError, tmp_path, f"{tmp_path / 'images' / 'hotel.seq1.png'}: PNG header gives "
+                               "4294967295 x 30 pixels, beyond the format's limit of 2147483647 "
+                               "(a damaged header)")
+    _err(TypeError, 5, "`path` must be a path (str or os.PathLike), got int 5")
+    _err(ValueError, "", "`path` must be a path, got '' (write '.' for the working folder)")
+    with pytest.raises(ValueError, match="`path`: cannot expand '~nosuchuser_x/house'"):
+        load_cmu_sequence("~nosuchuser_x/house")
+
+
+def test_landmark_sequence_checks_its_fields():
+    """The constructor checked nothing: 3 frames of points with 2 frame numbers, repeated
+    frames (silently the last row), fractional frames (truncated) and NaN points passed."""
+    P = np.zeros((3, 4, 2))
+    ok = LandmarkSequence("toy", P, [0, 1, 2], None, None, ".")
+    assert ok.n_frames == 3 and ok.frames.dtype == np.int64
+    for kwargs, exc, msg in [
+        (dict(frames=[0, 1]), ValueError, "`frames` must hold one frame number per row"),
+        (dict(frames=[0, 1, 1]), ValueError, "`frames` must not repeat a frame number"),
+        (dict(frames=[0.5, 1, 2]), TypeError, "`frames`"),
+        (dict(points=np.full((3, 4, 2), np.nan)), ValueError, "`points` must be finite"),
+        (dict(points=np.zeros((3, 4, 3))), ValueError, r"`points` must have shape \(n_frames"),
+        (dict(image_sizes=[[4, 3]] * 3), ValueError, "must be given together"),
+        (dict(image_paths=("a",) * 3, image_sizes=[[4, 0]] * 3), ValueError,
+         "`image_sizes` must hold a positive"),
+    ]:
+        args = dict(name="toy", points=P, frames=[0, 1, 2], image_paths=None,
+                    image_sizes=None, source=".") | kwargs
+        with pytest.raises(exc, match=msg):
+            LandmarkSequence(**args)

@@ -44,6 +44,27 @@ def test_env_pointing_nowhere_is_an_error_not_a_fallback(monkeypatch, isolated):
         data_home(required=False)
 
 
+def test_bad_arguments_and_empty_env_are_named(monkeypatch, isolated):
+    """TRANSYNC_DATA='' fell back silently; subfolder='/etc' left the data home; subfolder=5
+    raised "unsupported operand"; required='no' counted as true."""
+    (isolated / "a" / "shared" / "data").mkdir(parents=True)      # a fallback that exists
+    monkeypatch.setenv("TRANSYNC_DATA", "")
+    with pytest.raises(ValueError, match="TRANSYNC_DATA is set but empty"):
+        data_home(required=False)
+    monkeypatch.setenv("TRANSYNC_DATA", "~nosuchuser_x/data")
+    with pytest.raises(ValueError, match=r"`TRANSYNC_DATA`: cannot expand '~nosuchuser_x/data'"):
+        data_home()
+    monkeypatch.delenv("TRANSYNC_DATA")
+    with pytest.raises(ValueError, match="`subfolder` must be a folder inside the data home"):
+        data_home(subfolder="/etc")
+    with pytest.raises(ValueError, match="`subfolder` must be a folder inside the data home"):
+        data_home(subfolder="../..")
+    with pytest.raises(TypeError, match="`subfolder` must be None or a folder name"):
+        data_home(subfolder=5)
+    with pytest.raises(TypeError, match="`required` must be a bool, got str 'no'"):
+        data_home(required="no")
+
+
 def test_data_home_missing_names_every_place(isolated):
     assert data_home(required=False) is None
     with pytest.raises(FileNotFoundError, match="TRANSYNC_DATA not set") as exc:

@@ -45,9 +45,12 @@ def _q(path):
 # --------------------------------------------------------------------------- text homographies
 
 @pytest.mark.parametrize("text, where, what", [
-    ("1 0 2\nfoo 1.0\n0 0 1\n", "line 2", "expected 3 numbers, got 'foo 1.0'"),
-    ("1 0 2\n0 1 nan\n0 0 1\n", "line 2", "expected finite numbers"),
-    ("1 0 2\n0 1 0\ninf 0 1\n", "line 3", "expected finite numbers"),
+    ("1 0 2\nfoo 1.0\n0 0 1\n", "line 2", "expected 3 finite numbers, got 'foo 1.0'"),
+    ("1 0 2\n0 1 nan\n0 0 1\n", "line 2", "expected 3 finite numbers"),
+    ("1 0 2\n0 1 0\ninf 0 1\n", "line 3", "expected 3 finite numbers"),
+    ("1 0 2\n0 1 0\n1e999 0 1\n", "line 3", "expected finite numbers"),
+    ("1 0 2\n0 1_5 0\n0 0 1\n", "line 2", "expected 3 finite numbers, got '0 1_5 0'"),   # 15
+    ("1 0 2\x0c0 1 0\n0 0 1\n", "line 1", "expected 3 numbers, got 6"),  # \x0c: no line end
     ("1 0 2\n0 1\n0 0 1\n", "line 2", "expected 3 numbers, got 2"),
     ("1 0 0 0 1 0\n", "line 1", "expected 3 numbers, got 6"),
 ])
@@ -104,7 +107,8 @@ def test_hpatches_errors_name_file_and_line(tmp_path):
         _png(tmp_path / f"{k}.png")
     (tmp_path / "H_1_2").write_text("1 0 0\n0 1 0\n0 0 x\n")
     (tmp_path / "notes.txt").write_text("3.txt is not an image")
-    with pytest.raises(ValueError, match=_q(tmp_path / "H_1_2") + "`, line 3: expected 3 numbers"):
+    with pytest.raises(ValueError, match=_q(tmp_path / "H_1_2") + "`, line 3: expected 3 finite "
+                                         "numbers"):
         load_hpatches_sequence(tmp_path)
     (tmp_path / "H_1_2").write_text(GOOD_H)
     (tmp_path / "3.txt").write_text("not an image, ignored")
@@ -123,8 +127,11 @@ def test_empty_and_missing_folders(tmp_path, loader, what):
     (tmp_path / "file").write_text("x")
     with pytest.raises(FileNotFoundError, match="`folder` must be an existing directory"):
         loader(tmp_path / "file")
-    with pytest.raises(TypeError, match="`folder` must be a path, got int 3"):
+    with pytest.raises(TypeError, match=r"`folder` must be a path \(str or os.PathLike\), got "
+                                        r"int 3"):
         loader(3)
+    with pytest.raises(ValueError, match=r"`folder` must be a path, got ''"):     # was the cwd
+        loader("")
 
 
 def test_sequence_must_start_at_image_one(tmp_path):
@@ -284,6 +291,48 @@ def test_adelaidermf_bad_fields(tmp_path, override, what):
     path = _mat(tmp_path, **override)
     with pytest.raises(ValueError, match=_q(path) + re.escape(what)):
         load_adelaidermf("pair", tmp_path)
+
+
+def test_adelaidermf_silent_misreads_refused(tmp_path):
+    """A 2x3 label for 6 points was flattened; a homogeneous entry of 1e-320 gave inf points
+    (with an overflow warning); an all-NaN or negative float image was an image."""
+    path = _mat(tmp_path, n=6, label=np.ones((2, 3), np.uint8))
+    with pytest.raises(ValueError, match=_q(path) + re.escape("`, field 'label': expected 6 "
+                                                              "labels (one per column of 'data'), "
+                                                              "got shape (2, 3)")):
+        load_adelaidermf("pair", tmp_path)
+    data = np.vstack([np.ones((2, 5)), np.full(5, 1e-320), np.ones((3, 5))])
+    path = _mat(tmp_path, data=data)
+    with pytest.raises(ValueError, match=_q(path) + re.escape("`, field 'data': the points "
+                                                              "(x / w, y / w) overflow float64")):
+        load_adelaidermf("pair", tmp_path)
+    for img, got in ((np.full((4, 4), np.nan), "NaN or infinite"), (-np.ones((4, 4)), "negative")):
+        path = _mat(tmp_path, img2=img)
+        with pytest.raises(ValueError, match=_q(path) + re.escape(
+                f"`, field 'img2': expected an image of finite non-negative intensities, got "
+                f"{got} values")):
+            load_adelaidermf("pair", tmp_path)
+
+
+def test_two_spellings_of_one_image_number_refused(tmp_path):
+    """img01.png beside img1.png: the loader silently took img01.png as view 1."""
+    _oxford(tmp_path, GOOD_H)
+    _png(tmp_path / "img01.png", value=9)
+    with pytest.raises(ValueError, match=_q(tmp_path) + re.escape("`: image 1 is given twice "
+                                                                  "(img01, img1)")):
+        load_oxford_sequence(tmp_path)
+
+
+def test_truncated_png_prints_nothing(tmp_path, capfd):
+    """OpenCV logged "[ WARN:0@...] ... PNG input buffer is incomplete" to stderr."""
+    import cv2
+
+    _oxford(tmp_path, GOOD_H)
+    ok, buf = cv2.imencode(".png", np.random.default_rng(0).integers(0, 255, (40, 40), np.uint8))
+    (tmp_path / "img2.png").write_bytes(buf.tobytes()[:-30])
+    with pytest.raises(ValueError, match="cannot decode the image file"):
+        load_oxford_sequence(tmp_path)
+    assert capfd.readouterr().err == ""
 
 
 def test_adelaidermf_ten_labels_for_many_points(tmp_path):

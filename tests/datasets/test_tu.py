@@ -246,8 +246,14 @@ def test_bad_argument_types(tmp_path):
         load_tu(3)
     with pytest.raises(ValueError, match="^`path_or_name` must be a folder path"):
         load_tu("")
-    with pytest.raises(TypeError, match="^`data_home` must be None, a str or a path, got int$"):
+    with pytest.raises(TypeError, match=r"^`data_home` must be a path \(str or os.PathLike\), "
+                                        r"got int 5$"):
         load_tu("MUTAG", data_home=5)
+    # pathlib's bare RuntimeError "Could not determine home directory" named nothing
+    with pytest.raises(ValueError, match=r"`path_or_name`: cannot expand '~nosuchuser_x/TOY'"):
+        load_tu("~nosuchuser_x/TOY")
+    with pytest.raises(ValueError, match=r"`data_home`: cannot expand '~nosuchuser_x'"):
+        list_tu("~nosuchuser_x")
 
 
 # --------------------------------------------------------------------------- errors
@@ -486,3 +492,60 @@ def test_real_large_sets(name):
     else:
         assert ds.has_node_attributes
         assert all(g.node_features.shape == (g.n_nodes, 18) for g in ds.graphs)
+
+
+def test_damaged_numbers_and_files_are_named(tmp_path):
+    """Trailing NUL bytes (`2\\x00\\x00` read as 2.0) and `1_5` (read as 15) in node attributes;
+    an optional file that is a folder was taken as absent, a required one reported missing."""
+    rows = [", ".join(f"{x:.6f}" for x in row) for row in ATTRS]
+    for token in ("2\x00\x00", "1_5", "\uff11"):
+        bad = rows[:3] + [f"{token}, 1.0"] + rows[4:]
+        folder = _write(tmp_path / f"T{len(token)}{ord(token[-1])}", node_attributes=_lines(bad))
+        f = folder / "TOY_node_attributes.txt"
+        with pytest.raises(ValueError, match=re.escape(f"{f}, line 4: expected comma-separated "
+                                                       "node attributes (finite numbers)")):
+            load_tu(folder)
+    folder = _write(tmp_path / "DIR", skip=("node_labels",))
+    (folder / "TOY_node_labels.txt").mkdir()
+    _err(ValueError, folder, f"{folder / 'TOY_node_labels.txt'}: not a readable file (a folder); "
+                             "remove it or put the file there")
+    folder = _write(tmp_path / "LINK", skip=("edge_labels",))
+    (folder / "TOY_edge_labels.txt").symlink_to(tmp_path / "nowhere")
+    _err(ValueError, folder, f"{folder / 'TOY_edge_labels.txt'}: not a readable file (a broken "
+                             "link); remove it or put the file there")
+    folder = _write(tmp_path / "REQ", skip=("graph_indicator",))
+    (folder / "TOY_graph_indicator.txt").mkdir()
+    with pytest.raises(ValueError, match=re.escape(f"{folder / 'TOY_graph_indicator.txt'}: is a "
+                                                   "folder, not a file")):
+        load_tu(folder)
+
+
+def test_blame_the_odd_line_and_count_significant_digits(tmp_path):
+    """A first attribute line with 3 fields blamed line 2; `0000000000000001` (1) was refused as
+    longer than 15 digits."""
+    rows = [", ".join(f"{x:.6f}" for x in row) for row in ATTRS]
+    folder = _write(tmp_path / "ODD", node_attributes=_lines([rows[0] + ", 1.0"] + rows[1:]))
+    with pytest.raises(ValueError, match=re.escape(f"{folder / 'TOY_node_attributes.txt'}, line 1:"
+                                                   " expected comma-separated node attributes "
+                                                   "(2 fields), found 3")):
+        load_tu(folder)
+    folder = _write(tmp_path / "ZEROS", node_labels=_lines(["0000000000000005"] + NODE_LABELS[1:]))
+    assert load_tu(folder).graphs[0].node_labels[0] == 5
+
+
+def test_dataset_constructor_refuses_what_it_cannot_hold():
+    """y = 2**63 (uint64) wrapped to -2**63; one Graph for `graphs` and path=None raised raw
+    errors; has_node_labels=True without labels broke summary() later."""
+    g = Graph(np.zeros((1, 1)))
+    with pytest.raises(ValueError, match="`y` must fit in int64, got 9223372036854775808"):
+        TUDataset("t", (g,), y=np.array([2**63], np.uint64), path=".")
+    with pytest.raises(TypeError, match="`graphs` must be a list or tuple of transync.graphs"):
+        TUDataset("t", g, y=[0], path=".")
+    with pytest.raises(TypeError, match=r"`path` must be a path \(str or os.PathLike\), got "
+                                        "NoneType"):
+        TUDataset("t", (g,), y=[0], path=None)
+    with pytest.raises(ValueError, match="`has_node_labels` is True but `graphs.0.` has no "
+                                         "node_labels"):
+        TUDataset("t", (g,), y=[0], path=".", has_node_labels=True)
+    with pytest.raises(TypeError, match="`has_edge_labels` must be a bool, got str"):
+        TUDataset("t", (g,), y=[0], path=".", has_edge_labels="no")

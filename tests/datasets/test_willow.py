@@ -230,3 +230,12 @@ def test_mutated_mat_files_load_or_name_the_file(tmp_path_factory, compress, edi
         assert str(bad) in str(exc)
     else:
         assert np.isfinite(seq.points).all()
+
+
+def test_folder_argument_named():
+    """None, 1.5 and b"/tmp" reached pathlib ("expected str, bytes or os.PathLike object")."""
+    for bad in (None, 1.5, b"/tmp"):
+        with pytest.raises(TypeError, match=r"`folder` must be a path"):
+            load_willow_class(bad)
+    with pytest.raises(ValueError, match="`folder`: cannot expand '~nosuchuser_x/Car'"):
+        load_willow_class("~nosuchuser_x/Car")

@@ -33,10 +33,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validation import as_generator, check_bool, check_choice, check_int
+from .._validation import (as_generator, check_array, check_bool, check_choice, check_int,
+                           check_int_array)
 from ..graphs import Graph
 from ._graphs import GraphCollectionProblem
-from ._home import data_home, no_folder
+from ._home import as_path, data_home, no_folder
+from ._text import is_number, text_lines
 
 __all__ = ["LANDMARK_AFFINITY", "LandmarkSequence", "load_cmu_sequence"]
 
@@ -46,7 +48,9 @@ __all__ = ["LANDMARK_AFFINITY", "LandmarkSequence", "load_cmu_sequence"]
 #: angle difference in radians), written as ``exp(-(dd^2 + angle_weight dtheta^2) / sigma2)``.
 LANDMARK_AFFINITY = {"attribute": "length+angle", "sigma2": 0.05 / 0.9, "angle_weight": 0.1 / 0.9}
 
-_LABEL_RE = re.compile(r"^(?P<name>[A-Za-z_][A-Za-z_.\-]*?)(?P<number>\d+)$")
+# `<name><N>`: the name ends at the trailing digits and may hold digits itself (`cam2_1`)
+_LABEL_RE = re.compile(r"^(?P<name>[A-Za-z_](?:[\w.\-]*[A-Za-z_.\-])?)(?P<number>\d+)$", re.ASCII)
+_PNG_MAX_SIDE = 2**31 - 1          # the PNG specification's limit on width and height
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
@@ -59,6 +63,9 @@ def _png_size(path: Path) -> tuple[int, int]:
     width, height = struct.unpack(">II", head[16:24])
     if width == 0 or height == 0:
         raise ValueError(f"{path}: PNG header gives an empty image ({width} x {height})")
+    if max(width, height) > _PNG_MAX_SIDE:
+        raise ValueError(f"{path}: PNG header gives {width} x {height} pixels, beyond the "
+                         f"format's limit of {_PNG_MAX_SIDE} (a damaged header)")
     return int(width), int(height)
 
 
@@ -112,11 +119,34 @@ class LandmarkSequence:
     _position: dict = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
-        object.__setattr__(self, "points", _frozen(np.asarray(self.points, dtype=float)))
-        object.__setattr__(self, "frames", _frozen(np.asarray(self.frames, dtype=np.int64)))
+        if not isinstance(self.name, str):
+            raise TypeError(f"`name` must be a str, got {type(self.name).__name__}")
+        P = check_array(self.points, "points", ndim=3)
+        if P.shape[2] != 2 or P.shape[0] < 1 or P.shape[1] < 1:
+            raise ValueError(f"`points` must have shape (n_frames, n_landmarks, 2) with at least "
+                             f"one frame and one landmark, got shape {P.shape}")
+        F = check_int_array(self.frames, "frames", ndim=1)
+        if F.shape != (P.shape[0],):
+            raise ValueError(f"`frames` must hold one frame number per row of `points` "
+                             f"({P.shape[0]}), got shape {F.shape}")
+        if np.unique(F).size != F.size:
+            raise ValueError(f"`frames` must not repeat a frame number, got {F.tolist()!r:.80}")
+        object.__setattr__(self, "points", _frozen(P))
+        object.__setattr__(self, "frames", _frozen(F.astype(np.int64)))
+        if (self.image_paths is None) != (self.image_sizes is None):
+            raise ValueError("`image_paths` and `image_sizes` must be given together")
         if self.image_sizes is not None:
-            object.__setattr__(self, "image_sizes",
-                               _frozen(np.asarray(self.image_sizes, dtype=np.int64)))
+            S = check_int_array(self.image_sizes, "image_sizes", ndim=2)
+            if S.shape != (P.shape[0], 2) or (S.size and S.min() < 1):
+                raise ValueError(f"`image_sizes` must hold a positive (width, height) per frame, "
+                                 f"shape ({P.shape[0]}, 2), got shape {S.shape}")
+            if len(self.image_paths) != P.shape[0]:
+                raise ValueError(f"`image_paths` must hold one path per frame ({P.shape[0]}), got "
+                                 f"{len(self.image_paths)}")
+            object.__setattr__(self, "image_paths", tuple(Path(p) for p in self.image_paths))
+            object.__setattr__(self, "image_sizes", _frozen(S.astype(np.int64)))
+        if self.source is not None:
+            object.__setattr__(self, "source", as_path(self.source, "source"))
         object.__setattr__(self, "_position",
                            {int(f): p for p, f in enumerate(self.frames.tolist())})
 
@@ -266,25 +296,32 @@ def _read_label_file(path: Path) -> np.ndarray:
     except UnicodeDecodeError:
         raise ValueError(f"{path}: not a text file (expected rows `x y`)") from None
     rows = []
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        fields = line.split()
+    for lineno, line in enumerate(text_lines(text), start=1):
+        fields = line.split(None)
         if not fields:
             continue
         if len(fields) != 2:
             raise ValueError(f"{path}, line {lineno}: expected 2 columns `x y`, got "
                              f"{len(fields)}: {line.strip()!r:.60}")
-        try:
-            xy = [float(v) for v in fields]
-        except ValueError:
-            raise ValueError(f"{path}, line {lineno}: expected two numbers `x y`, got "
-                             f"{line.strip()!r:.60}") from None
-        if not all(math.isfinite(v) for v in xy):
+        if not all(is_number(v) for v in fields):
+            finite = all(_is_float(v) for v in fields)
+            raise ValueError(f"{path}, line {lineno}: expected "
+                             f"{'finite coordinates' if finite else 'two numbers `x y`'}, got "
+                             f"{line.strip()!r:.60}")
+        xy = [float(v) for v in fields]
+        if not all(math.isfinite(v) for v in xy):        # 1e999
             raise ValueError(f"{path}, line {lineno}: expected finite coordinates, got "
                              f"{line.strip()!r:.60}")
         rows.append(xy)
     if not rows:
         raise ValueError(f"{path}: no landmark rows (expected rows `x y`)")
     return np.array(rows, dtype=float)
+
+
+def _is_float(token: str) -> bool:
+    """A number or a spelled-out NaN / infinity: a row of these gets "expected finite
+    coordinates" rather than "expected two numbers"."""
+    return is_number(token) or token.lower().lstrip("+-") in ("nan", "inf", "infinity")
 
 
 def _label_files(folder: Path) -> tuple[str, dict[int, Path]]:
@@ -311,6 +348,11 @@ def _label_files(folder: Path) -> tuple[str, dict[int, Path]]:
         raise ValueError(f"{folder}: label files of several sequences ({names}); expected one "
                          "name prefix")
     (name, by_number), = found.items()
+    for p in sorted(folder.iterdir()):      # `house6.txt` beside house1..5: not silently skipped
+        stem = re.fullmatch(re.escape(name) + r"(\d+)\..*", p.name, re.ASCII)
+        if stem and not p.name.startswith("."):
+            raise ValueError(f"{p}: looks like frame {int(stem[1])} of {name!r} but label files "
+                             f"are named `{name}<N>` without an extension; rename or remove it")
     if 0 in by_number:
         raise ValueError(f"{by_number[0]}: frame numbers in the CMU layout start at 1 (file "
                          "`<name><N>` is frame N-1), got 0")
@@ -338,9 +380,12 @@ def load_cmu_sequence(path=None) -> LandmarkSequence:
     FileNotFoundError
         No such folder, or no ``label/`` folder in it.
     ValueError
-        No label files, label files of several name prefixes, a duplicate frame number, a row
-        without exactly two numbers, a NaN or infinite coordinate, files with different numbers
-        of landmarks, an unreadable PNG header: the message names the file (and line).
+        No label files, label files of several name prefixes, a duplicate frame number, a file
+        named like a frame but with an extension (``house6.txt``), a row without exactly two
+        numbers (ASCII decimal literals), a NaN or infinite coordinate, files with different
+        numbers of landmarks, an unreadable PNG header: the message names the file (and line).
+    TypeError
+        ``path`` not a ``str`` or ``os.PathLike``.
 
     Examples
     --------
@@ -358,7 +403,7 @@ def load_cmu_sequence(path=None) -> LandmarkSequence:
     if path is None:
         folder = data_home(subfolder="cmu-house")
     else:
-        folder = Path(path).expanduser()
+        folder = as_path(path, "path")
         if not folder.is_dir():
             raise FileNotFoundError(f"{folder}: {no_folder(folder)} (expected a folder in the CMU "
                                     "layout, holding `label/`)")

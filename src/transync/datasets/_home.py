@@ -3,7 +3,7 @@
 Resolution order (the first that exists wins):
 
 1. the environment variable ``TRANSYNC_DATA`` -- when set it must name an existing folder
-   (a variable that points nowhere is an error, never a silent fallback);
+   (a variable that points nowhere, or is empty, is an error, never a silent fallback);
 2. ``../shared/data`` relative to the current working directory, then relative to the source
    checkout this package runs from (only when it runs from a checkout, not an installed copy);
 3. the per-user cache folder: ``$XDG_CACHE_HOME/transync``, default ``~/.cache/transync``
@@ -15,9 +15,30 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from .._validation import check_bool
+
 __all__ = ["data_home"]
 
 _PACKAGE_ROOT = Path(__file__).resolve().parents[3]
+
+
+def as_path(value, name: str) -> Path:
+    """``value`` (a ``str`` or ``os.PathLike``) as a ``Path`` with ``~`` expanded; named errors
+    for other types, for ``''`` (which ``Path`` would read as the working directory) and for a
+    ``~user`` that does not exist (pathlib's bare ``RuntimeError``)."""
+    if isinstance(value, bool) or not isinstance(value, (str, os.PathLike)):
+        raise TypeError(f"`{name}` must be a path (str or os.PathLike), got "
+                        f"{type(value).__name__} {value!r:.40}")
+    text = os.fspath(value)
+    if not isinstance(text, str):
+        raise TypeError(f"`{name}` must be a path given as text, got {type(text).__name__} "
+                        f"{text!r:.40}")
+    if not text:
+        raise ValueError(f"`{name}` must be a path, got '' (write '.' for the working folder)")
+    try:
+        return Path(text).expanduser()
+    except RuntimeError as exc:             # "~nosuchuser/...": no such home folder
+        raise ValueError(f"`{name}`: cannot expand {text!r:.80} ({exc})") from None
 
 
 def no_folder(path: Path) -> str:
@@ -87,6 +108,9 @@ def data_home(required: bool = True, *, subfolder: str | None = None) -> Path | 
     FileNotFoundError, NotADirectoryError
         ``TRANSYNC_DATA`` is set but names no folder (whatever ``required``), or nothing was
         found and ``required`` is true.
+    ValueError, TypeError
+        ``TRANSYNC_DATA`` set but empty, ``required`` not a bool, ``subfolder`` not a folder
+        name inside the data home (absolute, or with ``..``).
 
     Examples
     --------
@@ -94,9 +118,20 @@ def data_home(required: bool = True, *, subfolder: str | None = None) -> Path | 
     >>> home is None or home.is_dir()
     True
     """
+    check_bool(required, "required")
+    if subfolder is not None:
+        if not isinstance(subfolder, str) or not subfolder:
+            raise TypeError(f"`subfolder` must be None or a folder name (non-empty str), got "
+                            f"{type(subfolder).__name__} {subfolder!r:.40}")
+        if Path(subfolder).is_absolute() or ".." in Path(subfolder).parts:
+            raise ValueError(f"`subfolder` must be a folder inside the data home, got "
+                             f"{subfolder!r:.80}")
     env = os.environ.get("TRANSYNC_DATA")
-    if env:
-        home = Path(env).expanduser()
+    if env is not None:
+        if not env:
+            raise ValueError("TRANSYNC_DATA is set but empty; set it to the folder holding the "
+                             "real data sets, or unset it")
+        home = as_path(env, "TRANSYNC_DATA")
         if not home.exists():
             raise FileNotFoundError(f"TRANSYNC_DATA={env!r} does not exist; set it to the folder "
                                     "holding the real data sets, or unset it")

@@ -31,8 +31,9 @@ from typing import Any
 import numpy as np
 
 from ..geometry import normalize_determinant
-from ._home import data_home
+from ._home import as_path, data_home
 from ._matfile import MatFieldError, MatFileError, read_mat
+from ._text import is_number, text_lines
 
 __all__ = [
     "AdelaideRMFPair",
@@ -103,15 +104,14 @@ def _read_matrix_text(path) -> np.ndarray:
     except (OSError, UnicodeDecodeError) as exc:
         raise ValueError(f"`{path}`: cannot read the homography as text ({exc})") from None
     rows = []
-    for lineno, line in enumerate(text.splitlines(), start=1):
+    for lineno, line in enumerate(text_lines(text), start=1):
         tokens = [t for t in re.split(r"[\s,;]+", line.strip()) if t]
         if not tokens:
             continue
-        try:
-            values = [float(t) for t in tokens]
-        except ValueError:
-            raise ValueError(f"`{path}`, line {lineno}: expected 3 numbers, "
-                             f"got {line.strip()!r:.80}") from None
+        if not all(is_number(t) for t in tokens):        # strict: no `1_5`, no NaN, no NUL
+            raise ValueError(f"`{path}`, line {lineno}: expected 3 finite numbers, "
+                             f"got {line.strip()!r:.80}")
+        values = [float(t) for t in tokens]
         if len(values) != 3:
             raise ValueError(f"`{path}`, line {lineno}: expected 3 numbers, got {len(values)} "
                              f"({line.strip()!r:.80})")
@@ -175,10 +175,15 @@ def _read_image(path) -> np.ndarray:
         raise ValueError(f"`{path}`: cannot read the image file ({exc})") from None
     arr = None
     if raw:
+        log = cv2.utils.logging
+        level = log.getLogLevel()
+        log.setLogLevel(log.LOG_LEVEL_SILENT)   # a damaged file is reported below, not on stderr
         try:
             arr = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_UNCHANGED)
         except cv2.error:
             arr = None
+        finally:
+            log.setLogLevel(level)
     if arr is None or arr.size == 0:
         why = "empty file" if not raw else f"{len(raw)} bytes, unknown or corrupt format"
         raise ValueError(f"`{path}`: cannot decode the image file ({why})")
@@ -201,24 +206,27 @@ def _find_image(folder: Path, stem: str) -> Path:
 
 
 def _check_folder(folder) -> Path:
-    if isinstance(folder, bool) or not isinstance(folder, (str, Path)) and not hasattr(
-            folder, "__fspath__"):
-        raise TypeError(f"`folder` must be a path, got {type(folder).__name__} {folder!r:.40}")
-    folder = Path(folder)
+    folder = as_path(folder, "folder")
     if not folder.is_dir():
         raise FileNotFoundError(f"`folder` must be an existing directory, got {str(folder)!r}")
     return folder
 
 
 def _image_files(folder: Path, pattern: str) -> dict:
-    """``{k: path}`` for the image files whose name matches ``pattern`` (group 1 = index ``k``),
-    sorted by ``k``; when one index has several files (``img1.ppm``, ``img1.png``) the first
-    extension of ``_EXTS`` wins."""
+    """``{k: path}`` for the image files whose name matches ``pattern`` (group 1 = index ``k``,
+    ASCII digits), sorted by ``k``; when one index has several files of one name
+    (``img1.ppm``, ``img1.png``) the first extension of ``_EXTS`` wins; two spellings of one
+    index (``img1.png``, ``img01.png``) are refused (which one is view 1?)."""
     found: dict = {}
-    for p in folder.iterdir():
-        m = re.fullmatch(pattern, p.name)
+    for p in sorted(folder.iterdir()):
+        m = re.fullmatch(pattern, p.name, re.ASCII)
         if m and p.suffix.lower() in _EXTS and p.is_file():
             found.setdefault(int(m.group(1)), []).append(p)
+    for k, ps in found.items():
+        stems = sorted({p.stem for p in ps})
+        if len(stems) > 1:
+            raise ValueError(f"`{folder}`: image {k} is given twice ({', '.join(stems)}); keep "
+                             "one spelling of each image number")
     return {k: min(ps, key=lambda p: (_EXTS.index(p.suffix.lower()), p.name))
             for k, ps in sorted(found.items())}
 
@@ -449,6 +457,10 @@ def _mat_image(m: dict, names: list, key: str, path: Path) -> np.ndarray:
             or (img.ndim == 3 and img.shape[2] not in (1, 3, 4)):
         raise ValueError(f"`{path}`, field {key!r}: expected an image (H, W) or (H, W, 3), "
                          f"got shape {img.shape} and dtype {img.dtype}")
+    if img.dtype.kind == "f" and not (np.isfinite(img).all() and img.min() >= 0):
+        got = "NaN or infinite" if not np.isfinite(img).all() else "negative"
+        raise ValueError(f"`{path}`, field {key!r}: expected an image of finite non-negative "
+                         f"intensities, got {got} values")
     return img
 
 
@@ -516,10 +528,15 @@ def load_adelaidermf(name, folder=None) -> AdelaideRMFPair:
                          "entries")
     if np.any(data[2] == 0) or np.any(data[5] == 0):
         raise ValueError(f"`{path}`, field 'data': homogeneous rows 3 and 6 must be non-zero")
+    with np.errstate(over="ignore"):
+        x1, x2 = (data[:2] / data[2]).T, (data[3:5] / data[5]).T
+    if not (np.isfinite(x1).all() and np.isfinite(x2).all()):
+        raise ValueError(f"`{path}`, field 'data': the points (x / w, y / w) overflow float64 "
+                         "(homogeneous entries near zero)")
     n = data.shape[1]
     raw = _mat_field(m, names, "label", path)
     labels = raw.ravel()
-    if raw.dtype.kind not in "uif" or labels.size != n:
+    if raw.dtype.kind not in "uif" or labels.size != n or sum(d > 1 for d in raw.shape) > 1:
         raise ValueError(f"`{path}`, field 'label': expected {n} labels (one per column of "
                          f"'data'), got shape {raw.shape} and dtype {raw.dtype}")
     if labels.dtype.kind == "f" and not np.all(np.isfinite(labels) & (labels == np.round(labels))):
@@ -531,5 +548,4 @@ def load_adelaidermf(name, folder=None) -> AdelaideRMFPair:
                          f"{2**62 - 1}, got {bad:.6g}")
     labels = labels.astype(np.int64)
     img1, img2 = _mat_image(m, names, "img1", path), _mat_image(m, names, "img2", path)
-    return AdelaideRMFPair(name=name, x1=(data[:2] / data[2]).T, x2=(data[3:5] / data[5]).T,
-                           labels=labels, img1=img1, img2=img2)
+    return AdelaideRMFPair(name=name, x1=x1, x2=x2, labels=labels, img1=img1, img2=img2)

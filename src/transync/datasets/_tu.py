@@ -37,9 +37,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .._validation import check_bool
 from ..graphs import Graph
 from ._home import data_home as _data_home
-from ._home import no_folder
+from ._home import as_path, no_folder
+from ._text import NUMBER_BYTES
 
 __all__ = ["TUDataset", "list_tu", "load_tu"]
 
@@ -115,6 +117,11 @@ class TUDataset:
     _sizes: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
+        if not isinstance(self.name, str):
+            raise TypeError(f"`name` must be a str, got {type(self.name).__name__}")
+        if isinstance(self.graphs, Graph) or not isinstance(self.graphs, (list, tuple)):
+            raise TypeError(f"`graphs` must be a list or tuple of transync.graphs.Graph, got "
+                            f"{type(self.graphs).__name__}")
         graphs = tuple(self.graphs)
         for k, g in enumerate(graphs):
             if not isinstance(g, Graph):
@@ -126,6 +133,15 @@ class TUDataset:
         if y.dtype.kind not in "iu" or y.shape != (len(graphs),):
             raise ValueError(f"`y` must be an int array of shape ({len(graphs)},), got "
                              f"{y.dtype} array of shape {y.shape}")
+        if y.dtype.kind == "u" and y.size and int(y.max()) > np.iinfo(np.int64).max:
+            raise ValueError(f"`y` must fit in int64, got {int(y.max())}")     # would wrap
+        for flag, attr in (("has_node_labels", "node_labels"),
+                           ("has_node_attributes", "node_features")):
+            if check_bool(getattr(self, flag), flag) and any(
+                    getattr(g, attr) is None for g in graphs):
+                k = next(i for i, g in enumerate(graphs) if getattr(g, attr) is None)
+                raise ValueError(f"`{flag}` is True but `graphs[{k}]` has no {attr}")
+        check_bool(self.has_edge_labels, "has_edge_labels")
         loops = np.zeros(len(graphs), np.int64) if self.self_loops is None else self.self_loops
         loops = np.asarray(loops)
         if loops.shape != (len(graphs),) or loops.dtype.kind not in "iu":
@@ -133,7 +149,7 @@ class TUDataset:
                              f"{loops.dtype} array of shape {loops.shape}")
         object.__setattr__(self, "graphs", graphs)
         object.__setattr__(self, "y", _frozen(y.astype(np.int64)))
-        object.__setattr__(self, "path", Path(self.path))
+        object.__setattr__(self, "path", as_path(self.path, "path"))
         object.__setattr__(self, "self_loops", _frozen(loops.astype(np.int64)))
         object.__setattr__(self, "ignored_files", tuple(self.ignored_files))
         object.__setattr__(self, "_sizes",
@@ -268,7 +284,11 @@ def _read_table(path: Path, *, columns: int | None, kind: str, what: str):
     rows = np.flatnonzero(per_line)
     if rows.size == 0:
         return np.zeros((0, columns or 0), np.int64 if kind == "int" else float), rows
-    k = int(per_line[rows[0]]) if columns is None else columns
+    if columns is None:             # the common field count (a bad first line is the one blamed)
+        counts, freq = np.unique(per_line[rows], return_counts=True)
+        k = int(counts[np.argmax(freq)])
+    else:
+        k = columns
     wrong = np.flatnonzero(per_line[rows] != k)
     if wrong.size:
         lineno = int(rows[wrong[0]]) + 1
@@ -279,7 +299,7 @@ def _read_table(path: Path, *, columns: int | None, kind: str, what: str):
     if kind == "int":
         values = _parse_ints(path, data, b, tok, start, token_line, what)
     else:
-        values = _parse_floats(path, data, token_line, what)
+        values = _parse_floats(path, data, b, tok, token_line, what)
     return values.reshape(rows.size, k), linenos
 
 
@@ -297,8 +317,10 @@ def _parse_ints(path, data, b, tok, start, token_line, what) -> np.ndarray:
     pos = np.flatnonzero(digit)
     tid = token_id[pos]
     power = ends[tid] - pos
-    if power.size and power.max() >= _MAX_DIGITS:
-        t = int(tid[np.argmax(power >= _MAX_DIGITS)])
+    # digits that count: from the first non-zero digit of a token (`0000000000000001` is 1)
+    significant = (b[pos] != 48) | (power == 0)
+    if power.size and np.any(significant & (power >= _MAX_DIGITS)):
+        t = int(tid[np.argmax(significant & (power >= _MAX_DIGITS))])
         raise _bad_line(path, data, int(token_line[t]) + 1,
                         f"expected {what} (integers of at most {_MAX_DIGITS} digits)")
     values = np.bincount(tid, weights=(b[pos] - 48) * 10.0 ** power, minlength=token_line.size)
@@ -307,7 +329,17 @@ def _parse_ints(path, data, b, tok, start, token_line, what) -> np.ndarray:
     return values
 
 
-def _parse_floats(path, data, token_line, what) -> np.ndarray:
+_NUMBER_BYTE = np.zeros(256, bool)
+_NUMBER_BYTE[list(NUMBER_BYTES)] = True
+
+
+def _parse_floats(path, data, b, tok, token_line, what) -> np.ndarray:
+    # ASCII decimal literals only: numpy and Python would also read `1_5` as 15, drop trailing
+    # NUL bytes (`2\x00\x00` as 2.0) and take full-width digits
+    bad = np.flatnonzero(tok & ~_NUMBER_BYTE[b])
+    if bad.size:
+        lineno = int(np.count_nonzero(b[:bad[0]] == 10)) + 1
+        raise _bad_line(path, data, lineno, f"expected {what} (finite numbers)")
     tokens = data.replace(b",", b" ").split()     # the same fields as the byte scan above
     try:
         values = np.array(tokens).astype(np.float64)
@@ -335,10 +367,7 @@ def _parse_floats(path, data, token_line, what) -> np.ndarray:
 def _tu_root(data_home, *, required: bool) -> Path | None:
     if data_home is None:
         return _data_home(required=required, subfolder="tu")
-    if not isinstance(data_home, (str, os.PathLike)):
-        raise TypeError(f"`data_home` must be None, a str or a path, got "
-                        f"{type(data_home).__name__}")
-    home = Path(data_home).expanduser()
+    home = as_path(data_home, "data_home")
     if not home.is_dir():
         raise FileNotFoundError(f"{home}: {no_folder(home)} (`data_home` must be the folder "
                                 "holding `tu/`)")
@@ -407,7 +436,7 @@ def _resolve(path_or_name, data_home) -> Path:
     if not spec:
         raise ValueError("`path_or_name` must be a folder path or a data set name, got ''")
     if is_path:
-        folder = Path(spec).expanduser()
+        folder = as_path(spec, "path_or_name")
         if not folder.is_dir():
             raise FileNotFoundError(f"{folder}: {no_folder(folder)} ({_layout('DS')})")
         return folder
@@ -442,7 +471,11 @@ def _locate(path_or_name, data_home) -> tuple[Path, str, dict]:
     files = {k: folder / f"{ds}_{k}.txt" for k in _REQUIRED + _OPTIONAL + _IGNORED}
     for k in _REQUIRED:
         if not files[k].is_file():
-            raise FileNotFoundError(f"{folder}: missing {files[k].name} ({_layout(ds)})")
+            what = ("is a folder, not a file" if files[k].is_dir() else
+                    "is a broken link" if files[k].is_symlink() else "missing")
+            if what == "missing":
+                raise FileNotFoundError(f"{folder}: missing {files[k].name} ({_layout(ds)})")
+            raise ValueError(f"{files[k]}: {what} ({_layout(ds)})")
     return folder, ds, files
 
 
@@ -510,6 +543,11 @@ def _read_optional(path: Path, columns, kind: str, what: str, rows: int, against
     Returns ``(values (rows, k), line numbers (rows,))`` as :func:`_read_table`.
     """
     if not path.is_file():
+        if path.exists() or path.is_symlink():       # a folder, or a link to nothing
+            what = ("a folder" if path.is_dir() else "a broken link" if not path.exists()
+                    else "not a regular file")
+            raise ValueError(f"{path}: not a readable file ({what}); remove it or put the file "
+                             "there")
         return None, None
     values, lines = _read_table(path, columns=columns, kind=kind, what=what)
     if values.shape[0] != rows:

@@ -155,3 +155,31 @@ def test_pairs_given_in_one_direction_only_with_unequal_sizes():
     rep = cycle_inconsistency({(1, 0): np.array([2, 1]), (1, 2): np.array([0, 1]),
                                (0, 2): np.array([-1, 1, 0])})
     assert rep["n_triangles"] == 1 and rep["inconsistent_triangles"] == 0.0
+
+
+def test_many_objects_need_no_objects_by_slots_table(monkeypatch):
+    """10**5 objects of 2 nodes in distinct slots: pairwise(0, 1) allocated a 10**5 x 2 * 10**5
+    table (149 GiB, MemoryError); the binary-search lookup gives the dense table's answers."""
+    import transync.permutations as perm
+
+    big = MultiMatching([np.array([2 * g, 2 * g + 1]) for g in range(10**5)])
+    np.testing.assert_array_equal(big.pairwise(0, 1), [-1, -1])
+    same = MultiMatching([np.array([0, 1])] * 10**5)
+    np.testing.assert_array_equal(same.pairwise(7, 99_999), [0, 1])
+    rng = np.random.default_rng(0)
+    for trial in range(20):
+        d = int(rng.integers(1, 9))
+        labels = [np.where(rng.random(k) < 0.3, -1, rng.permutation(d)[:k])
+                  for k in rng.integers(0, d + 1, size=int(rng.integers(1, 7)))]
+        dense = MultiMatching(labels).pairwise_array(pairs=None if len(labels) > 1 else [])
+        monkeypatch.setattr(perm, "_DENSE_INVERSE", 0)
+        m = MultiMatching(labels)
+        np.testing.assert_array_equal(m.pairwise_array(pairs=None if len(labels) > 1 else []),
+                                      dense)
+        for i in range(len(labels)):
+            for j in range(len(labels)):
+                monkeypatch.setattr(perm, "_DENSE_INVERSE", 2**24)
+                want = MultiMatching(labels).pairwise(i, j)
+                monkeypatch.setattr(perm, "_DENSE_INVERSE", 0)
+                np.testing.assert_array_equal(MultiMatching(labels).pairwise(i, j), want)
+        monkeypatch.setattr(perm, "_DENSE_INVERSE", 2**24)

@@ -65,6 +65,9 @@ def check_array(x, name: str, *, ndim: int | Sequence[int] | None = None, dtype=
     """Convert ``x`` to an array of ``dtype`` and check its number of dimensions and finiteness."""
     if x is None:
         raise TypeError(f"`{name}` must be an array, got None")
+    if hasattr(x, "tocsr") and hasattr(x, "nnz"):       # scipy.sparse, without importing it
+        raise TypeError(f"`{name}` must be a dense array, got the scipy.sparse "
+                        f"{type(x).__name__} (convert it with .toarray())")
     try:
         is_complex = np.iscomplexobj(x)
     except (TypeError, ValueError):     # ragged nesting: reported below
@@ -498,6 +501,30 @@ def int_magnitude(x) -> int:
     """Order of magnitude of the largest int inside ``x`` (an int, or a flat sequence)."""
     ints = [x] if isinstance(x, int) else [v for v in x if isinstance(v, int)]
     return int(max(abs(v).bit_length() for v in ints) * 0.30103) if ints else 0
+
+
+#: Largest iteration count any solver takes (10**12 with a tolerance of 1e-300 looped for good).
+MAX_ITER = 10**6
+
+
+def check_real(value, name: str) -> float:
+    """A finite real number of any sign (``bool`` refused; ints beyond float64 named).
+
+    >>> check_real(float("nan"), "min_score")
+    Traceback (most recent call last):
+        ...
+    ValueError: `min_score` must be a finite real number, got nan
+    """
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"`{name}` must be a finite real number, got {type(value).__name__} "
+                        f"{short_repr(value, 40)}")
+    try:
+        f = float(value)
+    except OverflowError:                   # an int beyond float64
+        f = np.inf
+    if not np.isfinite(f):
+        raise ValueError(f"`{name}` must be a finite real number, got {short_repr(value, 40)}")
+    return f
 
 
 def check_positive(value, name: str, *, allow_zero: bool = False) -> float:

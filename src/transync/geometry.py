@@ -28,7 +28,7 @@ import numbers
 
 import numpy as np
 
-from ._validation import check_array
+from ._validation import check_array, check_real
 
 __all__ = [
     "hartley_normalization",
@@ -226,17 +226,7 @@ def translation(tx, ty) -> np.ndarray:
     >>> translation(2, -1) @ [1.0, 1.0, 1.0]
     array([3., 0., 1.])
     """
-    out = []
-    for name, v in (("tx", tx), ("ty", ty)):
-        if isinstance(v, bool) or not isinstance(v, numbers.Real):
-            raise TypeError(f"`{name}` must be a finite real number, got {type(v).__name__} {v!r}")
-        try:
-            f = float(v)
-        except OverflowError:                   # an int beyond float64
-            f = np.inf
-        if not np.isfinite(f):
-            raise ValueError(f"`{name}` must be a finite real number, got {v!r:.40}")
-        out.append(f)
+    out = [check_real(tx, "tx"), check_real(ty, "ty")]
     return np.array([[1.0, 0.0, out[0]], [0.0, 1.0, out[1]], [0.0, 0.0, 1.0]])
 
 

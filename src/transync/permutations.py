@@ -35,9 +35,12 @@ from scipy.optimize import linear_sum_assignment
 from ._validation import (
     as_generator,
     check_array,
+    check_bool,
     check_index_pairs,
     check_int,
     check_int_array,
+    check_positive,
+    check_real,
 )
 
 __all__ = [
@@ -60,6 +63,7 @@ __all__ = [
 
 UNMATCHED = -1
 MAX_NODES = 10**8      # largest object (and dense matching matrix) the converters build
+_MAX_TRIANGLES = 10**8  # most triangles cycle_inconsistency checks (10**9 ran for hours)
 
 
 def pair_rows(pairs, n_objects: int):
@@ -164,6 +168,8 @@ def check_assignment(assignment, name: str = "assignment", *, n2: int | None = N
     array([ 2,  0, -1])
     """
     arr = _as_label_array(assignment, name)
+    n1 = None if n1 is None else check_int(n1, "n1", minimum=0)
+    n2 = None if n2 is None else check_int(n2, "n2", minimum=0)
     if arr.size and arr.max() >= 2**62:
         raise ValueError(f"`{name}` entries must be node indices, got {int(arr.max())}")
     if n1 is not None and arr.shape[0] != n1:
@@ -301,6 +307,9 @@ def is_partial_permutation_matrix(X, *, atol: float = 1e-8) -> bool:
     (True, False)
     """
     X = check_array(X, "X", finite=False)
+    atol = check_positive(atol, "atol", allow_zero=True)
+    if atol >= 0.5:             # 0 and 1 would overlap: 0.5 everywhere would pass
+        raise ValueError(f"`atol` must be < 0.5 (a tolerance on 0/1 entries), got {atol!r}")
     if X.ndim != 2:
         return False
     binary = np.all((np.abs(X) <= atol) | (np.abs(X - 1) <= atol))
@@ -442,6 +451,9 @@ def solve_lap(score, *, maximize: bool = True, min_score: float | None = None,
     array([ 1,  0, -1])
     """
     S = check_array(score, name, ndim=2)
+    maximize = check_bool(maximize, "maximize")
+    if min_score is not None:
+        min_score = check_real(min_score, "min_score")     # NaN dropped every pair silently
     rows, cols = linear_sum_assignment(S, maximize=maximize)
     a = np.full(S.shape[0], UNMATCHED, dtype=np.int64)
     a[rows] = cols
@@ -510,7 +522,7 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
     if not isinstance(pairwise, Mapping):
         raise TypeError(f"`pairwise` must be a dict {{(i, j): assignment}}, got "
                         f"{type(pairwise).__name__}")
-    check_int(max_triangles, "max_triangles", minimum=1)
+    check_int(max_triangles, "max_triangles", minimum=1, maximum=_MAX_TRIANGLES)
     given = None
     if sizes is not None:
         given = check_int_array(sizes, "sizes", ndim=1, integral_floats=True)
@@ -620,7 +632,8 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
         raise ValueError(f"`pairs` must hold object indices i < j in [0, {sizes.size})")
     if maps.size and (maps.min() < UNMATCHED or maps.max() >= max(int(sizes.max()), 1)):
         raise ValueError("`maps` entries must be node indices or -1")
-    check_int(max_triangles, "max_triangles", minimum=1)
+    check_int(max_triangles, "max_triangles", minimum=1, maximum=_MAX_TRIANGLES)
+    gen = as_generator(rng)         # checked even when no sampling needs it
     n_obj = int(sizes.shape[0])
     n_max = max(maps.shape[1], int(sizes.max(initial=0)))
     if n_max > maps.shape[1] and maps.shape[0] * n_max > MAX_NODES:   # padding, not input
@@ -648,7 +661,6 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
 
     def _chunks():
         if sampled:
-            gen = as_generator(rng)
             left = max_triangles
             while left > 0:
                 m = min(left, 100_000)
@@ -711,6 +723,9 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
 # multi-matchings: universe labels, the one place where labels become pairwise maps
 # ----------------------------------------------------------------------------------------------
 
+_DENSE_INVERSE = 2**24     # entries of MultiMatching's dense slot -> node table (128 MiB)
+
+
 def _pad(labels: Sequence[np.ndarray]) -> np.ndarray:
     n_max = max((lab.shape[0] for lab in labels), default=0)
     out = np.full((len(labels), n_max), UNMATCHED, dtype=np.int64)
@@ -763,7 +778,7 @@ class MultiMatching:
     labels: tuple[np.ndarray, ...]
     n_universe: int | None = None
     _padded: np.ndarray = field(init=False, repr=False)
-    _inv: np.ndarray | None = field(init=False, repr=False, default=None)
+    _inv: np.ndarray | tuple | None = field(init=False, repr=False, default=None)
     _sizes: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -840,22 +855,40 @@ class MultiMatching:
             raise ValueError(f"`{name}` must be an object index in [0, {self.n_objects}), got {g}")
         return g
 
-    def _inverse(self) -> np.ndarray:
+    def _inverse(self):
         """``inv[g, a]`` = node of object ``g`` in (compact) slot ``a``; the last column (= slot
-        -1) is -1."""
+        -1) is -1. Above ``_DENSE_INVERSE`` entries (10**5 objects of 2 nodes in distinct slots
+        asked for 149 GiB) it is ``(keys, nodes)`` instead: the sorted codes ``g * k + a`` of
+        the placed nodes, looked up by binary search (:meth:`_lookup`)."""
         if self._inv is None:
             k = int(self._padded.max(initial=-1)) + 1
-            inv = np.full((self.n_objects, k + 1), UNMATCHED, dtype=np.int64)
             g, u = np.nonzero(self._padded >= 0)
-            inv[g, self._padded[g, u]] = u
-            inv.flags.writeable = False
+            if self.n_objects * (k + 1) <= _DENSE_INVERSE:
+                inv = np.full((self.n_objects, k + 1), UNMATCHED, dtype=np.int64)
+                inv[g, self._padded[g, u]] = u
+                inv.flags.writeable = False
+            else:
+                keys = g.astype(np.int64) * k + self._padded[g, u]
+                order = np.argsort(keys, kind="stable")
+                inv = (keys[order], u[order].astype(np.int64), k)
             object.__setattr__(self, "_inv", inv)             # computed once (frozen object)
         return self._inv
+
+    def _lookup(self, objs: np.ndarray, slots: np.ndarray) -> np.ndarray:
+        """Node of object ``objs`` in compact slot ``slots`` (broadcast), -1 for none / slot -1."""
+        inv = self._inverse()
+        if isinstance(inv, np.ndarray):
+            return inv[objs, slots]                                   # slot -1 -> column -1
+        keys, nodes, k = inv
+        code = np.asarray(objs, np.int64) * k + slots
+        at = np.minimum(np.searchsorted(keys, code), max(keys.size - 1, 0))
+        hit = (slots >= 0) & (keys[at] == code) if keys.size else np.zeros(code.shape, bool)
+        return np.where(hit, nodes[at] if keys.size else UNMATCHED, UNMATCHED)
 
     def pairwise(self, i: int, j: int) -> np.ndarray:
         """Assignment from object ``i`` to object ``j`` (``-1`` = no partner in ``j``)."""
         i, j = self._object(i, "i"), self._object(j, "j")
-        return self._inverse()[j, self._padded[i, : self._sizes[i]]]   # slot -1 -> column -1
+        return self._lookup(np.int64(j), self._padded[i, : self._sizes[i]])
 
     def check_pairs(self, pairs=None) -> np.ndarray:
         """``pairs`` validated as a ``(P, 2)`` int array of object indices; ``None``: every
@@ -868,8 +901,7 @@ class MultiMatching:
         """Maps of many pairs at once: ``(P, n_max)`` int, row ``p`` the map ``i -> j`` of
         ``pairs[p] = (i, j)`` padded with -1 (default: every ``i < j``)."""
         pairs = self.check_pairs(pairs)
-        inv = self._inverse()
-        return inv[pairs[:, 1][:, None], self._padded[pairs[:, 0]]]
+        return self._lookup(pairs[:, 1][:, None], self._padded[pairs[:, 0]])
 
     def pairwise_dict(self, pairs=None) -> dict[tuple[int, int], np.ndarray]:
         """``{(i, j): pairwise(i, j)}`` for ``pairs`` (default: every ``i < j``)."""

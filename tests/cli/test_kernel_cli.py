@@ -147,3 +147,14 @@ def test_cli_kernel_view_graph_and_ensemble_options(toy, tmp_path, option, param
     with pytest.raises(SystemExit) as err:                # argparse: bad option value
         main([*args, option, "0"])
     assert err.value.code == 2
+
+
+def test_neighbors_beyond_the_data_set_reports_all_pairs(toy, tmp_path):
+    """--neighbors 1000 on 24 graphs matched every pair but the report said "view graph, 1000
+    nearest graphs + spanning tree"."""
+    out = tmp_path / "out"
+    assert main(["kernel", str(toy), "--out", str(out), *FAST, "--neighbors", "1000"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["params"]["n_neighbors"] == 1000 and report["view_graph_neighbors"] is None
+    assert "pairs matched: all (--neighbors 1000 reaches every graph)" in (
+        out / "report.md").read_text()

@@ -360,3 +360,32 @@ def test_a_bad_row_leaves_the_store_open_and_intact(tmp_path):
         store.records("e")
     with pytest.raises(TypeError, match="`path` must be a file path"):
         ExperimentStore(None)
+
+
+def test_rows_damaged_outside_transync_are_named(tmp_path):
+    """A row whose metrics were not JSON said only "Expecting value: line 1 column 1"; a string
+    metric or a config that is not an object failed later in mean_se / summarize without naming
+    the store. A store path that is a folder was blamed on permissions."""
+    from transync.experiments import ExperimentStore
+
+    path = tmp_path / "r.sqlite"
+    store = ExperimentStore(path)
+    store.add("e", "k", 0, "s", {"x": 1}, {"a": 1.0}, None, 0.1)
+    store.close()
+    for column, text in (("metrics", "{oops"), ("metrics", '{"a": "x"}'), ("config", "[1, 2]")):
+        con = sqlite3.connect(path)
+        con.execute(f"UPDATE trials SET {column} = ?", (text,))
+        con.commit()
+        con.close()
+        store = ExperimentStore(path)
+        with pytest.raises(ExperimentStoreError, match=r"r.sqlite, row \(experiment='e', "
+                                                       r"sweep='s', config hash k, trial=0\)"):
+            store.records("e")
+        store.close()
+        con = sqlite3.connect(path)
+        con.execute("UPDATE trials SET config = ?, metrics = ?", ('{"x": 1}', '{"a": 1.0}'))
+        con.commit()
+        con.close()
+    (tmp_path / "dir.sqlite").mkdir()
+    with pytest.raises(ExperimentStoreError, match="it is a folder, not a file"):
+        ExperimentStore(tmp_path / "dir.sqlite")

@@ -473,3 +473,100 @@ def test_solver_messages_name_the_users_argument():
     for method in ("rrwm", "sm", "ga", "ipfp", "pf"):      # given as `affinity`, not `K`
         with pytest.raises(ValueError, match="`affinity` is too small to match on"):
             match_graphs(g, g, method=method, affinity=np.full((4, 4), 1e-320))
+
+
+def test_sixth_fuzz_matching_contract():
+    """What a fuzz of transync.matching / transync.permutations found (each line failed before):
+    unchecked flags and thresholds, unbounded iteration counts and sizes, overflow warnings."""
+    from transync.matching import as_affinity, ipfp
+    from transync.permutations import (
+        check_assignment, cycle_inconsistency, is_partial_permutation_matrix, solve_lap)
+
+    S = np.array([[0.1, 0.9], [0.8, 0.2]])
+    with pytest.raises(ValueError, match="`min_score` must be a finite real number, got nan"):
+        solve_lap(S, min_score=np.nan)                      # dropped every pair silently
+    with pytest.raises(TypeError, match="`min_score` must be a finite real number, got str"):
+        solve_lap(S, min_score="x")
+    with pytest.raises(TypeError, match="`maximize` must be a bool, got str 'no'"):
+        solve_lap(S, maximize="no")                         # maximized
+    with pytest.raises(ValueError, match=r"`atol` must be < 0.5"):
+        is_partial_permutation_matrix(np.full((2, 2), 0.5), atol=10)    # answered True
+    with pytest.raises(ValueError, match="`atol` must be finite and >= 0"):
+        is_partial_permutation_matrix(np.eye(2), atol=-1)
+    with pytest.raises(TypeError, match="`n1` must be an int"):
+        check_assignment([0, 1], n1=2.0)
+    with pytest.raises(TypeError, match="`n2` must be an int"):
+        check_assignment([0, 1], n2="3")
+    with pytest.raises(TypeError, match="`rng`"):
+        cycle_inconsistency({(0, 1): np.array([1, 0])}, rng="x")
+    with pytest.raises(ValueError, match="`max_triangles` must be <= 100000000"):
+        cycle_inconsistency({(0, 1): np.array([1, 0])}, max_triangles=10**9)
+    K = np.ones((4, 4)) + 3 * np.eye(4)
+    with pytest.raises(ValueError, match="`max_iter` must be <= 1000000"):
+        sm(K, n1=2, n2=2, max_iter=10**12, tol=1e-300)      # looped for good
+    with pytest.raises(ValueError, match=r"`init` must have entries in \[0, 1\]"):
+        ipfp(K, n1=2, n2=2, init=np.eye(2) * 1e200)         # overflow warning
+    aff = as_affinity(K, n1=2, n2=2)
+    with pytest.raises(ValueError, match="`X` must be finite"):
+        aff.score(np.full((2, 2), np.nan))                  # NaN returned silently
+    with pytest.raises(TypeError, match="`X` must be real"):
+        aff.score(np.eye(2) + 0j)
+    with pytest.raises(ValueError, match=r"`X` must have shape \(n1, n2\) = \(2, 2\)"):
+        aff.score(np.eye(3))
+    with pytest.raises(ValueError, match="the objective of `X` overflows float64"):
+        aff.score(np.eye(2) * 1e200)
+    with pytest.raises(ValueError, match="`F, G` is too large to match on"):
+        SeparableAffinity(None, np.full((1, 2, 2), 1e300), np.full((1, 3, 3), 1e300))
+    with pytest.raises(ValueError, match="`n1` x `n2` must be at most"):
+        FactorizedAffinity(None, None, [[0, 1]], [[0, 1]], 10**12, 10**12)
+    with pytest.raises(ValueError, match=r"to_dense\(\) would build a 100000000 x"):
+        FactorizedAffinity(None, None, [[0, 1]], [[0, 1]], 10**4, 10**4).to_dense()
+    with pytest.raises(TypeError, match="must be a dense array, got the scipy.sparse"):
+        solve_lap(sp.csr_matrix(np.eye(3)))
+    rng = np.random.default_rng(0)
+    g1, g2 = (Graph.from_points(rng.random((4, 2)) * 1e200) for _ in range(2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                      # an overflow RuntimeWarning before
+        with pytest.raises(DegenerateInputError, match="`sigma2`=1e\\+300 is too small"):
+            gaussian_node_affinity(g1, g2, attribute="points", sigma2=1e300)
+    with pytest.warns(ConvergenceWarning, match="tol=1e-300 is below what float64 row sums "
+                                                "reach"):                   # blamed `tau`
+        sinkhorn(rng.random((4, 5)), tol=1e-300)
+
+
+def test_rrwm_warm_start_scale_does_not_drift():
+    """3200 warm-started RRWM steps on a valid asymmetric K: the Sinkhorn column scalings
+    handed from step to step drifted until `overflow encountered in dot`; they are now brought
+    to [0.5, 1) by a power of two, which changes no iterate."""
+    from transync.matching import RRWMStepper, gaussian_edge_affinity
+
+    rng = np.random.default_rng(0)
+    g1 = Graph.from_points(rng.random((6, 2)), edges="full")
+    g2 = g1.permute(rng.permutation(6))
+    K = gaussian_edge_affinity(g1, g2, backend="dense").to_dense()
+    st = RRWMStepper(np.triu(K) * 3 + 0.01, n1=6, n2=6, max_iter=3200, variant="original")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        while not st.step():
+            pass
+    assert st.n_iter > 3085 and np.isfinite(st.iterate).all() and np.isfinite(st._scaling).all()
+
+
+def test_subnormal_sigma2_refused_without_overflow_warnings():
+    """sigma2=5e-324 (positive, finite) leaked four "overflow encountered in divide" warnings
+    from the separable expansion; the underflow refusal names no library function or default
+    (the CLI's commands have their own)."""
+    rng = np.random.default_rng(0)
+    g1, g2 = (Graph.from_points(rng.random((6, 2)), edges="full") for _ in range(2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(DegenerateInputError, match="`sigma2`=4.94066e-324 is too small") as e:
+            gaussian_edge_affinity(g1, g2, sigma2=5e-324)
+    assert "default" not in str(e.value) and "match_graphs" not in str(e.value)
+    P = rng.random((6, 2))              # a shifted copy: equal lengths keep affinity 1
+    h1, h2 = Graph.from_points(P, edges="full"), Graph.from_points(P[::-1] + 0.01, edges="full")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the factorized path's exp(-d2 / sigma2) overflowed
+        for backend in ("factorized", "dense"):
+            K = gaussian_edge_affinity(h1, h2, sigma2=5e-324, backend=backend).to_dense()
+            assert np.isfinite(K).all() and K.max() == 1.0

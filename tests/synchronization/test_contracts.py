@@ -5,6 +5,7 @@ import pickle
 import warnings
 
 import numpy as np
+import scipy.sparse as sp
 import pytest
 
 from transync.datasets import make_noisy_linear_maps, make_permutation_collection
@@ -139,7 +140,7 @@ def test_empty_mask_is_a_clear_error(fn, pw):
     (np.array([np.nan, 0, 1]), TypeError,
      r"`pairwise\[\(0, 1\)\]` must hold integers \(node indices, -1 = unmatched\), got nan"),
     (np.array(["a", "b"]), TypeError, r"`pairwise\[\(0, 1\)\]` must hold integers"),
-    ("ab", TypeError, r"`pairwise\[\(0, 1\)\]` must be an assignment or a matrix, got str"),
+    ("ab", TypeError, r"`pairwise\[\(0, 1\)\]` must be an assignment or a dense matrix, got str"),
     (np.array([0.5, 1.0]), TypeError, r"`pairwise\[\(0, 1\)\]` must hold integers.*got 0.5"),
     (np.array([0, 1j]), TypeError, r"`pairwise\[\(0, 1\)\]` must hold integers"),
     (np.array([[1j, 0], [0, 1]]), TypeError, r"`pairwise\[\(0, 1\)\]` must be real"),
@@ -174,7 +175,7 @@ def test_bad_sizes_keys_and_targets():
         synchronize_permutations(3)
     with pytest.raises(ValueError, match=r"`weights` must be finite and >= 0, got nan"):
         synchronize_permutations({(0, 1): np.array([1, 0])}, weights={(0, 1): np.nan})
-    with pytest.raises(TypeError, match="`threshold` must be a real number"):
+    with pytest.raises(TypeError, match="`threshold` must be a finite real number, got str"):
         synchronize_permutations({(0, 1): np.array([1, 0])}, method="matcheig", threshold="0.5")
 
 
@@ -333,3 +334,50 @@ def test_weights_that_would_overflow_the_objective_are_refused(data, fn):
         warnings.simplefilter("error")
         with pytest.raises(ValueError, match=r"`weights` are too large.*rescale them"):
             calls[fn]()
+
+
+def test_sixth_fuzz_synchronization_contract():
+    """What a fuzz of transync.synchronization found (each line failed before): sizes whose
+    dense working set cannot exist (MemoryError after allocating, or minutes of it), unchecked
+    flags, raw OverflowError / numpy messages for keys and values."""
+    from transync.synchronization import estimate_universe
+
+    one = {(0, 1): np.array([1, 0])}
+    # 10**5 objects of 2 nodes: a 149 GiB slot table before; now a result
+    res = synchronize_permutations(one, sizes=[2] * 10**5)
+    assert res.matching.n_objects == 10**5
+    with pytest.raises(ValueError, match=r"the embedding \(total nodes x largest object\) would "
+                                         r"be a dense array of 1e\+14 entries"):
+        synchronize_permutations(one, sizes=[2, 10**7])                   # 728 TiB
+    with pytest.raises(ValueError, match="a dense array of 1e\\+16 entries"):
+        synchronize_permutations({(0, 1): np.arange(4), (1, 2): np.arange(4)},
+                                 sizes=[4] * 4 + [10**8])                 # minutes
+    with pytest.raises(ValueError, match="needs a dense 200000 x 200000 eigenproblem"):
+        estimate_universe({(0, 1): np.eye(2)}, sizes=[2] * 10**5)         # 298 GiB
+    with pytest.raises(TypeError, match="`fully_corrective` must be a bool, got str 'no'"):
+        synchronize_doubly_stochastic({(0, 1): np.eye(2)}, fully_corrective="no")
+    with pytest.raises(ValueError, match="`max_iter` must be <= 1000000"):
+        synchronize_doubly_stochastic({(0, 1): np.eye(2)}, max_iter=10**12)
+    with pytest.raises(ValueError, match="`max_iter` must be <= 1000000"):
+        synchronize_linear_maps({(0, 1): np.eye(2)}, max_iter=10**12)
+    for sync in (synchronize_permutations, synchronize_doubly_stochastic):
+        with pytest.raises(ValueError, match=r"keys must be object indices below 2\*\*62"):
+            sync({(0, 2**70): np.array([1, 0])})                       # raw OverflowError
+        with pytest.raises(ValueError, match=r"`pairwise\[\(0, 1\)\]` must be an assignment "
+                                             r"\(1-d\) or a matrix \(2-d\) of one row length"):
+            sync({(0, 1): [[1], [0, 1]]})                              # numpy's words
+        for bad in (None, sp.eye(2)):
+            with pytest.raises(TypeError, match=r"`pairwise\[\(0, 1\)\]` must be an assignment "
+                                                "or a dense matrix, got"):
+                sync({(0, 1): bad})                                    # "got shape ()"
+
+
+def test_few_large_objects_take_the_dense_solver():
+    """3 objects of 700 nodes (2100 in all, above DENSE_MAX): the matrix-free solver ran a
+    Krylov block of ~1500 columns (93 s at 1500 nodes per object); "auto" now goes dense when
+    the objects are few and large, and the result is the same."""
+    n = 700
+    rev, idn = np.arange(n)[::-1].copy(), np.arange(n)
+    res = synchronize_permutations({(0, 1): rev, (1, 2): idn})
+    assert res.info["solver"] == "dense" and res.info["n_universe"] == n
+    np.testing.assert_array_equal(res.matching.pairwise(0, 2), rev)

@@ -356,6 +356,10 @@ class ExperimentStore:
                 self._con.close()
                 self._con = None
             msg = str(exc)
+            if isinstance(exc, sqlite3.OperationalError) and self.path.is_dir():
+                raise ExperimentStoreError(
+                    f"cannot open the experiment store {self.path}: it is a folder, not a file; "
+                    "move it away or choose another --out") from exc
             if isinstance(exc, sqlite3.OperationalError) and (
                     "unable to open" in msg or "readonly" in msg or "read-only" in msg):
                 raise ExperimentStoreError(
@@ -399,9 +403,27 @@ class ExperimentStore:
             rows = self._con.execute(
                 "SELECT sweep, config, trial, metrics, error, seconds, config_hash FROM trials "
                 "WHERE experiment = ? ORDER BY sweep, config_hash, trial", (experiment,))
-            return [dict(sweep=s, config=json.loads(c), trial=t, metrics=json.loads(m),
-                         error=e, seconds=sec) for s, c, t, m, e, sec, h in rows
-                    if keys is None or h in keys]
+            return [dict(sweep=s, config=config, trial=t, metrics=metrics, error=e, seconds=sec)
+                    for s, c, t, m, e, sec, h in rows if keys is None or h in keys
+                    for config, metrics in [self._decode(experiment, s, h, t, c, m)]]
+
+    def _decode(self, experiment, sweep, key, trial, config, metrics) -> tuple[dict, dict]:
+        """A stored row's config and metrics, or an error naming the store and the row (a row
+        edited or damaged outside transync: text that is not JSON, values of the wrong type)."""
+        where = (f"the experiment store {self.path}, row (experiment={experiment!r}, "
+                 f"sweep={sweep!r}, config hash {str(key)[:12]}, trial={trial})")
+        try:
+            c, m = json.loads(config), json.loads(metrics)
+        except (TypeError, ValueError) as exc:
+            raise ExperimentStoreError(f"{where} does not hold JSON ({exc}); delete that row or "
+                                       + _SALVAGE.format(path=self.path)) from None
+        if not isinstance(c, dict) or not isinstance(m, dict) or not all(
+                v is None or (isinstance(v, (int, float)) and not isinstance(v, bool))
+                for v in m.values()):
+            raise ExperimentStoreError(f"{where}: 'config' must be a JSON object and 'metrics' "
+                                       "one of numbers; delete that row or "
+                                       + _SALVAGE.format(path=self.path))
+        return c, m
 
     def close(self):
         if self._con is not None:

@@ -7,7 +7,7 @@ import numbers
 import cv2
 import numpy as np
 
-from .._validation import check_array, check_homographies, check_int, check_positive
+from .._validation import MAX_ITER, check_array, check_homographies, check_int, check_positive
 from ..geometry import normalize_determinant, translation
 from ._sparse import check_image, check_masks
 
@@ -114,7 +114,7 @@ def refine_homography_ecc(template, image, H_init, *, mask=None, template_mask=N
                       float32=True).astype(np.float32)
     H_init = check_homographies(H_init, "H_init", ndim=2)
     levels = check_int(levels, "levels", minimum=1, maximum=8)
-    max_iter = check_int(max_iter, "max_iter", minimum=1)
+    max_iter = check_int(max_iter, "max_iter", minimum=1, maximum=MAX_ITER)
     eps = check_positive(eps, "eps")
     gauss_size = check_int(gauss_size, "gauss_size", minimum=1, maximum=1001)
     if gauss_size % 2 == 0:

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import (
+    MAX_ITER,
     as_generator,
     check_array,
     check_bool,
@@ -118,7 +119,7 @@ class DenseOptions:
 
     def __post_init__(self):
         set_ = object.__setattr__
-        set_(self, "max_iter", check_int(self.max_iter, "max_iter", minimum=0))
+        set_(self, "max_iter", check_int(self.max_iter, "max_iter", minimum=0, maximum=MAX_ITER))
         set_(self, "tol", check_positive(self.tol, "tol", allow_zero=True))
         set_(self, "levels", check_int(self.levels, "levels", minimum=1, maximum=8))
         set_(self, "max_step", check_positive(self.max_step, "max_step"))

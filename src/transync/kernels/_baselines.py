@@ -27,7 +27,7 @@ from functools import partial
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .._validation import check_choice, check_int, check_positive
+from .._validation import MAX_ITER, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning
 from ..graphs import Graph
 from ..parallel import map_chunks, split_chunks
@@ -443,7 +443,7 @@ def random_walk_kernel(graphs, *, lamda: float = 1e-2, node_labels=None, normali
     labels = [np.array([x[1][i] for i in range(len(x[1]))], dtype=np.int64) for x in X]
     lamda = check_positive(lamda, "lamda")
     tol = check_positive(tol, "tol")
-    max_iter = check_int(max_iter, "max_iter", minimum=1)
+    max_iter = check_int(max_iter, "max_iter", minimum=1, maximum=MAX_ITER)
     sizes = np.array([A.shape[0] for A in adj])
     rho = 0.0
     for n in np.unique(sizes):

@@ -112,9 +112,22 @@ class Affinity(ABC):
         return (self.n1, self.n2)
 
     def score(self, X) -> float:
-        """QAP objective ``vec(X)^T K vec(X)``."""
-        X = np.asarray(X, dtype=float)
-        return float(np.vdot(X, self.matvec(X)))
+        """QAP objective ``vec(X)^T K vec(X)`` of a finite ``(n1, n2)`` matrix ``X``.
+
+        Raises ``TypeError``/``ValueError`` for a complex, non-finite or mis-shaped ``X`` and
+        for an ``X`` so large that the objective overflows float64.
+        """
+        X = check_array(X, "X", ndim=2)
+        if X.shape != (self.n1, self.n2):
+            raise ValueError(f"`X` must have shape (n1, n2) = ({self.n1}, {self.n2}), got "
+                             f"{X.shape}")
+        with np.errstate(over="ignore", invalid="ignore"):
+            value = float(np.vdot(X, self.matvec(X)))
+        if not np.isfinite(value):
+            raise ValueError(f"the objective of `X` overflows float64 (largest |X| entry "
+                             f"{float(np.abs(X).max()):.3g}; an assignment matrix has 0/1 "
+                             "entries)")
+        return value
 
     def column_sums(self) -> np.ndarray:
         """Column sums of ``K`` as an ``(n1, n2)`` array."""
@@ -144,8 +157,26 @@ def _unvec(x: np.ndarray, n1: int, n2: int) -> np.ndarray:
     return np.asarray(x).reshape((n1, n2), order="F")
 
 
+#: Most candidates ``n1 n2`` an affinity takes (every product allocates ``n1 n2`` floats) and
+#: most entries ``(n1 n2)^2`` ``to_dense`` builds: 2**31 float64 are 16 GiB.
+MAX_DENSE_ENTRIES = 2**31
+
+
 def _check_sizes(n1, n2) -> tuple[int, int]:
-    return check_int(n1, "n1", minimum=1), check_int(n2, "n2", minimum=1)
+    n1, n2 = check_int(n1, "n1", minimum=1), check_int(n2, "n2", minimum=1)
+    if n1 * n2 > MAX_DENSE_ENTRIES:         # 10**12 x 10**12 was accepted, then a MemoryError
+        raise ValueError(f"`n1` x `n2` must be at most {MAX_DENSE_ENTRIES} candidates, got "
+                         f"{n1} x {n2}")
+    return n1, n2
+
+
+def _check_dense(aff) -> None:
+    """Refuse ``to_dense`` when ``(n1 n2)^2`` entries exceed ``MAX_DENSE_ENTRIES``."""
+    nn = aff.n1 * aff.n2
+    if nn * nn > MAX_DENSE_ENTRIES:
+        raise ValueError(f"to_dense() would build a {nn} x {nn} matrix ({float(nn) ** 2:.3g} "
+                         f"entries, above {MAX_DENSE_ENTRIES}); use matvec() / the factorized "
+                         "form")
 
 
 def _check_values(values: np.ndarray, name: str, n_candidates: int) -> None:
@@ -277,6 +308,7 @@ class SparseAffinity(_MatrixAffinity):
         return _unvec(self.K.diagonal(), self.n1, self.n2)
 
     def to_dense(self):
+        _check_dense(self)
         return self.K.toarray()
 
     def drop_conflicts(self):
@@ -400,6 +432,7 @@ class FactorizedAffinity(Affinity):
                                   self.edges2, self.n1, self.n2)
 
     def to_dense(self):
+        _check_dense(self)
         n1 = self.n1
         K = np.zeros((n1 * self.n2, n1 * self.n2))
         rows = self.edges2[:, 0][None, :] * n1 + self.edges1[:, 0][:, None]
@@ -430,7 +463,8 @@ class SeparableAffinity(Affinity):
     Raises
     ------
     ValueError, TypeError
-        Mis-shaped factors (``R`` or a size of 0, ``G`` with another rank than ``F``), a
+        Mis-shaped factors (``R`` or a size of 0, ``G`` with another rank than ``F``), factors
+        so large that ``R max|F| max|G|`` times ``n1 n2`` exceeds 1e300 (products overflow), a
         mis-shaped or negative ``node``, a negative ``max_error``.
 
     Examples
@@ -453,9 +487,12 @@ class SeparableAffinity(Affinity):
             raise ValueError(f"`G` must have shape (R, n2, n2) with R={R} (as `F`) and n2 >= 1, "
                              f"got {self.G.shape}")
         self.n1, self.n2 = n1, self.G.shape[1]
+        with np.errstate(over="ignore"):        # inf here is refused below
+            bound = R * float(np.abs(self.F).max()) * float(np.abs(self.G).max())
+        # |K| <= R max|F| max|G| entrywise: factors of 1e300 passed and every product overflowed
+        check_affinity_magnitude(bound, self.n1 * self.n2, "F, G")
         self.node = _check_node_term(node, self.n1, self.n2)
         self.max_error = check_positive(max_error, "max_error", allow_zero=True)
-        R = self.F.shape[0]
         # concatenated factors turn the R small products into two large GEMMs
         self._Gcat = np.ascontiguousarray(np.swapaxes(self.G, 1, 2).transpose(1, 0, 2)
                                           .reshape(self.n2, R * self.n2))
@@ -520,6 +557,7 @@ class SeparableAffinity(Affinity):
     def to_dense(self):
         """The full matrix; entries an expansion (``max_error > 0``) puts below zero by less
         than its error bound are 0, so that ``as_affinity(a.to_dense())`` accepts it."""
+        _check_dense(self)
         K = np.einsum("rij,rab->aibj", self.F, self.G).reshape(self.n1 * self.n2, -1)
         if self.node is not None:
             K[np.diag_indices_from(K)] += _vec(self.node)
@@ -632,12 +670,18 @@ def gaussian_node_affinity(g1: Graph, g2: Graph, *, sigma2: float = 1.0,
         what = "node_features" if attribute == "features" else "points"
         raise ValueError(f"`g1.{what}` and `g2.{what}` must have the same width, got "
                          f"{f1.shape[1]} and {f2.shape[1]}")
-    d2 = ((f1[:, None, :] - f2[None, :, :]) ** 2).sum(-1)
-    _refuse_underflow(int(np.count_nonzero(d2 <= _UNDERFLOW * sigma2)), 1, sigma2,
+    # d2 / sigma2 on features scaled by a power of two: points at 1e200 squared to inf before
+    top = max(float(np.abs(f1).max(initial=0.0)), float(np.abs(f2).max(initial=0.0)))
+    e = int(np.frexp(top)[1]) if top > 0 else 0
+    D = np.ldexp(f1, -e)[:, None, :] - np.ldexp(f2, -e)[None, :, :]
+    with np.errstate(over="ignore"):        # beyond float64: exp(-inf) = 0, refused below
+        r = np.ldexp(1.0, e) / np.sqrt(sigma2)
+        t = (D ** 2).sum(-1) * (r * r)
+    t[~np.any(D != 0, axis=-1)] = 0.0      # identical features (0 * inf)
+    _refuse_underflow(int(np.count_nonzero(t <= _UNDERFLOW)), 1, sigma2,
                       f"node {attribute}", float(np.median(np.abs(np.concatenate(
-                          [f1.ravel(), f2.ravel()])))),
-                      "gaussian_node_affinity (or pass `node_affinity`)")
-    return np.exp(-d2 / sigma2)
+                          [f1.ravel(), f2.ravel()])))))
+    return np.exp(-t)
 
 
 #: Default width ``sigma2`` of the Gaussian edge affinity ``exp(-(d1 - d2)^2 / sigma2)`` (Cho et
@@ -654,8 +698,7 @@ _UNDERFLOW = 690.0
 _MAX_LENGTH = 1e150
 
 
-def _refuse_underflow(alive: int, needed: int, sigma2: float, what: str, scale: float,
-                      how: str) -> None:
+def _refuse_underflow(alive: int, needed: int, sigma2: float, what: str, scale: float) -> None:
     """Raise when fewer than ``needed`` pairs keep a non-negligible ``exp(-d2 / sigma2)``.
 
     A vanishing Gaussian affinity makes every solver return an arbitrary matching with objective
@@ -664,8 +707,10 @@ def _refuse_underflow(alive: int, needed: int, sigma2: float, what: str, scale: 
     """
     if alive >= needed:
         return
-    fix = (f"Set `sigma2` to the squared scale of the data (e.g. sigma2={0.6 * scale**2:.3g}, "
-           f"as the default 0.15 is for a unit square) in {how}, or rescale the data"
+    # no default value nor function name here: the CLI's commands have other defaults and its
+    # user called none of the library functions
+    fix = (f"Set `sigma2` to about the squared scale of the data (e.g. "
+           f"sigma2={0.6 * scale**2:.3g}), or rescale the data"
            if scale < 1e150 else        # its square is beyond float64: no sigma2 can help
            "Rescale the data (its squared scale is beyond float64)")
     raise DegenerateInputError(
@@ -796,8 +841,7 @@ def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = DEFAULT_SIGM
         x, y = np.sort(a1[0][M1]), a2[0][M2]
         _refuse_underflow(_count_close(x, y, np.sqrt(_UNDERFLOW * sigma2)), min(m1, m2), sigma2,
                           f"edge attributes ({attribute!r})",
-                          float(np.median(np.abs(np.concatenate([x, y])))),
-                          "match_graphs or gaussian_edge_affinity")
+                          float(np.median(np.abs(np.concatenate([x, y])))))
     if backend == "auto":
         scalar = attribute != "length+angle"
         separable_cost = 16 * (n1 * n1 * n2 + n1 * n2 * n2)
@@ -819,7 +863,8 @@ def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = DEFAULT_SIGM
         dth = a1[1][M1][:, None] - a2[1][M2][None, :]
         dth = (dth + np.pi) % (2 * np.pi) - np.pi
         d2 = d2 + angle_weight * dth**2
-    edge = np.exp(-d2 / sigma2)
+    with np.errstate(over="ignore"):        # subnormal sigma2: d2 / sigma2 = inf, exp(-inf) = 0
+        edge = np.exp(-d2 / sigma2)
     fac = FactorizedAffinity(node_affinity, edge, e1, e2, n1, n2)
     if backend == "factorized":
         return fac
@@ -884,7 +929,14 @@ def _separable_gaussian(E1, E2, M1, M2, sigma2, node, tol):
     Tensor Chebyshev interpolation on ``p`` points per axis, recompressed by an SVD of the
     ``p x p`` kernel samples and truncated where the singular values fall below ``tol``; the
     achieved error is measured on a fine grid covering both ranges (and on the actual values).
+    A subnormal ``sigma2`` makes ``d^2 / sigma2`` overflow to inf, whose ``exp(-inf) = 0`` is
+    the right value: the overflow is not reported (the caller refuses a vanished affinity).
     """
+    with np.errstate(over="ignore", divide="ignore"):
+        return _separable_gaussian_expansion(E1, E2, M1, M2, sigma2, node, tol)
+
+
+def _separable_gaussian_expansion(E1, E2, M1, M2, sigma2, node, tol):
     x = E1[M1]
     y = E2[M2]
     if x.size == 0 or y.size == 0:
@@ -1110,5 +1162,4 @@ def _check_underflow(vals, pairs, sigma2, attribute):
         if x.size and y.size:
             _refuse_underflow(_count_close(x, y, radius), min(x.size, y.size), sigma2,
                               f"edge attributes ({attribute!r})",
-                              float(np.median(np.abs(np.concatenate([x, y])))),
-                              "match_collection or gaussian_edge_affinity")
+                              float(np.median(np.abs(np.concatenate([x, y])))))

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import check_affinity_scale, check_int, check_positive
+from .._validation import MAX_ITER, check_affinity_scale, check_int, check_positive
 from ._affinity import as_affinity
 from ._result import MatchingResult
 from ._sinkhorn import sinkhorn_normalize
@@ -146,7 +146,8 @@ class GAStepper(_BaseStepper):
         super().__init__(aff, max_iter=levels)
         self.max_inner = check_int(max_inner, "max_inner", minimum=1)
         self.inner_tol = check_positive(inner_tol, "inner_tol")
-        self.sinkhorn_max_iter = check_int(sinkhorn_max_iter, "sinkhorn_max_iter", minimum=1)
+        self.sinkhorn_max_iter = check_int(sinkhorn_max_iter, "sinkhorn_max_iter", minimum=1,
+                                           maximum=MAX_ITER)
         self.sinkhorn_tol = check_positive(sinkhorn_tol, "sinkhorn_tol")
         K = _symmetric(aff)
         top = K.max_column_sum()

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import check_affinity_scale, check_choice, check_int, check_positive
+from .._validation import MAX_ITER, check_affinity_scale, check_choice, check_int, check_positive
 from ..permutations import assignment_to_matrix, solve_lap
 from ._affinity import as_affinity
 from ._result import MatchingResult
@@ -63,7 +63,7 @@ class IPFPStepper(_BaseStepper):
                  init=_DEFAULTS["init"], max_iter: int = _DEFAULTS["max_iter"],
                  tol: float = _DEFAULTS["tol"]):
         aff = as_affinity(affinity, n1=n1, n2=n2)
-        super().__init__(aff, max_iter=check_int(max_iter, "max_iter", minimum=1))
+        super().__init__(aff, max_iter=check_int(max_iter, "max_iter", minimum=1, maximum=MAX_ITER))
         self.tol = check_positive(tol, "tol")
         self._K = _symmetric(aff)
         check_affinity_scale(self._K.max_column_sum())

@@ -19,7 +19,7 @@ import warnings
 import numpy as np
 import scipy.sparse as sp
 
-from .._validation import (check_affinity_magnitude, check_array, check_bool, check_int,
+from .._validation import (MAX_ITER, check_affinity_magnitude, check_array, check_bool, check_int,
                            check_positive)
 from ..exceptions import ConvergenceWarning
 from ..permutations import assignment_to_matrix, solve_lap
@@ -147,7 +147,7 @@ def sinkhorn(scores, *, n1: int | None = None, n2: int | None = None, tau: float
     """
     S, aff = _score_matrix(scores, n1, n2)
     tau = check_positive(tau, "tau")
-    max_iter = check_int(max_iter, "max_iter", minimum=1)
+    max_iter = check_int(max_iter, "max_iter", minimum=1, maximum=MAX_ITER)
     tol = check_positive(tol, "tol")
     with np.errstate(over="ignore"):
         L = S / tau
@@ -158,7 +158,10 @@ def sinkhorn(scores, *, n1: int | None = None, n2: int | None = None, tau: float
     X, n_iter, err, converged = out.X, out.n_sweeps, out.error, out.converged
     if not converged:
         span = float(np.ptp(L)) if L.size else 0.0
+        reachable = 64 * np.finfo(float).eps * max(S.shape)   # rounding of a row sum
         why = (f"after max_iter={max_iter} sweeps" if n_iter >= max_iter else
+               f"after {n_iter} sweeps: tol={tol:g} is below what float64 row sums reach "
+               f"(about {reachable:.1g} here); pass a larger `tol`" if tol < reachable else
                f"after {n_iter} sweeps: scores / tau span {span:.3g}, beyond float64's "
                f"precision; pass a larger `tau`")
         warnings.warn(f"sinkhorn: row sums off by {err:.3g} > tol={tol:g} {why}",

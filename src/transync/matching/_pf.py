@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import check_int, check_positive
+from .._validation import MAX_ITER, check_int, check_positive
 from ..permutations import assignment_to_matrix, solve_lap
 from ._affinity import as_affinity
 from ._result import MatchingResult
@@ -82,13 +82,13 @@ class PFStepper(_BaseStepper):
                  min_step: float = _DEFAULTS["min_step"], jump_tol: float = _DEFAULTS["jump_tol"],
                  fw_max_iter: int = _DEFAULTS["fw_max_iter"], fw_tol: float = _DEFAULTS["fw_tol"]):
         aff = as_affinity(affinity, n1=n1, n2=n2)
-        super().__init__(aff, max_iter=check_int(max_iter, "max_iter", minimum=1))
+        super().__init__(aff, max_iter=check_int(max_iter, "max_iter", minimum=1, maximum=MAX_ITER))
         self.max_step = check_positive(step, "step")
         self.min_step = check_positive(min_step, "min_step")
         if self.min_step > self.max_step:
             raise ValueError(f"`min_step` must be <= step={self.max_step!r}, got {self.min_step!r}")
         self.jump_tol = check_positive(jump_tol, "jump_tol")
-        self.fw_max_iter = check_int(fw_max_iter, "fw_max_iter", minimum=1)
+        self.fw_max_iter = check_int(fw_max_iter, "fw_max_iter", minimum=1, maximum=MAX_ITER)
         self.fw_tol = check_positive(fw_tol, "fw_tol")
         self._K = _moderate(_symmetric(aff))   # rescaled only if its scale would overflow
         lam, v, _, _ = _power_iteration(self._K.matvec, self.n1, self.n2, max_iter=200, tol=1e-8)

@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._validation import (
+    MAX_ITER,
     check_affinity_scale,
     check_choice,
     check_int,
@@ -156,7 +157,7 @@ class RRWMStepper(_BaseStepper):
         pick = lambda value, key: d[key] if value is None else value  # noqa: E731
         aff = as_affinity(affinity, n1=n1, n2=n2)
         super().__init__(aff, max_iter=check_int(pick(max_iter, "max_iter"), "max_iter",
-                                                 minimum=1))
+                                                 minimum=1, maximum=MAX_ITER))
         self.c = check_probability(pick(c, "c"), "c")
         self.amplification = check_positive(pick(amplification, "amplification"),
                                             "amplification")
@@ -166,7 +167,7 @@ class RRWMStepper(_BaseStepper):
                              f"which overflows float64 beyond ~709), got {self.amplification!r}")
         self.tol = check_positive(pick(tol, "tol"), "tol")
         self.sinkhorn_max_iter = check_int(pick(sinkhorn_max_iter, "sinkhorn_max_iter"),
-                                           "sinkhorn_max_iter", minimum=1)
+                                           "sinkhorn_max_iter", minimum=1, maximum=MAX_ITER)
         self.sinkhorn_sweeps = 0
         self.stop = None            # why the loop stopped: "tolerance", "stable rounding"
         # the Sinkhorn output before any step: uniform, feasible with and without slack

@@ -42,7 +42,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import logsumexp
 
-from .._validation import MIN_AFFINITY_SCALE, check_array, check_choice, check_int, check_positive
+from .._validation import (MAX_ITER, MIN_AFFINITY_SCALE, check_array, check_choice, check_int,
+                           check_positive)
 
 __all__ = ["SinkhornBatchOutput", "SinkhornOutput", "sinkhorn_augmented_batch", "sinkhorn_batch",
            "sinkhorn_normalize"]
@@ -241,6 +242,13 @@ def _scaling_loop(A, slack: float, v0, *, n_half: int, tol: float | None, check_
     A = np.asarray(A, dtype=float)      # (``out=`` buffers need the operands' dtype)
     n1, n2 = A.shape
     v = np.ones(n2) if v0 is None else np.array(v0, dtype=float)
+    if v0 is not None and not slack and v.size:
+        # without slack the loop is invariant under (u c, v / c), so a warm start handed from
+        # solve to solve drifts in scale until it overflows (RRWM, 3000 warm-started steps);
+        # a power of two brings max v to [0.5, 1) exactly: the same iterates to the last bit
+        top = float(v.max())
+        if 0 < top < np.inf:
+            v = np.ldexp(v, -int(np.frexp(top)[1]))
     Av, u, uA, t = np.empty(n1), np.empty(n1), np.empty(n2), np.empty(n1)
     n_sweeps, err, converged = 0, np.inf, False
     check = tol is not None
@@ -444,8 +452,8 @@ def sinkhorn_batch(A, *, slack: str = "mass", domain: str = "scaling", tol: floa
     if 0 in A.shape:
         raise ValueError(f"`A` must have shape (b, n1, n2) with every size >= 1, got {A.shape}")
     if half_sweeps is not None:
-        half_sweeps = check_int(half_sweeps, "half_sweeps", minimum=1)
-    max_iter = check_int(max_iter, "max_iter", minimum=1)
+        half_sweeps = check_int(half_sweeps, "half_sweeps", minimum=1, maximum=MAX_ITER)
+    max_iter = check_int(max_iter, "max_iter", minimum=1, maximum=MAX_ITER)
     check_every = check_int(check_every, "check_every", minimum=1)
     if tol is not None:
         tol = check_positive(tol, "tol")
@@ -515,7 +523,7 @@ def sinkhorn_augmented_batch(M, *, tol: float, max_iter: int, which=None) -> Non
                          f"with n1, n2 >= 1 (normalised in place), got "
                          f"{getattr(M, 'shape', type(M).__name__)}")
     tol = check_positive(tol, "tol")
-    max_iter = check_int(max_iter, "max_iter", minimum=1)
+    max_iter = check_int(max_iter, "max_iter", minimum=1, maximum=MAX_ITER)
     _check_kernels(M, "M")
     _batch_augmented(M, tol=tol, max_iter=max_iter, which=which)
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import check_int, check_positive
+from .._validation import MAX_ITER, check_int, check_positive
 from ._affinity import as_affinity
 from ._result import MatchingResult
 from ._stepwise import _BaseStepper, _moderate, _run, _symmetric
@@ -60,7 +60,7 @@ class SMStepper(_BaseStepper):
     def __init__(self, affinity, *, n1: int | None = None, n2: int | None = None,
                  max_iter: int = _DEFAULTS["max_iter"], tol: float = _DEFAULTS["tol"]):
         aff = as_affinity(affinity, n1=n1, n2=n2)
-        super().__init__(aff, max_iter=check_int(max_iter, "max_iter", minimum=1))
+        super().__init__(aff, max_iter=check_int(max_iter, "max_iter", minimum=1, maximum=MAX_ITER))
         self.tol = check_positive(tol, "tol")
         self._X = np.full((self.n1, self.n2), 1.0 / (self.n1 * self.n2))
         self.eigenvalue = 0.0

@@ -67,8 +67,8 @@ class Stepper(Protocol):
         One outer iteration (RRWM, SM, IPFP: one iteration; GA: one beta level, with its inner loop
         run to convergence; PF: one lambda step). Returns ``done``.
     set_iterate(X)
-        Overwrite the relaxed state with ``X`` (e.g. a synchronized matrix) and continue from it;
-        resets ``converged`` so that at least one more step is taken.
+        Overwrite the relaxed state with ``X`` (e.g. a synchronized matrix; entries in [0, 1])
+        and continue from it; resets ``converged`` so that at least one more step is taken.
     result()
         Round the current state with the Hungarian algorithm and return a :class:`MatchingResult`.
 
@@ -133,6 +133,11 @@ class _BaseStepper:
         if X.shape != (self.n1, self.n2):
             raise ValueError(f"`{name}` must have shape ({self.n1}, {self.n2}), got {X.shape}")
         check_nonnegative(X, name)
+        if X.size and X.max() > 1.0 + 1e-6:
+            # every solver's iterate lies in [0, 1] (doubly stochastic, a unit vector, a point of
+            # the Birkhoff polytope); 1e200 * I overflowed IPFP's products
+            raise ValueError(f"`{name}` must have entries in [0, 1] (a relaxed assignment), got "
+                             f"maximum {float(X.max()):.6g}")
         return np.array(X, dtype=float)
 
     def set_iterate(self, X) -> None:

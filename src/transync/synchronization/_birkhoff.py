@@ -34,8 +34,10 @@ import scipy.sparse as sp
 from scipy.optimize import linear_sum_assignment
 
 from .._validation import (
+    MAX_ITER,
     as_generator,
     check_array,
+    check_bool,
     check_choice,
     check_index_pairs,
     check_int,
@@ -132,6 +134,8 @@ def birkhoff_von_neumann(X, *, tol: float = 1e-9,
 
 #: Warm start: at most this many atoms of ``init`` (the heaviest) are kept.
 WARM_MAX_ATOMS = 32
+#: Largest total node count whose universe size is estimated (a dense eigenproblem, 3 GiB here).
+MAX_DENSE_UNIVERSE_NODES = 20_000
 #: Atoms whose weight falls to or below this value are dropped (weights renormalized).
 _DROP = 1e-12
 #: Matrix-free eigensolver: the block matrix is formed densely (one GEMM per product) when the
@@ -607,9 +611,10 @@ def synchronize_doubly_stochastic(pairwise, *, mask=None, weights=None, max_iter
     >>> res2.n_iter, np.round(res2.weights, 3).tolist()
     (0, [0.7, 0.3])
     """
-    max_iter = check_int(max_iter, "max_iter", minimum=0)
-    inner_sweeps = check_int(inner_sweeps, "inner_sweeps", minimum=0)
+    max_iter = check_int(max_iter, "max_iter", minimum=0, maximum=MAX_ITER)
+    inner_sweeps = check_int(inner_sweeps, "inner_sweeps", minimum=0, maximum=MAX_ITER)
     tol = check_positive(tol, "tol")
+    fully_corrective = check_bool(fully_corrective, "fully_corrective")
     check_choice(solver, "solver", ("auto", "dense", "matrix_free"))
     if init is not None and not isinstance(init, BirkhoffSyncResult):
         raise TypeError("`init` must be a BirkhoffSyncResult (a previous result of "
@@ -811,6 +816,10 @@ def _estimate_universe_soft(X, w, pairs, sizes):
     n_max = int(sizes.max())
     off = np.concatenate([[0], np.cumsum(sizes)])
     M = int(off[-1])
+    if M > MAX_DENSE_UNIVERSE_NODES:        # a dense M x M eigenproblem (2 * 10**5: 298 GiB)
+        raise ValueError(f"estimating the universe of {M} nodes in all needs a dense {M} x {M} "
+                         f"eigenproblem (at most {MAX_DENSE_UNIVERSE_NODES} nodes); pass "
+                         "`n_universe`")
     w = spec.relative_weights(np.asarray(w, dtype=float))
     B = spec.identity_weight(w) * np.eye(M)
     for q, (i, j) in enumerate(pairs):

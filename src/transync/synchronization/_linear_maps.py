@@ -37,7 +37,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .._validation import check_array, check_bool, check_choice, check_int, check_positive
+from .._validation import MAX_ITER, check_array, check_bool, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning, DegenerateInputError
 from ..geometry import normalization_matrix, normalize_determinant
 from ._pairwise_input import check_mask, check_weight_magnitude, observations
@@ -510,7 +510,7 @@ def _synchronize_linear_maps(T, *, name, mask, weights, reference, group, robust
     group = check_choice(group, "group", _GROUPS)
     residual = check_choice(residual, "residual", _RESIDUALS)
     disconnected = check_choice(disconnected, "disconnected", ("raise", "component"))
-    max_iter = check_int(max_iter, "max_iter", minimum=1)
+    max_iter = check_int(max_iter, "max_iter", minimum=1, maximum=MAX_ITER)
     tol = check_positive(tol, "tol", allow_zero=True)
     per_object = np.ndim(residual_scale) > 0
     if per_object:

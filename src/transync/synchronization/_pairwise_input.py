@@ -33,8 +33,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
-from .._validation import MAX_AFFINITY_SCALE, check_array, check_int, check_int_array
+from .._validation import MAX_AFFINITY_SCALE, check_array, check_int, check_int_array, short_repr
 from ..permutations import (
     MAX_NODES,
     assignment_to_matrix,
@@ -126,6 +127,9 @@ def _key(i, j, name: str) -> tuple[int, int]:
         raise TypeError(f"`{name}` keys must be pairs of ints, got {(i, j)!r}") from None
     if i < 0 or j < 0:
         raise ValueError(f"`{name}` keys must be non-negative object indices, got {(i, j)}")
+    if max(i, j) >= 2**62:                      # stored as int64
+        raise ValueError(f"`{name}` keys must be object indices below 2**62, got "
+                         f"{short_repr((i, j))}")
     if i == j:
         raise ValueError(f"`{name}` must not contain pairs with i == j (self-pairs), got "
                          f"{(i, j)}")
@@ -165,7 +169,7 @@ def _mapping_observations(pairwise: Mapping, name: str) -> list:
     if keys and all(type(k) is tuple and len(k) == 2 for k in keys):
         try:
             karr = np.array(keys)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             karr = None
         if karr is not None and karr.ndim == 2 and karr.dtype.kind in "iu":
             bad = np.flatnonzero((karr < 0).any(1) | (karr[:, 0] == karr[:, 1]))
@@ -214,6 +218,7 @@ def parse_pairwise(pairwise, *, mask=None, weights=None, sizes=None, soft: bool 
     ws = _pair_weights(weights, ki, kj)
     n_obj = _count_objects(ki, kj, fixed, mask, name)
     sizes_out = _infer_sizes(ki, kj, vals, fixed, n_obj, name)
+    _check_working_set(ki.size, sizes_out, soft, name)
     check_weight_magnitude(ws, int(sizes_out.max(initial=1)))
     pairs = np.column_stack([np.minimum(ki, kj), np.maximum(ki, kj)])
     if soft:
@@ -225,6 +230,26 @@ def parse_pairwise(pairwise, *, mask=None, weights=None, sizes=None, soft: bool 
     _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
     return StackedPairs(n_objects=n_obj, sizes=sizes_out, pairs=pairs, maps=maps, soft=blocks,
                         weights=ws / counts[inverse])
+
+
+#: Entries of the largest dense array the synchronizers build from the input: the stacked maps
+#: (pairs x n_max, soft: pairs x n_max^2) and the embedding (total nodes x n_max, at least the
+#: universe). 2**31 entries are 16 GiB; above it the input is refused up front instead of a
+#: MemoryError or minutes of allocation (sizes [2, 10**7] asked for 728 TiB). NCI1's 8.4 million
+#: pairs of graphs padded to 111 nodes (the kernels' all-pairs run) need 9.3e8.
+MAX_WORKING_ENTRIES = 2**31
+
+
+def _check_working_set(n_pairs: int, sizes: np.ndarray, soft: bool, name: str) -> None:
+    n_max, total = int(sizes.max(initial=1)), int(sizes.sum())
+    need = {"the stacked pairs": n_pairs * n_max * (n_max if soft else 1),
+            "the embedding (total nodes x largest object)": total * n_max}
+    what, entries = max(need.items(), key=lambda kv: kv[1])
+    if entries > MAX_WORKING_ENTRIES:
+        raise ValueError(f"`{name}` describes {sizes.size} objects, the largest of {n_max} "
+                         f"nodes ({total} in all, from `sizes` or the maps' entries): "
+                         f"{what} would be a dense array of {entries:.3g} entries, above "
+                         f"{MAX_WORKING_ENTRIES:.3g}; synchronize fewer or smaller objects")
 
 
 def _check_weights_arg(weights):
@@ -295,7 +320,7 @@ def _int_keys(pairwise: Mapping):
         return None
     try:
         karr = np.array(keys)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):    # ints beyond int64: the slow path names them
         return None
     if karr.ndim != 2 or karr.dtype.kind not in "iu":
         return None
@@ -323,9 +348,14 @@ def _as_values(ki, kj, raw, soft: bool, name: str) -> _Values:
 
 
 def _as_value(value, label: str, soft: bool) -> tuple[np.ndarray, int | None]:
-    if isinstance(value, (str, bytes)):
-        raise TypeError(f"`{label}` must be an assignment or a matrix, got {type(value).__name__}")
-    arr = np.asarray(value)
+    if isinstance(value, (str, bytes)) or value is None or sp.issparse(value):
+        raise TypeError(f"`{label}` must be an assignment or a dense matrix, got "
+                        f"{type(value).__name__}")
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError):                 # ragged nesting
+        raise ValueError(f"`{label}` must be an assignment (1-d) or a matrix (2-d) of one row "
+                         f"length, got rows of different lengths") from None
     if arr.ndim == 1:
         return check_assignment(arr, label), None
     if arr.ndim != 2:

@@ -127,7 +127,7 @@ def test_huge_node_features_refused():
     g2 = Graph(g2.adjacency, points=g2.points, node_features=g2.node_features + 5e8)
     with pytest.raises(DegenerateInputError, match=r"`sigma2`=1 is too small for node features"):
         gaussian_node_affinity(g1, g2)
-    with pytest.raises(DegenerateInputError, match="pass `node_affinity`"):
+    with pytest.raises(DegenerateInputError, match="pass `node_affinity=gaussian_node_affinity"):
         match_graphs(g1, g2, method="hungarian")
 
 

@@ -45,12 +45,12 @@ def test_env_pointing_nowhere_is_an_error_not_a_fallback(monkeypatch, isolated):
 
 
 def test_bad_arguments_and_empty_env_are_named(monkeypatch, isolated):
-    """TRANSYNC_DATA='' fell back silently; subfolder='/etc' left the data home; subfolder=5
-    raised "unsupported operand"; required='no' counted as true."""
+    """subfolder='/etc' left the data home; subfolder=5 raised "unsupported operand";
+    required='no' counted as true; an unknown ~user raised pathlib's bare RuntimeError.
+    TRANSYNC_DATA='' counts as unset, and the "not found" message says so."""
     (isolated / "a" / "shared" / "data").mkdir(parents=True)      # a fallback that exists
-    monkeypatch.setenv("TRANSYNC_DATA", "")
-    with pytest.raises(ValueError, match="TRANSYNC_DATA is set but empty"):
-        data_home(required=False)
+    monkeypatch.setenv("TRANSYNC_DATA", "")         # the shell convention: empty = unset
+    assert data_home() == (isolated / "a" / "shared" / "data").resolve()
     monkeypatch.setenv("TRANSYNC_DATA", "~nosuchuser_x/data")
     with pytest.raises(ValueError, match=r"`TRANSYNC_DATA`: cannot expand '~nosuchuser_x/data'"):
         data_home()
@@ -63,6 +63,9 @@ def test_bad_arguments_and_empty_env_are_named(monkeypatch, isolated):
         data_home(subfolder=5)
     with pytest.raises(TypeError, match="`required` must be a bool, got str 'no'"):
         data_home(required="no")
+    monkeypatch.setenv("TRANSYNC_DATA", "")
+    with pytest.raises(FileNotFoundError, match=r"TRANSYNC_DATA is empty: taken as not set"):
+        data_home(subfolder="nope")
 
 
 def test_data_home_missing_names_every_place(isolated):

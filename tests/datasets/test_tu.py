@@ -531,6 +531,9 @@ def test_blame_the_odd_line_and_count_significant_digits(tmp_path):
         load_tu(folder)
     folder = _write(tmp_path / "ZEROS", node_labels=_lines(["0000000000000005"] + NODE_LABELS[1:]))
     assert load_tu(folder).graphs[0].node_labels[0] == 5
+    # 400 leading zeros: 10.0 ** 400 is inf and 0 * inf NaN, read as -2**63 (found by review)
+    folder = _write(tmp_path / "Z400", graph_labels=_lines(["0" * 400 + "1"] + GRAPH_LABELS[1:]))
+    assert load_tu(folder).y.tolist() == [1] + GRAPH_LABELS[1:]
 
 
 def test_dataset_constructor_refuses_what_it_cannot_hold():

@@ -236,7 +236,7 @@ def test_set_iterate_between_steps_as_the_reference(warm):
     rng = np.random.default_rng(7)
     for k in range(8):
         if k % 3 == 2:
-            X = st.iterate * rng.uniform(0.5, 1.0, st.iterate.shape)     # iterates lie in [0, 1]
+            X = st.iterate * rng.uniform(0.5, 1.5, st.iterate.shape)
             st.set_iterate(X)
             ref.set_iterate(X)
         st.step()

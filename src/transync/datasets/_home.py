@@ -3,7 +3,8 @@
 Resolution order (the first that exists wins):
 
 1. the environment variable ``TRANSYNC_DATA`` -- when set it must name an existing folder
-   (a variable that points nowhere, or is empty, is an error, never a silent fallback);
+   (a variable that points nowhere is an error, never a silent fallback; set to the empty
+   string it counts as unset, the shell convention, and the "not found" message says so);
 2. ``../shared/data`` relative to the current working directory, then relative to the source
    checkout this package runs from (only when it runs from a checkout, not an installed copy);
 3. the per-user cache folder: ``$XDG_CACHE_HOME/transync``, default ``~/.cache/transync``
@@ -109,8 +110,8 @@ def data_home(required: bool = True, *, subfolder: str | None = None) -> Path | 
         ``TRANSYNC_DATA`` is set but names no folder (whatever ``required``), or nothing was
         found and ``required`` is true.
     ValueError, TypeError
-        ``TRANSYNC_DATA`` set but empty, ``required`` not a bool, ``subfolder`` not a folder
-        name inside the data home (absolute, or with ``..``).
+        ``TRANSYNC_DATA`` naming an unknown ``~user``, ``required`` not a bool, ``subfolder``
+        not a folder name inside the data home (absolute, or with ``..``).
 
     Examples
     --------
@@ -127,10 +128,7 @@ def data_home(required: bool = True, *, subfolder: str | None = None) -> Path | 
             raise ValueError(f"`subfolder` must be a folder inside the data home, got "
                              f"{subfolder!r:.80}")
     env = os.environ.get("TRANSYNC_DATA")
-    if env is not None:
-        if not env:
-            raise ValueError("TRANSYNC_DATA is set but empty; set it to the folder holding the "
-                             "real data sets, or unset it")
+    if env:                     # empty counts as unset (as XDG_CACHE_HOME does), said below
         home = as_path(env, "TRANSYNC_DATA")
         if not home.exists():
             raise FileNotFoundError(f"TRANSYNC_DATA={env!r} does not exist; set it to the folder "
@@ -150,6 +148,7 @@ def data_home(required: bool = True, *, subfolder: str | None = None) -> Path | 
         what = f"the data folder{'' if subfolder is None else f' {subfolder!r}'}"
         where = ", ".join(str(p) for p in looked)
         raise FileNotFoundError(f"cannot find {what}: looked at {where}"
-                                + ("" if env else " (TRANSYNC_DATA not set)")
+                                + ("" if env else " (TRANSYNC_DATA not set)" if env is None
+                                   else " (TRANSYNC_DATA is empty: taken as not set)")
                                 + "; set TRANSYNC_DATA to the folder holding the real data sets")
     return home

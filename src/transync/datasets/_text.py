@@ -1,11 +1,12 @@
-"""Reading numbers from the text formats (CMU label files, Oxford/HPatches ground truth, TU
-node attributes): one rule for what a number and what a line is.
+"""Reading numbers from the text formats: one rule for what a number is (CMU label files,
+Oxford/HPatches ground truth, TU node attributes) and what a line is (CMU, Oxford/HPatches).
 
 A number is an ASCII decimal literal (``-1.5``, ``.5``, ``3e-2``): Python's ``float`` would also
 take ``1_5`` (as 15), full-width digits, and surrounding NUL bytes, which in a data file are
 damage, not numbers. A line ends at ``\\n``, ``\\r\\n`` or ``\\r`` only (``str.splitlines``
 also breaks at form feeds, ``\\x1c``-``\\x1e``, ``\\x85`` and ``\\u2028``, which shifts the
-line numbers the messages give and can split one row into two).
+line numbers the messages give and can split one row into two). TU files are scanned as bytes
+(``transync.datasets._tu``): there a line ends at ``\\n`` and a ``\\r`` is a blank.
 """
 
 from __future__ import annotations

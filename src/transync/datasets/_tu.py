@@ -323,7 +323,9 @@ def _parse_ints(path, data, b, tok, start, token_line, what) -> np.ndarray:
         t = int(tid[np.argmax(significant & (power >= _MAX_DIGITS))])
         raise _bad_line(path, data, int(token_line[t]) + 1,
                         f"expected {what} (integers of at most {_MAX_DIGITS} digits)")
-    values = np.bincount(tid, weights=(b[pos] - 48) * 10.0 ** power, minlength=token_line.size)
+    # leading zeros weigh 0 whatever their place (10.0 ** 309 is inf, and 0 * inf is NaN)
+    weight = 10.0 ** np.where(power < _MAX_DIGITS, power, 0)
+    values = np.bincount(tid, weights=(b[pos] - 48) * weight, minlength=token_line.size)
     values = np.rint(values).astype(np.int64)
     values[b[np.flatnonzero(start)] == 45] *= -1
     return values

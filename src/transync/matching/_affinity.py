@@ -675,9 +675,8 @@ def gaussian_node_affinity(g1: Graph, g2: Graph, *, sigma2: float = 1.0,
     e = int(np.frexp(top)[1]) if top > 0 else 0
     D = np.ldexp(f1, -e)[:, None, :] - np.ldexp(f2, -e)[None, :, :]
     with np.errstate(over="ignore"):        # beyond float64: exp(-inf) = 0, refused below
-        r = np.ldexp(1.0, e) / np.sqrt(sigma2)
-        t = (D ** 2).sum(-1) * (r * r)
-    t[~np.any(D != 0, axis=-1)] = 0.0      # identical features (0 * inf)
+        # scaling by 2**e commutes with rounding: d2 / sigma2 to the last bit where it is finite
+        t = np.ldexp((D ** 2).sum(-1), 2 * e) / sigma2
     _refuse_underflow(int(np.count_nonzero(t <= _UNDERFLOW)), 1, sigma2,
                       f"node {attribute}", float(np.median(np.abs(np.concatenate(
                           [f1.ravel(), f2.ravel()])))))

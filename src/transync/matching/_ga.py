@@ -124,6 +124,7 @@ class GAStepper(_BaseStepper):
     """
 
     method = "ga"
+    unit_iterate = True
 
     def __init__(self, affinity, *, n1: int | None = None, n2: int | None = None,
                  beta0: float = _DEFAULTS["beta0"], beta_max: float | None = None,

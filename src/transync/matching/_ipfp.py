@@ -58,6 +58,7 @@ class IPFPStepper(_BaseStepper):
     """
 
     method = "ipfp"
+    unit_iterate = True
 
     def __init__(self, affinity, *, n1: int | None = None, n2: int | None = None,
                  init=_DEFAULTS["init"], max_iter: int = _DEFAULTS["max_iter"],

@@ -76,6 +76,7 @@ class PFStepper(_BaseStepper):
     """
 
     method = "pf"
+    unit_iterate = True
 
     def __init__(self, affinity, *, n1: int | None = None, n2: int | None = None,
                  max_iter: int = _DEFAULTS["max_iter"], step: float = _DEFAULTS["step"],

@@ -67,8 +67,10 @@ class Stepper(Protocol):
         One outer iteration (RRWM, SM, IPFP: one iteration; GA: one beta level, with its inner loop
         run to convergence; PF: one lambda step). Returns ``done``.
     set_iterate(X)
-        Overwrite the relaxed state with ``X`` (e.g. a synchronized matrix; entries in [0, 1])
-        and continue from it; resets ``converged`` so that at least one more step is taken.
+        Overwrite the relaxed state with ``X`` (e.g. a synchronized matrix; non-negative, with
+        entries in [0, 1] for GA, PF and IPFP, whose iterates are points of the Birkhoff
+        polytope) and continue from it; resets ``converged`` so that at least one more step is
+        taken.
     result()
         Round the current state with the Hungarian algorithm and return a :class:`MatchingResult`.
 
@@ -111,6 +113,7 @@ class _BaseStepper:
     """Bookkeeping shared by the steppers: budget, convergence flag, rounding."""
 
     method = ""
+    unit_iterate = False        # the iterate lives in [0, 1] (GA, PF, IPFP): set_iterate checks
 
     def __init__(self, affinity: Affinity, *, max_iter: int):
         self.affinity = affinity
@@ -133,11 +136,11 @@ class _BaseStepper:
         if X.shape != (self.n1, self.n2):
             raise ValueError(f"`{name}` must have shape ({self.n1}, {self.n2}), got {X.shape}")
         check_nonnegative(X, name)
-        if X.size and X.max() > 1.0 + 1e-6:
-            # every solver's iterate lies in [0, 1] (doubly stochastic, a unit vector, a point of
-            # the Birkhoff polytope); 1e200 * I overflowed IPFP's products
-            raise ValueError(f"`{name}` must have entries in [0, 1] (a relaxed assignment), got "
-                             f"maximum {float(X.max()):.6g}")
+        if self.unit_iterate and X.size and X.max() > 1.0 + 1e-6:
+            # a point of the (sub-)Birkhoff polytope has entries in [0, 1]; IPFP's products
+            # overflowed at 1e200 * I (RRWM and SM rescale their iterate: any scale will do)
+            raise ValueError(f"`{name}` must have entries in [0, 1] ({self.method}'s iterate is a "
+                             f"relaxed assignment), got maximum {float(X.max()):.6g}")
         return np.array(X, dtype=float)
 
     def set_iterate(self, X) -> None:

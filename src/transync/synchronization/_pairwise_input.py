@@ -172,7 +172,8 @@ def _mapping_observations(pairwise: Mapping, name: str) -> list:
         except (TypeError, ValueError, OverflowError):
             karr = None
         if karr is not None and karr.ndim == 2 and karr.dtype.kind in "iu":
-            bad = np.flatnonzero((karr < 0).any(1) | (karr[:, 0] == karr[:, 1]))
+            bad = np.flatnonzero((karr < 0).any(1) | (karr[:, 0] == karr[:, 1])
+                                 | (karr >= 2**62).any(1))
             if not bad.size:                             # fast path: valid int keys
                 return [(int(i), int(j), v)
                         for (i, j), v in zip(karr.tolist(), pairwise.values())]
@@ -324,7 +325,7 @@ def _int_keys(pairwise: Mapping):
         return None
     if karr.ndim != 2 or karr.dtype.kind not in "iu":
         return None
-    if np.any((karr < 0).any(1) | (karr[:, 0] == karr[:, 1])):
+    if np.any((karr < 0).any(1) | (karr[:, 0] == karr[:, 1]) | (karr >= 2**62).any(1)):
         return None                                  # the slow path names the bad key
     karr = karr.astype(np.int64)
     return karr[:, 0].copy(), karr[:, 1].copy()

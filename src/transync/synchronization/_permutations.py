@@ -190,10 +190,7 @@ def _spectral_embedding(stk, d, solver, tol, rng, info):
     n_max = int(stk.sizes.max())
     use = solver
     if solver == "auto":
-        # a Krylov block of about 2 n_max columns (the universe search) that is a large part of
-        # M costs more than the dense solver: 3 objects of 1500 nodes took 93 s matrix-free
-        wide = 8 * n_max >= M and M <= spec.DENSE_WIDE_MAX
-        use = "dense" if M <= spec.DENSE_MAX or wide else "matrix_free"
+        use = "dense" if M <= spec.DENSE_MAX else "matrix_free"
     t0 = time.perf_counter()
     dobs = spec.directed(stk)
     # matrix-free products run in float32 (half the memory traffic); Ritz steps in float64
@@ -224,11 +221,7 @@ def _spectral_embedding(stk, d, solver, tol, rng, info):
 
     def _eigs(k_vals, k_vec, V0):
         if use == "dense":
-            if k_vals > k_vec:      # eigenvalues for the gap search, vectors only for k_vec
-                w = sla.eigh(Ad, eigvals_only=True, subset_by_index=[M - k_vals, M - 1])
-                _, U = sla.eigh(Ad, subset_by_index=[M - k_vec, M - 1])
-            else:
-                w, U = sla.eigh(Ad, subset_by_index=[M - max(k_vals, k_vec), M - 1])
+            w, U = sla.eigh(Ad, subset_by_index=[M - max(k_vals, k_vec), M - 1])
             return w[::-1], U[:, ::-1], 1, True
         b = min(M, max(max(k_vals, k_vec) + 6, int(1.15 * max(k_vals, k_vec))))
         vals, U, n_p, _, ok = spec.block_krylov_eigs(

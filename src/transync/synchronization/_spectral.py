@@ -23,7 +23,6 @@ from ._pairwise_input import StackedPairs
 __all__: list[str] = []
 
 DENSE_MAX = 2000          # "auto" uses dense eigh up to this total number of nodes
-DENSE_WIDE_MAX = 20000    # ... and up to this many when the objects are few and large
 
 
 def directed(stk: StackedPairs):

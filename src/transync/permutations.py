@@ -858,7 +858,7 @@ class MultiMatching:
     def _inverse(self):
         """``inv[g, a]`` = node of object ``g`` in (compact) slot ``a``; the last column (= slot
         -1) is -1. Above ``_DENSE_INVERSE`` entries (10**5 objects of 2 nodes in distinct slots
-        asked for 149 GiB) it is ``(keys, nodes)`` instead: the sorted codes ``g * k + a`` of
+        asked for 149 GiB) it is ``(keys, nodes, k)`` instead: the sorted codes ``g * k + a`` of
         the placed nodes, looked up by binary search (:meth:`_lookup`)."""
         if self._inv is None:
             k = int(self._padded.max(initial=-1)) + 1

@@ -326,7 +326,8 @@ def _is_float(token: str) -> bool:
 
 def _label_files(folder: Path) -> tuple[str, dict[int, Path]]:
     found: dict[str, dict[int, Path]] = {}
-    for p in sorted(folder.iterdir()):
+    entries = sorted(folder.iterdir())      # listed once, read twice below
+    for p in entries:
         if p.name.startswith(".") or not p.is_file():
             continue
         m = _LABEL_RE.match(p.name)
@@ -348,7 +349,7 @@ def _label_files(folder: Path) -> tuple[str, dict[int, Path]]:
         raise ValueError(f"{folder}: label files of several sequences ({names}); expected one "
                          "name prefix")
     (name, by_number), = found.items()
-    for p in sorted(folder.iterdir()):      # `house6.txt` beside house1..5: not silently skipped
+    for p in entries:                       # `house6.txt` beside house1..5: not silently skipped
         stem = re.fullmatch(re.escape(name) + r"(\d+)\..*", p.name, re.ASCII)
         if stem and not p.name.startswith("."):
             raise ValueError(f"{p}: looks like frame {int(stem[1])} of {name!r} but label files "

@@ -457,8 +457,9 @@ def _mat_image(m: dict, names: list, key: str, path: Path) -> np.ndarray:
             or (img.ndim == 3 and img.shape[2] not in (1, 3, 4)):
         raise ValueError(f"`{path}`, field {key!r}: expected an image (H, W) or (H, W, 3), "
                          f"got shape {img.shape} and dtype {img.dtype}")
-    if img.dtype.kind == "f" and not (np.isfinite(img).all() and img.min() >= 0):
-        got = "NaN or infinite" if not np.isfinite(img).all() else "negative"
+    finite = img.dtype.kind != "f" or bool(np.isfinite(img).all())
+    if img.dtype.kind == "f" and not (finite and img.min() >= 0):
+        got = "NaN or infinite" if not finite else "negative"
         raise ValueError(f"`{path}`, field {key!r}: expected an image of finite non-negative "
                          f"intensities, got {got} values")
     return img

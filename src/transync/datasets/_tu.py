@@ -137,9 +137,8 @@ class TUDataset:
             raise ValueError(f"`y` must fit in int64, got {int(y.max())}")     # would wrap
         for flag, attr in (("has_node_labels", "node_labels"),
                            ("has_node_attributes", "node_features")):
-            if check_bool(getattr(self, flag), flag) and any(
-                    getattr(g, attr) is None for g in graphs):
-                k = next(i for i, g in enumerate(graphs) if getattr(g, attr) is None)
+            k = next((i for i, g in enumerate(graphs) if getattr(g, attr) is None), None)
+            if check_bool(getattr(self, flag), flag) and k is not None:
                 raise ValueError(f"`{flag}` is True but `graphs[{k}]` has no {attr}")
         check_bool(self.has_edge_labels, "has_edge_labels")
         loops = np.zeros(len(graphs), np.int64) if self.self_loops is None else self.self_loops
@@ -246,6 +245,11 @@ def _bad_line(path: Path, data: bytes, lineno: int, what: str) -> ValueError:
     return ValueError(f"{path}, line {lineno}: {what}, got {_line_text(data, lineno)!r:.60}")
 
 
+def _bad_byte(path: Path, data: bytes, b: np.ndarray, at: int, what: str) -> ValueError:
+    """:func:`_bad_line` for the line holding byte ``at`` of ``b`` (the file's bytes)."""
+    return _bad_line(path, data, int(np.count_nonzero(b[:at] == 10)) + 1, what)
+
+
 def _read_table(path: Path, *, columns: int | None, kind: str, what: str):
     """Parse a TU text file into ``(values (rows, k), line numbers (rows,))``, vectorized.
 
@@ -310,8 +314,7 @@ def _parse_ints(path, data, b, tok, start, token_line, what) -> np.ndarray:
     next_digit[:-1] = digit[1:]
     bad = np.flatnonzero(tok & ~digit & ~(sign & start & next_digit))
     if bad.size:
-        lineno = int(np.count_nonzero(b[:bad[0]] == 10)) + 1
-        raise _bad_line(path, data, lineno, f"expected {what} (integers)")
+        raise _bad_byte(path, data, b, int(bad[0]), f"expected {what} (integers)")
     token_id = np.cumsum(start, dtype=token_line.dtype) - 1
     ends = np.flatnonzero(tok & ~np.append(tok[1:], False))
     pos = np.flatnonzero(digit)
@@ -340,8 +343,7 @@ def _parse_floats(path, data, b, tok, token_line, what) -> np.ndarray:
     # NUL bytes (`2\x00\x00` as 2.0) and take full-width digits
     bad = np.flatnonzero(tok & ~_NUMBER_BYTE[b])
     if bad.size:
-        lineno = int(np.count_nonzero(b[:bad[0]] == 10)) + 1
-        raise _bad_line(path, data, lineno, f"expected {what} (finite numbers)")
+        raise _bad_byte(path, data, b, int(bad[0]), f"expected {what} (finite numbers)")
     tokens = data.replace(b",", b" ").split()     # the same fields as the byte scan above
     try:
         values = np.array(tokens).astype(np.float64)

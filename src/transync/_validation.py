@@ -7,7 +7,9 @@ what was expected and what arrived. Internals trust validated inputs.
 from __future__ import annotations
 
 import numbers
+import os
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -15,6 +17,8 @@ __all__ = [
     "as_generator",
     "check_array",
     "check_bool",
+    "check_path",
+    "frozen_copy",
     "check_finite",
     "check_int",
     "check_int_array",
@@ -483,8 +487,42 @@ def check_bool(value, name: str) -> bool:
     TypeError: `progress` must be a bool, got int 1
     """
     if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"`{name}` must be a bool, got {type(value).__name__} {value!r}")
+        raise TypeError(f"`{name}` must be a bool, got {type(value).__name__} "
+                        f"{short_repr(value, 60)}")
     return bool(value)
+
+
+def check_path(value, name: str) -> Path:
+    """``value`` (a ``str`` or ``os.PathLike``) as a ``Path`` with ``~`` expanded; named errors
+    for other types, for ``''`` (which ``Path`` would read as the working directory) and for a
+    ``~user`` that does not exist (pathlib's bare ``RuntimeError``).
+
+    >>> check_path("", "out_dir")
+    Traceback (most recent call last):
+        ...
+    ValueError: `out_dir` must be a path, got '' (write '.' for the working folder)
+    """
+    if isinstance(value, bool) or not isinstance(value, (str, os.PathLike)):
+        raise TypeError(f"`{name}` must be a path (str or os.PathLike), got "
+                        f"{type(value).__name__} {value!r:.40}")
+    text = os.fspath(value)
+    if not isinstance(text, str):
+        raise TypeError(f"`{name}` must be a path given as text, got {type(text).__name__} "
+                        f"{text!r:.40}")
+    if not text:
+        raise ValueError(f"`{name}` must be a path, got '' (write '.' for the working folder)")
+    try:
+        return Path(text).expanduser()
+    except RuntimeError as exc:             # "~nosuchuser/...": no such home folder
+        raise ValueError(f"`{name}`: cannot expand {text!r:.80} ({exc})") from None
+
+
+def frozen_copy(a) -> np.ndarray:
+    """A read-only copy of ``a``, for the arrays of frozen results (nobody can edit them
+    through the result, nor through the array they were built from)."""
+    out = np.array(a)
+    out.flags.writeable = False
+    return out
 
 
 def short_repr(x, limit: int = 80) -> str:

@@ -138,6 +138,28 @@ def test_whitespace_tolerance(tmp_path):
         np.testing.assert_array_equal(g.edge_features, h.edge_features)
 
 
+def test_lone_carriage_returns_end_lines(tmp_path):
+    """Files saved with old-Mac line ends (a lone ``\\r``) were read as one long line and
+    refused with a field count; lines now end at ``\\n``, ``\\r\\n`` or ``\\r`` as in the other
+    text loaders, and messages count lines that way."""
+    ref = load_tu(_write(tmp_path / "R"))
+    cr = {kind: _lines(rows).replace("\n", "\r") for kind, rows in (
+        ("A", A_LINES), ("graph_indicator", NODES), ("graph_labels", GRAPH_LABELS),
+        ("node_labels", NODE_LABELS), ("edge_labels", EDGE_LABELS))}
+    cr["node_attributes"] = "".join(f"{a}, {b}\r" for a, b in ATTRS)
+    ds = load_tu(_write(tmp_path / "C", **cr))
+    assert ds.sizes.tolist() == ref.sizes.tolist()
+    np.testing.assert_array_equal(ds.y, ref.y)
+    for g, h in zip(ds.graphs, ref.graphs):
+        np.testing.assert_array_equal(g.adjacency, h.adjacency)
+        np.testing.assert_array_equal(g.node_labels, h.node_labels)
+        np.testing.assert_allclose(g.node_features, h.node_features, atol=1e-6)
+        np.testing.assert_array_equal(g.edge_features, h.edge_features)
+    folder = _write(tmp_path / "B", A="1, 2\r2, 1\r\n\r3, x\r")
+    with pytest.raises(ValueError, match=r"TOY_A.txt, line 4: .*got '3, x'"):
+        load_tu(folder)
+
+
 def test_self_loops_dropped_and_counted(tmp_path):
     ds = load_tu(_write(tmp_path / "S", A=_lines(A_LINES + ["4, 4", "7, 7", "7, 7"]),
                         edge_labels=_lines(EDGE_LABELS + [1, 2, 2])))

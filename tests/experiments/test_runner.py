@@ -254,15 +254,17 @@ def test_run_and_summarize_arguments_are_named(tmp_path):
     for call, exc, match in (
             (lambda: run_experiment(None, tmp_path), TypeError,
              "`experiment` must be an Experiment"),
-            (lambda: run_experiment(exp, None), TypeError, "`out_dir` must be a folder path"),
+            (lambda: run_experiment(exp, None), TypeError,
+             r"`out_dir` must be a path \(str or os.PathLike\), got NoneType"),
+            (lambda: run_experiment(exp, ""), ValueError, "`out_dir` must be a path, got ''"),
             (lambda: run_experiment(exp, tmp_path, workers=10**6), ValueError,
              r"`workers` must be <= 256"),
             (lambda: run_experiment(exp, tmp_path, trials=10**12), ValueError,
              r"`trials` must be <= 1000000"),
             (lambda: run_experiment(exp, tmp_path, progress="no"), TypeError,
-             "`progress` must be True or False"),
+             "`progress` must be a bool, got str 'no'"),
             (lambda: run_experiment(exp, tmp_path, plot=0), TypeError,
-             "`plot` must be True or False"),
+             "`plot` must be a bool, got int 0"),
             (lambda: summarize(None, []), TypeError, "`experiment` must be an Experiment"),
             (lambda: summarize(exp, [{"sweep": "s"}]), TypeError,
              r"`records\[0\]` must be a dict with keys"),
@@ -270,6 +272,16 @@ def test_run_and_summarize_arguments_are_named(tmp_path):
         with pytest.raises(exc, match=match):
             call()
     assert not (tmp_path / "results.sqlite").exists()
+
+
+def test_out_dir_with_a_tilde_is_the_home_folder(tmp_path, monkeypatch):
+    """``"~/runs"`` made a folder literally named ``~`` in the working directory."""
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.chdir(tmp_path)
+    result = run_experiment(_experiment(trials=1), "~/runs", progress=False, plot=False)
+    assert result.out_dir == tmp_path / "home" / "runs"
+    assert (tmp_path / "home" / "runs" / "results.sqlite").is_file()
+    assert not (tmp_path / "~").exists()
 
 
 def test_workers_beyond_the_trials_start_no_idle_process(tmp_path, monkeypatch):

@@ -358,8 +358,10 @@ def test_a_bad_row_leaves_the_store_open_and_intact(tmp_path):
     store.close()
     with pytest.raises(ExperimentStoreError, match="is closed"):
         store.records("e")
-    with pytest.raises(TypeError, match="`path` must be a file path"):
+    with pytest.raises(TypeError, match=r"`path` must be a path \(str or os.PathLike\)"):
         ExperimentStore(None)
+    with pytest.raises(ValueError, match="`path` must be a path, got ''"):
+        ExperimentStore("")
 
 
 def test_rows_damaged_outside_transync_are_named(tmp_path):

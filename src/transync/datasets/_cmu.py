@@ -34,10 +34,10 @@ from pathlib import Path
 import numpy as np
 
 from .._validation import (as_generator, check_array, check_bool, check_choice, check_int,
-                           check_int_array)
+                           check_int_array, check_path, frozen_copy)
 from ..graphs import Graph
 from ._graphs import GraphCollectionProblem
-from ._home import as_path, data_home, no_folder
+from ._home import data_home, no_folder
 from ._text import is_number, text_lines
 
 __all__ = ["LANDMARK_AFFINITY", "LandmarkSequence", "load_cmu_sequence"]
@@ -68,11 +68,6 @@ def _png_size(path: Path) -> tuple[int, int]:
                          f"format's limit of {_PNG_MAX_SIDE} (a damaged header)")
     return int(width), int(height)
 
-
-def _frozen(a: np.ndarray) -> np.ndarray:
-    a = np.array(a)
-    a.setflags(write=False)
-    return a
 
 
 @dataclass(frozen=True)
@@ -131,8 +126,8 @@ class LandmarkSequence:
                              f"({P.shape[0]}), got shape {F.shape}")
         if np.unique(F).size != F.size:
             raise ValueError(f"`frames` must not repeat a frame number, got {F.tolist()!r:.80}")
-        object.__setattr__(self, "points", _frozen(P))
-        object.__setattr__(self, "frames", _frozen(F.astype(np.int64)))
+        object.__setattr__(self, "points", frozen_copy(P))
+        object.__setattr__(self, "frames", frozen_copy(F.astype(np.int64)))
         if (self.image_paths is None) != (self.image_sizes is None):
             raise ValueError("`image_paths` and `image_sizes` must be given together")
         if self.image_sizes is not None:
@@ -144,9 +139,9 @@ class LandmarkSequence:
                 raise ValueError(f"`image_paths` must hold one path per frame ({P.shape[0]}), got "
                                  f"{len(self.image_paths)}")
             object.__setattr__(self, "image_paths", tuple(Path(p) for p in self.image_paths))
-            object.__setattr__(self, "image_sizes", _frozen(S.astype(np.int64)))
+            object.__setattr__(self, "image_sizes", frozen_copy(S.astype(np.int64)))
         if self.source is not None:
-            object.__setattr__(self, "source", as_path(self.source, "source"))
+            object.__setattr__(self, "source", check_path(self.source, "source"))
         object.__setattr__(self, "_position",
                            {int(f): p for p, f in enumerate(self.frames.tolist())})
 
@@ -404,7 +399,7 @@ def load_cmu_sequence(path=None) -> LandmarkSequence:
     if path is None:
         folder = data_home(subfolder="cmu-house")
     else:
-        folder = as_path(path, "path")
+        folder = check_path(path, "path")
         if not folder.is_dir():
             raise FileNotFoundError(f"{folder}: {no_folder(folder)} (expected a folder in the CMU "
                                     "layout, holding `label/`)")

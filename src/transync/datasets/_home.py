@@ -16,30 +16,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from .._validation import check_bool
+from .._validation import check_bool, check_path
 
 __all__ = ["data_home"]
 
 _PACKAGE_ROOT = Path(__file__).resolve().parents[3]
-
-
-def as_path(value, name: str) -> Path:
-    """``value`` (a ``str`` or ``os.PathLike``) as a ``Path`` with ``~`` expanded; named errors
-    for other types, for ``''`` (which ``Path`` would read as the working directory) and for a
-    ``~user`` that does not exist (pathlib's bare ``RuntimeError``)."""
-    if isinstance(value, bool) or not isinstance(value, (str, os.PathLike)):
-        raise TypeError(f"`{name}` must be a path (str or os.PathLike), got "
-                        f"{type(value).__name__} {value!r:.40}")
-    text = os.fspath(value)
-    if not isinstance(text, str):
-        raise TypeError(f"`{name}` must be a path given as text, got {type(text).__name__} "
-                        f"{text!r:.40}")
-    if not text:
-        raise ValueError(f"`{name}` must be a path, got '' (write '.' for the working folder)")
-    try:
-        return Path(text).expanduser()
-    except RuntimeError as exc:             # "~nosuchuser/...": no such home folder
-        raise ValueError(f"`{name}`: cannot expand {text!r:.80} ({exc})") from None
 
 
 def no_folder(path: Path) -> str:
@@ -129,7 +110,7 @@ def data_home(required: bool = True, *, subfolder: str | None = None) -> Path | 
                              f"{subfolder!r:.80}")
     env = os.environ.get("TRANSYNC_DATA")
     if env:                     # empty counts as unset (as XDG_CACHE_HOME does), said below
-        home = as_path(env, "TRANSYNC_DATA")
+        home = check_path(env, "TRANSYNC_DATA")
         if not home.exists():
             raise FileNotFoundError(f"TRANSYNC_DATA={env!r} does not exist; set it to the folder "
                                     "holding the real data sets, or unset it")

@@ -30,8 +30,9 @@ from typing import Any
 
 import numpy as np
 
+from .._validation import check_path
 from ..geometry import normalize_determinant
-from ._home import as_path, data_home
+from ._home import data_home
 from ._matfile import MatFieldError, MatFileError, read_mat
 from ._text import is_number, text_lines
 
@@ -206,7 +207,7 @@ def _find_image(folder: Path, stem: str) -> Path:
 
 
 def _check_folder(folder) -> Path:
-    folder = as_path(folder, "folder")
+    folder = check_path(folder, "folder")
     if not folder.is_dir():
         raise FileNotFoundError(f"`folder` must be an existing directory, got {str(folder)!r}")
     return folder

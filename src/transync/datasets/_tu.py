@@ -37,11 +37,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validation import check_bool
+from .._validation import check_bool, check_path, frozen_copy
 from ..graphs import Graph
 from ._home import data_home as _data_home
-from ._home import as_path, no_folder
-from ._text import NUMBER_BYTES
+from ._home import no_folder
+from ._text import NUMBER_BYTES, unix_newlines
 
 __all__ = ["TUDataset", "list_tu", "load_tu"]
 
@@ -56,11 +56,6 @@ def _layout(ds: str) -> str:
             f"{ds}_graph_labels.txt, optionally {ds}_node_labels.txt, {ds}_edge_labels.txt and "
             f"{ds}_node_attributes.txt")
 
-
-def _frozen(a: np.ndarray) -> np.ndarray:
-    a = np.array(a)
-    a.setflags(write=False)
-    return a
 
 
 # --------------------------------------------------------------------------- the data set
@@ -147,12 +142,12 @@ class TUDataset:
             raise ValueError(f"`self_loops` must be an int array of shape ({len(graphs)},), got "
                              f"{loops.dtype} array of shape {loops.shape}")
         object.__setattr__(self, "graphs", graphs)
-        object.__setattr__(self, "y", _frozen(y.astype(np.int64)))
-        object.__setattr__(self, "path", as_path(self.path, "path"))
-        object.__setattr__(self, "self_loops", _frozen(loops.astype(np.int64)))
+        object.__setattr__(self, "y", frozen_copy(y.astype(np.int64)))
+        object.__setattr__(self, "path", check_path(self.path, "path"))
+        object.__setattr__(self, "self_loops", frozen_copy(loops.astype(np.int64)))
         object.__setattr__(self, "ignored_files", tuple(self.ignored_files))
         object.__setattr__(self, "_sizes",
-                           _frozen(np.array([g.n_nodes for g in graphs], dtype=np.int64)))
+                           frozen_copy(np.array([g.n_nodes for g in graphs], dtype=np.int64)))
 
     def __len__(self) -> int:
         return len(self.graphs)
@@ -237,7 +232,7 @@ class TUDataset:
 
 
 def _line_text(data: bytes, lineno: int) -> str:
-    line = data.split(b"\n")[lineno - 1]
+    line = unix_newlines(data).split(b"\n")[lineno - 1]
     return line.decode("utf-8", "replace").strip()
 
 
@@ -260,6 +255,7 @@ def _read_table(path: Path, *, columns: int | None, kind: str, what: str):
     data = path.read_bytes()
     if data.startswith(codecs.BOM_UTF8):
         data = b" " * len(codecs.BOM_UTF8) + data[len(codecs.BOM_UTF8):]
+    data = unix_newlines(data)              # lines end at \n, \r\n or \r, as in text_lines
     b = np.frombuffer(data, dtype=np.uint8)
     newline = b == 10
     comma = b == 44
@@ -371,7 +367,7 @@ def _parse_floats(path, data, b, tok, token_line, what) -> np.ndarray:
 def _tu_root(data_home, *, required: bool) -> Path | None:
     if data_home is None:
         return _data_home(required=required, subfolder="tu")
-    home = as_path(data_home, "data_home")
+    home = check_path(data_home, "data_home")
     if not home.is_dir():
         raise FileNotFoundError(f"{home}: {no_folder(home)} (`data_home` must be the folder "
                                 "holding `tu/`)")
@@ -440,7 +436,7 @@ def _resolve(path_or_name, data_home) -> Path:
     if not spec:
         raise ValueError("`path_or_name` must be a folder path or a data set name, got ''")
     if is_path:
-        folder = as_path(spec, "path_or_name")
+        folder = check_path(spec, "path_or_name")
         if not folder.is_dir():
             raise FileNotFoundError(f"{folder}: {no_folder(folder)} ({_layout('DS')})")
         return folder

@@ -18,8 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .._validation import check_path
 from ._cmu import LandmarkSequence, _png_size
-from ._home import as_path, no_folder
+from ._home import no_folder
 from ._matfile import MatFieldError, MatFileError, read_mat
 
 __all__ = ["load_willow_class"]
@@ -95,7 +96,7 @@ def load_willow_class(folder) -> LandmarkSequence:
     ((2, 4, 2), [50.0, 25.0], None)
     >>> tmp.cleanup()
     """
-    folder = as_path(folder, "folder")
+    folder = check_path(folder, "folder")
     if not folder.is_dir():
         raise FileNotFoundError(f"{folder}: {no_folder(folder)} (expected a Willow-ObjectClass "
                                 "class folder of `<name>.png` + `<name>.mat` files)")

@@ -57,7 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from .._progress import progress_bar
-from .._validation import check_int, short_repr
+from .._validation import check_bool, check_int, check_path, short_repr
 from ..exceptions import ExperimentStoreError
 
 __all__ = ["Experiment", "ExperimentReport", "ExperimentStore", "Sweep", "run_experiment",
@@ -321,10 +321,7 @@ class ExperimentStore:
     """
 
     def __init__(self, path) -> None:
-        if not isinstance(path, (str, os.PathLike)) or not str(path):
-            raise TypeError(f"`path` must be a file path (str or path-like), got "
-                            f"{type(path).__name__} {path!r:.60}")
-        self.path = Path(path)
+        self.path = check_path(path, "path")
         _prepare_folder(self.path.parent)
         self._con = None
         with self._guard(opening=True):
@@ -715,18 +712,13 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
     """
     if not isinstance(experiment, Experiment):
         raise TypeError(f"`experiment` must be an Experiment, got {type(experiment).__name__}")
-    if not isinstance(out_dir, (str, os.PathLike)) or not str(out_dir):
-        raise TypeError(f"`out_dir` must be a folder path (str or path-like), got "
-                        f"{type(out_dir).__name__} {out_dir!r:.60}")
+    out = check_path(out_dir, "out_dir")
     n_trials = check_int(trials if trials is not None else experiment.trials, "trials", minimum=1,
                          maximum=MAX_TRIALS)
     workers = check_int(workers, "workers", minimum=1, maximum=MAX_WORKERS)
     seed = check_int(seed, "seed")
-    for name, flag in (("progress", progress), ("plot", plot)):
-        if not isinstance(flag, (bool, np.bool_)):
-            raise TypeError(f"`{name}` must be True or False, got {type(flag).__name__} "
-                            f"{flag!r:.40}")
-    out = Path(out_dir)
+    progress = check_bool(progress, "progress")
+    plot = check_bool(plot, "plot")
     created = not out.exists()
     t_start = time.perf_counter()
     try:

@@ -7,7 +7,8 @@ import numbers
 import cv2
 import numpy as np
 
-from .._validation import MAX_ITER, check_array, check_homographies, check_int, check_positive
+from .._validation import (MAX_ITER, check_array, check_bool, check_homographies, check_int,
+                           check_positive)
 from ..geometry import normalize_determinant, translation
 from ._sparse import check_image, check_masks
 
@@ -281,8 +282,7 @@ def mean_warped_image(images, homographies, *, size, masks=None, offset=(0, 0),
     if masks is not None:
         masks = check_masks(masks, imgs, "masks")
     (w, h), offset = _canvas(size, offset)
-    if not isinstance(normalize, (bool, np.bool_)):
-        raise TypeError(f"`normalize` must be True or False, got {normalize!r}")
+    normalize = check_bool(normalize, "normalize")
     reference = check_int(reference, "reference", minimum=0, maximum=N - 1)
     T = translation(*offset)
     acc = np.zeros((h, w), np.float64)

@@ -10,7 +10,8 @@ from ..exceptions import UnlinkedViewsWarning
 from ..geometry import normalize_determinant
 from ._dense import mean_warped_image
 from ..metrics import brenner_focus, corner_error, pairwise_corner_error, segmentation_scores
-from .._validation import check_array, check_homographies, check_int, invertible_homographies
+from .._validation import (check_array, check_bool, check_homographies, check_int,
+                           invertible_homographies)
 from ._sparse import (check_image, check_masks, estimate_pairwise_homographies, load_images,
                       to_gray)
 
@@ -223,8 +224,7 @@ def evaluate_alignment(images, H_est, H_true, *, masks_true, reference=0, masks_
     masks_true = check_masks(masks_true, gray, "masks_true")
     masks_est = None if masks_est is None else check_masks(masks_est, gray, "masks_est")
     reference = check_int(reference, "reference", minimum=0, maximum=n - 1)
-    if not isinstance(pairwise, (bool, np.bool_)):
-        raise TypeError(f"`pairwise` must be True or False, got {pairwise!r}")
+    pairwise = check_bool(pairwise, "pairwise")
     sizes = np.array([(g.shape[1], g.shape[0]) for g in gray], float)
     ok = np.all(np.isfinite(H_est), axis=(1, 2))
     ok &= invertible_homographies(np.where(ok[:, None, None], H_est, np.eye(3)))  # singular: failed

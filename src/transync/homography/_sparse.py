@@ -672,8 +672,7 @@ def estimate_rectified_pairwise(images, H_to_ref, pairs, *, reference=0, margin=
         raise ValueError(f"`H_to_ref` must have shape ({n}, 3, 3), got {H_to_ref.shape}")
     known = np.isfinite(H_to_ref).all(axis=(1, 2))
     check_homographies(H_to_ref[known], "H_to_ref", ndim=3)       # the estimates: invertible
-    if not isinstance(guided, (bool, np.bool_)):
-        raise TypeError(f"`guided` must be True or False, got {guided!r}")
+    guided = check_bool(guided, "guided")
     margin = check_positive(margin, "margin", allow_zero=True)
     if margin > 2:
         raise ValueError(f"`margin` must lie in [0, 2], got {margin!r}")

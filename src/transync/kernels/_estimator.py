@@ -11,7 +11,8 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
 from .._progress import progress_bar
-from .._validation import as_generator, check_choice, check_int, check_int_array, check_positive
+from .._validation import (as_generator, check_bool, check_choice, check_int, check_int_array,
+                           check_positive)
 from ..graphs import Graph
 from ._checks import check_label_array, check_sequence, check_width
 from ._hks import hks_features
@@ -363,9 +364,7 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
         if check_positive(self.pair_fraction, "pair_fraction") > 1:
             raise ValueError(f"`pair_fraction` must lie in (0, 1], got {self.pair_fraction!r}")
         for name in ("normalize", "progress", "sync_dummies", "drop_label_mismatches"):
-            if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise TypeError(f"`{name}` must be a bool, got "
-                                f"{type(getattr(self, name)).__name__}")
+            check_bool(getattr(self, name), name)
         if not isinstance(self.random_state, np.random.RandomState):   # (draws from it)
             as_generator(self.random_state, "random_state")             # before any work
 

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._blas import blas_limit
-from .._validation import (as_generator, check_array, check_choice, check_choices, check_int,
-                           check_positive)
+from .._validation import (as_generator, check_array, check_bool, check_choice, check_choices,
+                           check_int, check_positive)
 from ..exceptions import ConvergenceWarning
 from ..permutations import MultiMatching, cycle_inconsistency_arrays
 from ..synchronization import (
@@ -282,10 +282,8 @@ default="auto"
         raise ValueError("`executor` spreads independent pairwise work (mode='offline', CAO); "
                          "the online solvers run all pairs in lock-step in this process: pass "
                          f"executor=None or mode='offline', got executor={executor!r}")
-    if not isinstance(refine, (bool, np.bool_)):
-        raise TypeError(f"`refine` must be True or False, got {refine!r}")
-    if not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"`progress` must be True or False, got {progress!r}")
+    refine = check_bool(refine, "refine")
+    progress = check_bool(progress, "progress")
     options = _check_options(options, "rrwm" if solver in CAO_VARIANTS else solver)
     verify = _check_verify(verify, verify_threshold, graphs, layout)
     if verify is not None and layout.kind == "full" and n_universe is None:

@@ -270,7 +270,17 @@ def round_to_universe(V: np.ndarray, sizes: np.ndarray, d: int, *, refine: int =
     M, k = V.shape
     norms = np.linalg.norm(V, axis=1, keepdims=True)
     Vn = V / np.maximum(norms, 1e-300)
-    _, _, piv = sla.qr(Vn.T, mode="economic", pivoting=True)
+    # Every normalized row has norm 1, so the QR's first pivot was a tie that rounding decided
+    # (weights times 1000, equal up to rounding, turned accuracy 0.78 into 0.49). The first
+    # prototype is fixed instead: the row of largest norm before normalization, the first of
+    # those within 1e-9 of it. Doubling that row makes the QR take it first and changes nothing
+    # else (the first Householder direction is the row's own direction).
+    first = int(np.flatnonzero(norms[:, 0] >= norms.max(initial=0.0) * (1 - 1e-9))[0]) \
+        if M else 0
+    Vp = Vn.copy()
+    if M:
+        Vp[first] *= 2.0
+    _, _, piv = sla.qr(Vp.T, mode="economic", pivoting=True)
     C = Vn[piv[:k]]                         # (k, k): one prototype row per slot
     R = polar(C.T)                        # Vn @ R puts prototype a on axis a
     S = Vn @ R

@@ -1,5 +1,6 @@
 import argparse
 import json
+import re
 import subprocess
 import sys
 import types
@@ -84,6 +85,7 @@ def test_demo_writes_summary(tmp_path, toy_registry):
     assert main(["demo", "--out", str(out), "--experiments", "toy", "--no-progress"]) == 0
     text = (out / "summary.md").read_text()
     assert "# transync demo" in text and "| spectral | 1.000 |" in text
+    assert "too few to rank the methods" in text      # a one-trial table is no ranking
     assert (out / "toy" / "toy.png").exists()
 
 
@@ -174,7 +176,6 @@ def bad_inputs(tmp_path):
       "dummies"], r"`--verify` checks matches between the graphs' points"),
 ])
 def test_errors_are_one_line_and_exit_2(bad_inputs, capsys, argv, expected):
-    import re
 
     argv = [a.format(d=bad_inputs) for a in argv]
     assert main(argv) == 2
@@ -197,6 +198,37 @@ def test_bad_options_are_usage_errors(capsys, argv):
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and err.startswith("transync: error: argument --"), err
     assert "(see `transync " in err
+
+
+@pytest.mark.parametrize("argv", [["collection", "x", "y"], ["kernel", "MUTAG"],
+                                  ["experiment", "pairwise"], ["match", "x", "y"]])
+def test_unknown_options_point_to_the_subcommand_help(capsys, argv):
+    """argparse reports a subcommand's unknown option from the top-level parser: the message
+    said "see `transync --help`", which does not list the subcommand's options."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv + ["--bogus"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err == (f"transync: error: unrecognized arguments: --bogus "
+                   f"(see `transync {argv[0]} --help`)\n")
+
+
+def test_every_subcommand_hides_progress_with_no_progress():
+    """`collection` took only --quiet; every other subcommand with bars takes --no-progress."""
+    parser = build_parser()
+    for argv in (["collection", "a.txt", "b.txt"], ["kernel", "MUTAG"],
+                 ["experiment", "pairwise"], ["homography", "a.png", "b.png"]):
+        args = parser.parse_args(argv + ["--no-progress"])
+        assert getattr(args, "quiet", None) or getattr(args, "no_progress", None), argv
+    assert parser.parse_args(["collection", "a.txt", "b.txt", "--quiet"]).quiet
+
+
+def test_help_says_each_default_once(capsys):
+    for command in ("kernel", "collection", "experiment", "homography", "match", "sync"):
+        with pytest.raises(SystemExit):
+            main([command, "--help"])
+        out = " ".join(capsys.readouterr().out.split())
+        assert not re.search(r"default: [^()]*\) \(default", out), (command, out)
 
 
 def test_debug_shows_the_traceback_and_unexpected_errors_stay_one_line(bad_inputs, capsys,
@@ -328,15 +360,26 @@ def test_cli_homography(tmp_path, scene, capsys):
     assert (out / "mean_warped.png").exists() and (out / "report.md").exists()
     report = (out / "report.md").read_text()
     assert "dense refinement: on; view updates over 1 round(s): accepted" in report
+    if "converged: False" in report:      # says why and what to change
+        assert re.search(r"converged: False \(the corners still moved [\d.e+-]+ px in round 1, "
+                         r"above the tolerance of 0.02 px; --max-iter allows more rounds\)",
+                         report), report
     assert "views linked to the reference: all" in report and "black where no" in report
     assert "transync homography: sparse pairs" in capsys.readouterr().err    # progress shown
     assert main(["homography", *paths[:2], "--out", str(tmp_path / "quiet"), "--features", "800",
                  "--max-iter", "1", "--no-progress"]) == 0
     assert capsys.readouterr().err == ""
+    # a second run on fewer images into the same folder left the first run's masks 2 and 3
+    (out / "masks" / "notes.txt").write_text("mine")
+    assert main(["homography", *paths[:2], "--out", str(out), "--features", "800",
+                 "--max-iter", "1", "--no-progress"]) == 0
+    assert sorted(p.name for p in (out / "masks").iterdir()) == [
+        "mask_000.png", "mask_001.png", "notes.txt"]
+    assert "- removed 2 mask file(s) of an earlier run" in capsys.readouterr().out
+    assert "mask_002.png, mask_003.png" in (out / "report.md").read_text()
 
 
 def test_cli_homography_failures_leave_no_output_folder(tmp_path, capsys):
-    import re
 
     import cv2
 
@@ -566,3 +609,52 @@ def test_sync_json_takes_the_sizes_the_library_asks_for(tmp_path, capsys):
     f.write_text('{"pairs": [[0, 2, [1, 0]]], "sizes": [2, "x"]}')
     assert main(["sync", str(f)]) == 2
     assert '"sizes" must be a list of node counts' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("finish_first", [False, True])
+def test_interrupted_experiment_says_what_is_on_disk(tmp_path, capsys, monkeypatch,
+                                                     finish_first):
+    """Ctrl-C before any trial finished said "finished trials are saved in .../results.sqlite",
+    a file that did not exist (the kernels experiment's Gram cache was there, not the store)."""
+    import transync.cli._experiment as cli_exp
+    from transync.experiments import Experiment, Sweep
+
+    calls = []
+
+    def trial(config, rng):
+        calls.append(1)
+        if len(calls) > int(finish_first):
+            raise KeyboardInterrupt
+        return {"v": 1.0}
+
+    exp = Experiment(name="toy", trial=trial, trials=3, sweeps=[
+        Sweep(name="s", variable="x", values=[0], methods=["m"], metrics=("v",))])
+    monkeypatch.setattr(cli_exp, "_build", lambda *a, **k: exp)
+    out = tmp_path / "run"
+    if not finish_first:                      # a cache from an earlier stage of the run
+        (out / "cache").mkdir(parents=True)
+        (out / "cache" / "gram.npz").write_bytes(b"x")
+    assert main(["experiment", "pairwise", "--out", str(out), "--no-progress"]) == 130
+    err = capsys.readouterr().err
+    if finish_first:
+        assert err == (f"transync: interrupted; finished trials are saved in "
+                       f"{out / 'results.sqlite'}; run the same command again to resume\n")
+        assert (out / "results.sqlite").is_file()
+    else:
+        assert err == (f"transync: interrupted; no trial had finished, so none is stored; the "
+                       f"computations cached in {out / 'cache'} are reused when you run the "
+                       f"same command again\n")
+
+
+def test_homography_report_says_why_rounds_did_not_converge():
+    """The report said only "converged: False"; it now names the last change, the tolerance
+    and the option that allows more rounds."""
+    from transync.cli._homography import _unconverged_note
+    from transync.homography import DenseOptions
+
+    hist = [{"iteration": 1, "max_corner_change": 0.5}, {"iteration": 2, "max_corner_change": 0.25}]
+    res = types.SimpleNamespace(converged=False, info={"history": hist,
+                                                       "options": DenseOptions(tol=0.1)})
+    assert _unconverged_note(res) == (" (the corners still moved 0.25 px in round 2, above the "
+                                      "tolerance of 0.1 px; --max-iter allows more rounds)")
+    assert _unconverged_note(types.SimpleNamespace(converged=True, info=res.info)) == ""

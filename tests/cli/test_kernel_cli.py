@@ -61,6 +61,8 @@ def test_kernel_command_writes_gram_and_report(toy, tmp_path, capsys):
     assert "kept 24/24 graphs" in rep["pruning"] and rep["seconds"]["gram"] > 0
     md = (out / "report.md").read_text()
     assert "# transync kernel: TOY" in md and "PSD" in md and "transductive" in md
+    # one repetition has no spread between repetitions: no "± 0.00" as if it were measured
+    assert "±" not in md and "one 3-fold stratified CV: no spread between repetitions" in md
 
 
 def test_dataset_by_name_in_the_data_home(toy, tmp_path, monkeypatch, capsys):

@@ -65,6 +65,15 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message):
         self.exit(2, f"transync: error: {message} (see `{self.prog} --help`)\n")
 
+    def parse_args(self, args=None, namespace=None):
+        # argparse reports a subcommand's unknown options from the top-level parser, whose
+        # message then pointed at `transync --help`; the subcommand's own help is the one to read
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            sub = getattr(self, "subcommands", {}).get(getattr(ns, "command", None), self)
+            sub.error(f"unrecognized arguments: {' '.join(extras)}")
+        return ns
+
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``argparse`` parser of every subcommand (each sets ``func``).
@@ -95,6 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
     _homography.add_parser(sub)
     _kernel.add_parser(sub)
     _datasets.add_parser(sub)
+    parser.subcommands = dict(sub.choices)
     return parser
 
 
@@ -143,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
         if debug:
             traceback.print_exc()
         hint = getattr(args, "interrupt_hint", None)
+        hint = hint() if callable(hint) else hint      # what is on disk now
         print("transync: interrupted" + (f"; {hint}" if hint else ""), file=sys.stderr)
         return 130
     except Exception as exc:  # noqa: BLE001 - the one place that turns errors into one line

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import importlib
 import inspect
 import time
+from pathlib import Path
 
 from ._common import CLIError, check_output_folder, positive_int, seed_int
 
@@ -59,8 +61,7 @@ def _cmd_experiment(args) -> int:
                               else f"results/{args.name}{'-quick' if args.quick else ''}")
     sets = [s for s in args.sets.split(",") if s.strip()] if args.sets else None
     exp = _build(args.name, quick=args.quick, data=args.data, sets=sets, out=out)
-    args.interrupt_hint = (f"finished trials are saved in {out / 'results.sqlite'}; run the "
-                           "same command again to resume")
+    args.interrupt_hint = functools.partial(_resume_hint, out)
     report = run_experiment(exp, out, trials=args.trials, workers=args.workers, seed=args.seed,
                             progress=not args.no_progress)
     print(f"{report.n_new} new trials ({report.n_failed} failed) in {report.seconds:.1f} s; "
@@ -74,6 +75,34 @@ def _cmd_experiment(args) -> int:
     return 1 if report.n_failed else 0
 
 
+def _stored_trials(store: Path) -> int:
+    """Rows in the experiment store ``store`` (0 when absent or unreadable)."""
+    import sqlite3
+
+    if not store.is_file():
+        return 0
+    try:
+        con = sqlite3.connect(f"file:{store}?mode=ro", uri=True, timeout=1)
+        try:
+            return int(con.execute("SELECT COUNT(*) FROM trials").fetchone()[0])
+        finally:
+            con.close()
+    except sqlite3.Error:
+        return 0
+
+
+def _resume_hint(out: Path) -> str:
+    """What an interrupted experiment left in ``out`` (said after Ctrl-C)."""
+    store = out / "results.sqlite"
+    cache = out / "cache"
+    if _stored_trials(store):
+        return f"finished trials are saved in {store}; run the same command again to resume"
+    said = "no trial had finished, so none is stored"
+    if cache.is_dir() and any(cache.iterdir()):
+        said += f"; the computations cached in {cache} are reused"
+    return said + " when you run the same command again"
+
+
 def _cmd_demo(args) -> int:
     from ..experiments import run_experiment
 
@@ -84,7 +113,12 @@ def _cmd_demo(args) -> int:
     t0 = time.perf_counter()
     lines = ["# transync demo", "",
              "Quick versions of the experiments on generated data (offline). Each folder holds "
-             "`results.sqlite`, `summary.md`, `summary.csv` and a plot.", ""]
+             "`results.sqlite`, `summary.md`, `summary.csv` and a plot.", "",
+             "They show that every stage runs and what its outputs look like, on one or two "
+             "trials of small problems: too few to rank the methods (a difference between two "
+             "methods here can go either way). The full runs are `transync experiment NAME` "
+             "(many trials per point); their stored results are in the documentation "
+             "(docs/experiments).", ""]
     failed = 0
     created = not out.exists()
     for name in dict.fromkeys(args.experiments):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import re
 import time
 from pathlib import Path
 
@@ -107,7 +108,7 @@ def _cmd_homography(args) -> int:
     }
     with new_output_folder(args.out) as out:
         lines = _write_outputs(out, res, payload, args, names, seconds)
-    print("\n".join(lines[:7]))
+    print("\n".join(lines[:7] + [line for line in lines if line.startswith("- removed")]))
     print(f"written to {out}")
     return 0
 
@@ -119,6 +120,9 @@ def _write_outputs(out: Path, res, payload: dict, args, names, seconds) -> list[
     (out / "masks").mkdir(exist_ok=True)
     for k, m in enumerate(res.masks):
         _imwrite(out / "masks" / f"mask_{k:03d}.png", m.astype(np.uint8) * 255)
+    stale = _stale_masks(out / "masks", len(res.masks))
+    for path in stale:                  # an earlier run's masks of images this run lacks
+        path.unlink()
     mean = np.nan_to_num(res.mean_image)
     _imwrite(out / "mean_warped.png", np.clip(np.round(mean), 0, 255).astype(np.uint8))
     sync = res.info["sync"]
@@ -130,12 +134,12 @@ def _write_outputs(out: Path, res, payload: dict, args, names, seconds) -> list[
         f"{int((sync.mask & ~sync.inliers).sum() // 2)}",
         _dense_line(res, args),
         f"- segmentation: {'off' if args.no_segment else 'on'}, rounds: {res.n_iter}, "
-        f"converged: {res.converged}",
+        f"converged: {res.converged}{_unconverged_note(res)}",
         _views_line(res, names),
         f"- plane fraction per view: "
         f"{', '.join(f'{m.mean():.2f}' for m in res.masks)}",
-        f"- time: {seconds:.1f} s "
-        f"({', '.join(f'{k} {v:.1f}' for k, v in res.info['seconds'].items())})",
+        f"- time: {seconds:.1f} s with reading the images (pipeline stages: "
+        f"{', '.join(f'{k} {v:.1f}' for k, v in res.info['seconds'].items())})",
         "", "| round | max corner change (px) | plane fraction |", "|---|---|---|",
     ]
     for h in res.info["history"]:
@@ -152,8 +156,33 @@ def _write_outputs(out: Path, res, payload: dict, args, names, seconds) -> list[
               "the reference image's own canvas (parts of views outside it are cut off). "
               "Sharp where the homographies agree, blurred where they do not; black where no "
               "warped image covers the canvas (outside every view's footprint)."]
+    if stale:
+        lines.append(f"- removed {len(stale)} mask file(s) of an earlier run into this folder "
+                     f"(images beyond this run's {len(res.masks)}): "
+                     f"{', '.join(p.name for p in stale[:5])}{' ...' if len(stale) > 5 else ''}")
     (out / "report.md").write_text("\n".join(lines) + "\n")
     return lines
+
+
+def _unconverged_note(res) -> str:
+    """Why the rounds stopped unconverged, and what to change (empty when they converged)."""
+    hist = res.info.get("history") or []
+    if res.converged or not hist:
+        return ""
+    return (f" (the corners still moved {hist[-1]['max_corner_change']:.3g} px in round "
+            f"{hist[-1]['iteration']}, above the tolerance of "
+            f"{res.info['options'].tol:g} px; --max-iter allows more rounds)")
+
+
+def _stale_masks(folder: Path, n_images: int) -> list[Path]:
+    """The ``mask_NNN.png`` files in ``folder`` (this command's own names) of image numbers
+    ``>= n_images``: left by an earlier run on more images into the same ``--out``."""
+    stale = []
+    for path in folder.iterdir():
+        m = re.fullmatch(r"mask_(\d{3,})\.png", path.name)
+        if m and int(m.group(1)) >= n_images and path.is_file():
+            stale.append(path)
+    return sorted(stale)
 
 
 def _dense_line(res, args) -> str:

@@ -115,8 +115,11 @@ def _markdown(r: dict) -> list[str]:
            "pairs, the others of random 70 % subsamples)"),
         f"- graphs: {r['kept']} of {r['graphs']} kept, {r['classes']} classes, universe "
         f"n = {r['universe']}; pruning: {r['pruning']}",
-        f"- accuracy: {100 * acc['mean']:.2f} ± {100 * acc['std']:.2f} % ({acc['repeats']} x "
-        f"{acc['folds']}-fold stratified CV; ± = std of the repetition means)",
+        (f"- accuracy: {100 * acc['mean']:.2f} ± {100 * acc['std']:.2f} % ({acc['repeats']} x "
+         f"{acc['folds']}-fold stratified CV; ± = std of the repetition means)"
+         if acc["repeats"] > 1 else
+         f"- accuracy: {100 * acc['mean']:.2f} % (one {acc['folds']}-fold stratified CV: no "
+         f"spread between repetitions; --repeats 10 gives one)"),
         f"- C: chosen by a 3-fold inner CV on the training folds from "
         f"{', '.join(f'{c:g}' for c in r['C']['grid'])}; most chosen {r['C']['most_chosen']:g}",
         f"- PSD: λ_min / λ_max = {psd['min_over_max_eigenvalue']:.3g} -> "
@@ -154,7 +157,7 @@ def add_parser(sub) -> None:
     p.add_argument("--alignments", type=positive_int, default=1, metavar="R",
                    help="ensemble: average the kernels of R synchronizations of the same "
                         "matches, the first of all pairs, the others of random 70%% subsamples "
-                        "(R times the synchronization's cost; default: 1)")
+                        "(R times the synchronization's cost)")
     p.add_argument("--folds", type=_at_least_2, default=10,
                    help="outer stratified folds (default: 10)")
     p.add_argument("--repeats", type=positive_int, default=10,

@@ -348,7 +348,8 @@ def add_parsers(sub) -> None:
                    help="verification gate, as a fraction of the median nearest-neighbour "
                         "distance of the points (default 0.5)")
     p.add_argument("--seed", type=seed_int, default=0, help="seed of the randomized steps")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--no-progress", "--quiet", dest="quiet", action="store_true",
+                   help="hide the progress bars")
     p.add_argument("--out", help="JSON output file (default: print)")
     p.set_defaults(func=_cmd_collection)
 

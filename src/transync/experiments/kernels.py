@@ -321,7 +321,9 @@ def prepare(path, key: str | None = None) -> PreparedSet:
 #: ``transync.kernels`` changes a Gram matrix, so that stale cached entries are not reused.
 #: 2: refined synchronization, cross-label matches dropped, exact spectral placement.
 #: 3: pairs cut into chunks by work, largest first (near-ties of RRWM / SM may fall otherwise).
-CACHE_VERSION = 3
+#: 4: node affinities of features equal up to rounding exactly 1 (2026-11-27), the spectral
+#: rounding's first prototype fixed by the rows' norms (2026-11-28).
+CACHE_VERSION = 4
 
 
 def _hash(obj) -> str:

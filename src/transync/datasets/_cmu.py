@@ -69,7 +69,6 @@ def _png_size(path: Path) -> tuple[int, int]:
     return int(width), int(height)
 
 
-
 @dataclass(frozen=True)
 class LandmarkSequence:
     """Frames of one object with the same landmarks in every frame.

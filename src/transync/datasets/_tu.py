@@ -57,7 +57,6 @@ def _layout(ds: str) -> str:
             f"{ds}_node_attributes.txt")
 
 
-
 # --------------------------------------------------------------------------- the data set
 
 

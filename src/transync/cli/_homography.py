@@ -44,7 +44,13 @@ def _stage_log(enabled: bool):
     import logging
     import sys
 
-    handler = logging.StreamHandler(sys.stderr)
+    from tqdm.auto import tqdm
+
+    class _AboveTheBar(logging.Handler):    # a line of its own, not glued to the round bar
+        def emit(self, record):
+            tqdm.write(self.format(record), file=sys.stderr)
+
+    handler = _AboveTheBar()
     handler.setFormatter(logging.Formatter("transync homography: %(message)s"))
     log = logging.getLogger("transync.homography")
     level = log.level

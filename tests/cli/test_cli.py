@@ -409,12 +409,20 @@ def test_datasets_command(monkeypatch, tmp_path, capsys):
     assert main(["datasets"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("transync: error: TRANSYNC_DATA=") and "does not exist" in err
-    (tmp_path / "graf").mkdir()
-    (tmp_path / "graf" / "img1.ppm").write_bytes(b"P6")
+    (tmp_path / "oxford-graf").mkdir()
+    (tmp_path / "oxford-graf" / "img1.ppm").write_bytes(b"P6")
+    (tmp_path / "tu" / "MUTAG").mkdir(parents=True)
+    (tmp_path / "results").mkdir()
     monkeypatch.setenv("TRANSYNC_DATA", str(tmp_path))
     assert main(["datasets"]) == 0
-    out = capsys.readouterr().out
-    assert f"data home: {tmp_path}" in out and "graf" in out and "1 files" in out
+    out = capsys.readouterr().out.splitlines()
+    # the folders transync reads by name, present or not, and the others apart
+    assert out[0] == f"data home: {tmp_path}"
+    assert out[1].split()[:2] == ["cmu-house", "missing"] and "give load_cmu_sequence" in out[1]
+    assert out[2].split()[:3] == ["tu", "0", "files"] and out[2].endswith("sets: MUTAG)")
+    assert out[3].split()[:3] == ["oxford-graf", "1", "files"] and "load_graf" in out[3]
+    assert out[4].split()[:2] == ["adelaidermf", "missing"]
+    assert out[5] == "  other folders, not read by name: results"
 
 
 def test_sync_command_takes_matrices_like_the_library(tmp_path):

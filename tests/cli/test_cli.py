@@ -176,7 +176,6 @@ def bad_inputs(tmp_path):
       "dummies"], r"`--verify` checks matches between the graphs' points"),
 ])
 def test_errors_are_one_line_and_exit_2(bad_inputs, capsys, argv, expected):
-
     argv = [a.format(d=bad_inputs) for a in argv]
     assert main(argv) == 2
     cap = capsys.readouterr()
@@ -211,6 +210,13 @@ def test_unknown_options_point_to_the_subcommand_help(capsys, argv):
     err = capsys.readouterr().err
     assert err == (f"transync: error: unrecognized arguments: --bogus "
                    f"(see `transync {argv[0]} --help`)\n")
+
+
+def test_unknown_top_level_option_points_to_the_top_level_help(capsys):
+    with pytest.raises(SystemExit):
+        main(["--bogus", "sync", "x.json"])
+    assert capsys.readouterr().err == ("transync: error: unrecognized arguments: --bogus "
+                                       "(see `transync --help`)\n")
 
 
 def test_every_subcommand_hides_progress_with_no_progress():
@@ -379,8 +385,17 @@ def test_cli_homography(tmp_path, scene, capsys):
     assert "mask_002.png, mask_003.png" in (out / "report.md").read_text()
 
 
-def test_cli_homography_failures_leave_no_output_folder(tmp_path, capsys):
+def test_stale_masks_are_only_names_the_command_writes(tmp_path):
+    from transync.cli._homography import _stale_masks
 
+    for name in ("mask_000.png", "mask_001.png", "mask_002.png", "mask_1000.png",
+                 "mask_0042.png", "mask_\u0660\u0660\u0667.png", "mask_003.PNG", "mine.png"):
+        (tmp_path / name).write_bytes(b"")
+    (tmp_path / "mask_005.png").mkdir()
+    assert [p.name for p in _stale_masks(tmp_path, 2)] == ["mask_002.png", "mask_1000.png"]
+
+
+def test_cli_homography_failures_leave_no_output_folder(tmp_path, capsys):
     import cv2
 
     paths = []
@@ -652,6 +667,28 @@ def test_interrupted_experiment_says_what_is_on_disk(tmp_path, capsys, monkeypat
         assert err == (f"transync: interrupted; no trial had finished, so none is stored; the "
                        f"computations cached in {out / 'cache'} are reused when you run the "
                        f"same command again\n")
+
+
+def test_resume_hint_reads_the_store_of_any_folder_name(tmp_path):
+    """The store was opened as 'file:{path}?mode=ro': a '?' or '#' in a folder name cut the
+    path there, and SQLite created an empty file at the cut (read-write) and found no trial;
+    without a cache the hint read "... none is stored when you run the same command again"."""
+    import sqlite3
+
+    from transync.cli._experiment import _resume_hint
+
+    for name in ("a?b", "c#d", "e%41f", "g h"):
+        out = tmp_path / name / "run"
+        out.mkdir(parents=True)
+        assert _resume_hint(out) == ("no trial had finished, so none is stored; run the same "
+                                     "command again to start over")
+        con = sqlite3.connect(out / "results.sqlite")
+        con.execute("CREATE TABLE trials (x)")
+        con.execute("INSERT INTO trials VALUES (1)")
+        con.commit()
+        con.close()
+        assert _resume_hint(out).startswith(f"finished trials are saved in {out}")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a?b", "c#d", "e%41f", "g h"]
 
 
 def test_homography_report_says_why_rounds_did_not_converge():

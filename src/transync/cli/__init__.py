@@ -68,9 +68,14 @@ class _Parser(argparse.ArgumentParser):
     def parse_args(self, args=None, namespace=None):
         # argparse reports a subcommand's unknown options from the top-level parser, whose
         # message then pointed at `transync --help`; the subcommand's own help is the one to read
-        ns, extras = self.parse_known_args(args, namespace)
+        argv = list(sys.argv[1:] if args is None else args)
+        ns, extras = self.parse_known_args(argv, namespace)
         if extras:
-            sub = getattr(self, "subcommands", {}).get(getattr(ns, "command", None), self)
+            command = getattr(ns, "command", None)
+            sub = getattr(self, "subcommands", {}).get(command, self)
+            # an unknown option before the subcommand's name is the top-level parser's
+            if command in argv and any(x in argv[:argv.index(command)] for x in extras):
+                sub = self
             sub.error(f"unrecognized arguments: {' '.join(extras)}")
         return ns
 

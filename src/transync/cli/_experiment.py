@@ -82,7 +82,8 @@ def _stored_trials(store: Path) -> int:
     if not store.is_file():
         return 0
     try:
-        con = sqlite3.connect(f"file:{store}?mode=ro", uri=True, timeout=1)
+        # as a URI ('?', '#' and '%' in folder names escaped), read-only: never creates a file
+        con = sqlite3.connect(f"{store.resolve().as_uri()}?mode=ro", uri=True, timeout=1)
         try:
             return int(con.execute("SELECT COUNT(*) FROM trials").fetchone()[0])
         finally:
@@ -97,10 +98,11 @@ def _resume_hint(out: Path) -> str:
     cache = out / "cache"
     if _stored_trials(store):
         return f"finished trials are saved in {store}; run the same command again to resume"
-    said = "no trial had finished, so none is stored"
+    said = "no trial had finished, so none is stored; "
     if cache.is_dir() and any(cache.iterdir()):
-        said += f"; the computations cached in {cache} are reused"
-    return said + " when you run the same command again"
+        return said + (f"the computations cached in {cache} are reused when you run the same "
+                       "command again")
+    return said + "run the same command again to start over"
 
 
 def _cmd_demo(args) -> int:

@@ -126,9 +126,7 @@ def _write_outputs(out: Path, res, payload: dict, args, names, seconds) -> list[
     (out / "masks").mkdir(exist_ok=True)
     for k, m in enumerate(res.masks):
         _imwrite(out / "masks" / f"mask_{k:03d}.png", m.astype(np.uint8) * 255)
-    stale = _stale_masks(out / "masks", len(res.masks))
-    for path in stale:                  # an earlier run's masks of images this run lacks
-        path.unlink()
+    stale = _stale_masks(out / "masks", len(res.masks))   # removed once all else is written
     mean = np.nan_to_num(res.mean_image)
     _imwrite(out / "mean_warped.png", np.clip(np.round(mean), 0, 255).astype(np.uint8))
     sync = res.info["sync"]
@@ -167,6 +165,8 @@ def _write_outputs(out: Path, res, payload: dict, args, names, seconds) -> list[
                      f"(images beyond this run's {len(res.masks)}): "
                      f"{', '.join(p.name for p in stale[:5])}{' ...' if len(stale) > 5 else ''}")
     (out / "report.md").write_text("\n".join(lines) + "\n")
+    for path in stale:                  # an earlier run's masks of images this run lacks
+        path.unlink()
     return lines
 
 
@@ -185,8 +185,9 @@ def _stale_masks(folder: Path, n_images: int) -> list[Path]:
     ``>= n_images``: left by an earlier run on more images into the same ``--out``."""
     stale = []
     for path in folder.iterdir():
-        m = re.fullmatch(r"mask_(\d{3,})\.png", path.name)
-        if m and int(m.group(1)) >= n_images and path.is_file():
+        m = re.fullmatch(r"mask_([0-9]{3,})\.png", path.name)
+        if (m and path.name == f"mask_{int(m.group(1)):03d}.png"     # a name this writes
+                and int(m.group(1)) >= n_images and path.is_file()):
             stale.append(path)
     return sorted(stale)
 

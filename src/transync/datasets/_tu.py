@@ -258,7 +258,7 @@ def _read_table(path: Path, *, columns: int | None, kind: str, what: str):
     b = np.frombuffer(data, dtype=np.uint8)
     newline = b == 10
     comma = b == 44
-    blank = (b == 32) | (b == 9) | (b == 13) | (b == 11) | (b == 12)
+    blank = (b == 32) | (b == 9) | (b == 11) | (b == 12)
     tok = ~(newline | comma | blank)
     index = np.int32 if b.size < 2**31 - 1 else np.int64      # halves the scan's memory
     line = np.cumsum(newline, dtype=index)    # 0-based line of each byte (a newline ends it)

@@ -322,7 +322,8 @@ def prepare(path, key: str | None = None) -> PreparedSet:
 #: 2: refined synchronization, cross-label matches dropped, exact spectral placement.
 #: 3: pairs cut into chunks by work, largest first (near-ties of RRWM / SM may fall otherwise).
 #: 4: node affinities of features equal up to rounding exactly 1 (2026-11-27), the spectral
-#: rounding's first prototype fixed by the rows' norms (2026-11-28).
+#: rounding's first prototype fixed by the rows' norms, and for a universe above the largest
+#: graph the eigengap's columns tried in the rounding (2026-11-28).
 CACHE_VERSION = 4
 
 

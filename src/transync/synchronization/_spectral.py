@@ -275,8 +275,8 @@ def round_to_universe(V: np.ndarray, sizes: np.ndarray, d: int, *, refine: int =
     # prototype is fixed instead: the row of largest norm before normalization, the first of
     # those within 1e-9 of it. Doubling that row makes the QR take it first and changes nothing
     # else (the first Householder direction is the row's own direction).
-    first = int(np.flatnonzero(norms[:, 0] >= norms.max(initial=0.0) * (1 - 1e-9))[0]) \
-        if M else 0
+    top = np.flatnonzero(norms[:, 0] >= norms.max(initial=0.0) * (1 - 1e-9))
+    first = int(top[0]) if top.size else 0          # (none: NaN rows, which the QR refuses)
     Vp = Vn.copy()
     if M:
         Vp[first] *= 2.0

@@ -679,7 +679,7 @@ def _image_sizes(image_size, n):
 
 
 def synchronize_homographies(H, *, mask=None, weights=None, reference=0, robust=False,
-                             image_size=None, max_iter=20, tol=1e-6,
+                             image_size=None, max_iter=50, tol=1e-6,
                              disconnected="raise") -> LinearMapSyncResult:
     """Synchronize pairwise plane homographies (SL(3) null-space method) in normalized coordinates.
 
@@ -694,8 +694,13 @@ def synchronize_homographies(H, *, mask=None, weights=None, reference=0, robust=
     Parameters
     ----------
     H : ndarray of shape (N, N, 3, 3) or dict {(i, j): ndarray (3, 3)}
-    mask, weights, reference, robust, max_iter, disconnected
+    mask, weights, reference, robust, disconnected
         As in :func:`synchronize_linear_maps`.
+    max_iter : int, default=50
+        IRLS iterations when ``robust`` (:func:`synchronize_linear_maps`'s default is 20). The
+        IRLS converges linearly, and on real matches the change can shrink by only ~0.7 per
+        iteration: with OpenCV 5's SIFT, one synchronization of a generated 4-view scene
+        needed 22 iterations to reach ``tol`` (it stopped unconverged at 20).
     image_size : (width, height) or ndarray of shape (N, 2), default=None
         Image sizes for the normalization. ``None`` means the coordinates are used as given
         (they should then already be about [-1, 1]).

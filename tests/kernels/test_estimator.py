@@ -417,8 +417,13 @@ def test_mutag_copies_are_placed_like_their_originals(mutag, sync, kernel):
     copies = [Graph(g.adjacency.copy(), node_labels=g.node_labels.copy()) for g in graphs[:10]]
     d = np.abs(tak.transform(copies) - tak.gram_[:10])
     # a copy is placed by voting over its matches to all fitted graphs, which may differ from
-    # the fitted matches: most rows agree exactly, a few entries do not (max measured 0.065)
-    assert d.mean() < 2e-3 and d.max() < 0.1
+    # the fitted matches (the node matcher's ties fall otherwise when a pair is solved the
+    # other way round): most rows agree exactly, a few entries do not. Measured here with the
+    # canonical node order: mean 0 to 7.2e-3, max 0.073 (linear, orthogonal); on 12 other
+    # subsets of MUTAG with the linear kernel 0 to 2 of the 10 rows differ, mean <= 2.2e-3
+    assert d.mean() < 1e-2 and d.max() < 0.1
+    if kernel == "linear":               # most copies get their row exactly (the relaxed
+        assert (d.max(1) < 1e-9).sum() >= 6  # embedding is placed approximately: all rows move)
 
 
 @pytest.mark.dataset("tu")
@@ -832,7 +837,9 @@ def test_bagged_subsamples_keep_a_spanning_forest_of_the_view_graph():
 def test_ensemble_relaxed_spectral_transform_uses_each_members_embedding():
     """Relaxed + spectral: each member places new graphs with its own degrees and eigenvalues;
     the ensemble's rows are the mean of the members' rows computed from their own state."""
+    from transync.graphs import canonical_node_order
     from transync.kernels import assignment_kernel, relaxed_features
+    from transync.kernels._estimator import _padded_orders, _renumber_alignment
 
     rng = np.random.default_rng(5)
     graphs = [_random_graph(int(rng.integers(4, 8)), 0.5, rng) for _ in range(10)]
@@ -840,12 +847,18 @@ def test_ensemble_relaxed_spectral_transform_uses_each_members_embedding():
     ens = TransitiveAssignmentKernel(matcher="node", sync="spectral", kernel="relaxed",
                                      n_alignments=3, pair_fraction=0.5,
                                      random_state=1).fit(graphs)
-    assign = tk.match_pairs(list(ens.features_) + hks_features(new, ens.times_),
-                            [g.adjacency for g in graphs + new],
+    # the estimator computes in each graph's canonical node order (node_order_)
+    fitted_graphs = [g.permute(o) for g, o in zip(graphs, ens.node_order_)]
+    new = [g.permute(canonical_node_order(g.adjacency)) for g in new]
+    assign = tk.match_pairs([f[o] for f, o in zip(ens.features_, ens.node_order_)]
+                            + hks_features(new, ens.times_),
+                            [g.adjacency for g in fitted_graphs + new],
                             np.array([[10 + t, j] for t in range(2) for j in range(10)]),
                             n=ens.n_universe_, matcher="node", sigma2=ens.sigma2_, rng=1)
+    order_n = _padded_orders(ens.node_order_, ens.n_universe_)
     rows = []
     for a, fitted in zip(ens.alignments_, ens.member_aligned_):
+        a = _renumber_alignment(a, order_n)
         _, Q = place_graphs(assign.reshape(2, 10, -1), a.labels, embedding=a.embedding,
                             method="spectral", degrees=a.info["degrees"],
                             eigenvalues=a.info["eigenvalues"],
@@ -870,6 +883,29 @@ def test_estimator_pickled_before_the_ensemble_loads_as_one_member(rng):
     old.__setstate__(state)
     np.testing.assert_allclose(old.transform(graphs[:2]), want)
     assert old.get_params()["n_alignments"] == 1
+
+
+def test_estimator_pickled_before_the_canonical_order_keeps_the_given_order(rng, monkeypatch):
+    """A pickle without ``node_order_`` (fitted in the caller's numbering) transforms new graphs
+    in their given order too, as it did, rather than silently changing its output; a refit
+    computes in the canonical order again."""
+    import transync.kernels._estimator as est_module
+
+    graphs = [_random_graph(int(rng.integers(5, 9)), 0.4, rng) for _ in range(8)]
+    new = [g.permute(rng.permutation(g.n_nodes)) for g in graphs[:3]]
+    given = lambda gs, use_labels: [np.arange(g.n_nodes) for g in gs]  # noqa: E731
+    with monkeypatch.context() as m:                  # the fit as transync did it before
+        m.setattr(est_module, "_node_orders", given)
+        est = TransitiveAssignmentKernel(random_state=0).fit(graphs)
+        want = est.transform(new)
+    state = est.__getstate__()
+    del state["node_order_"], state["_given_order"]
+    old = TransitiveAssignmentKernel.__new__(TransitiveAssignmentKernel)
+    old.__setstate__(state)
+    np.testing.assert_array_equal(old.transform(new), want)
+    refit = pickle.loads(pickle.dumps(old)).fit(graphs)
+    canonical = TransitiveAssignmentKernel(random_state=0).fit(graphs)
+    np.testing.assert_array_equal(refit.transform(new), canonical.transform(new))
 
 
 def test_bool_node_labels_and_a_bad_random_state():
@@ -906,3 +942,82 @@ def test_parameter_bounds_and_names_from_the_fourth_fuzz():
     directed = Graph(np.triu(path), directed=True)
     with pytest.raises(ValueError, match=r"`X\[0\]` must be an undirected graph"):
         TransitiveAssignmentKernel(matcher="node").fit([directed, Graph(path)])
+
+
+def _symmetric_molecules(rng, count=14):
+    """Small labelled graphs full of exact ties: random trees (leaves of one label are often
+    interchangeable), plus rings and stars."""
+    graphs = []
+    for k in range(count):
+        n = int(rng.integers(5, 10))
+        A = np.zeros((n, n))
+        if k % 4 == 0:                                             # a ring
+            A[np.arange(n), (np.arange(n) + 1) % n] = 1
+        elif k % 4 == 1:                                           # a star
+            A[0, 1:] = 1
+        else:                                                      # a random tree
+            for v in range(1, n):
+                A[int(rng.integers(v)), v] = 1
+        graphs.append(Graph(A + A.T, node_labels=rng.integers(0, 2, n)))
+    return graphs
+
+
+def _renumbered(graphs, rng):
+    perms = [rng.permutation(g.n_nodes) for g in graphs]
+    return [g.permute(p) for g, p in zip(graphs, perms)], perms
+
+
+@pytest.mark.parametrize("matcher, sync, kernel", [("node", "orthogonal", "gaussian"),
+                                                   ("node", "spectral", "linear"),
+                                                   ("rrwm", "orthogonal", "linear"),
+                                                   ("sm", "spectral", "relaxed")])
+def test_kernel_does_not_depend_on_node_numbering(matcher, sync, kernel):
+    """Renumbering the nodes of every graph leaves gram_ and transform unchanged (before the
+    canonical node order, the exact ties of these symmetric graphs fell by node index: gram_
+    moved by up to 0.28), and the node-indexed attributes follow the caller's numbering."""
+    rng = np.random.default_rng(11)
+    graphs = _symmetric_molecules(rng)
+    new = _symmetric_molecules(rng, 4)
+    est = dict(matcher=matcher, sync=sync, kernel=kernel, random_state=0)
+    a = TransitiveAssignmentKernel(**est).fit(graphs)
+
+    def padded(order):
+        return np.concatenate([order, np.arange(order.size, a.n_universe_)])
+
+    for seed in (1, 2):
+        shuffled, perms = _renumbered(graphs, np.random.default_rng(seed))
+        b = TransitiveAssignmentKernel(**est).fit(shuffled)
+        np.testing.assert_allclose(b.gram_, a.gram_, rtol=0, atol=1e-12)
+        new_b = _renumbered(new, np.random.default_rng(seed + 10))[0]
+        np.testing.assert_allclose(b.transform(new_b), a.transform(new), rtol=0, atol=1e-12)
+        for g, p in enumerate(perms):
+            # both fits computed on the same canonical graph; node k of it is a.node_order_[g][k]
+            # of graphs[g] and b.node_order_[g][k] of shuffled[g] (the same node up to an
+            # automorphism: these graphs have many)
+            oa, ob = a.node_order_[g], b.node_order_[g]
+            np.testing.assert_array_equal(shuffled[g].permute(ob).adjacency,
+                                          graphs[g].permute(oa).adjacency)
+            np.testing.assert_array_equal(b.labels_[g, ob], a.labels_[g, oa])
+            np.testing.assert_allclose(b.features_[g][ob], a.features_[g][oa], atol=1e-12)
+        for r, (i, j) in enumerate(b.pairs_):   # the same maps between the canonical graphs
+            ia, ja = padded(a.node_order_[i]), padded(a.node_order_[j])
+            ib, jb = padded(b.node_order_[i]), padded(b.node_order_[j])
+            np.testing.assert_array_equal(np.argsort(jb)[b.assignments_[r][ib]],
+                                          np.argsort(ja)[a.assignments_[r][ia]])
+
+
+def test_fitted_attributes_are_in_the_callers_numbering():
+    """labels_ and assignments_ describe the graphs as given: on copies of one rigid graph
+    under known renumberings, the slots give the planted correspondences."""
+    rng = np.random.default_rng(3)
+    base = _rigid_graph(7, rng)
+    perms = [rng.permutation(7) for _ in range(5)]
+    graphs = [base.permute(p) for p in perms]               # node x of graph g: base node p[x]
+    tak = TransitiveAssignmentKernel(matcher="node", random_state=0).fit(graphs)
+    slot_of_base = [np.empty(7, np.int64) for _ in graphs]
+    for g, p in enumerate(perms):
+        slot_of_base[g][p] = tak.labels_[g, :7]
+    for g in range(1, len(graphs)):
+        np.testing.assert_array_equal(slot_of_base[g], slot_of_base[0])
+    for r, (i, j) in enumerate(tak.pairs_):
+        np.testing.assert_array_equal(perms[j][tak.assignments_[r][:7]], perms[i])

@@ -324,7 +324,8 @@ def prepare(path, key: str | None = None) -> PreparedSet:
 #: 4: node affinities of features equal up to rounding exactly 1 (2026-11-27), the spectral
 #: rounding's first prototype fixed by the rows' norms, and for a universe above the largest
 #: graph the eigengap's columns tried in the rounding (2026-11-28).
-CACHE_VERSION = 4
+#: 5: every graph matched and synchronized in its canonical node order (2026-11-28).
+CACHE_VERSION = 5
 
 
 def _hash(obj) -> str:

@@ -262,6 +262,17 @@ def test_sinkhorn_batch_refuses_kernels_it_cannot_normalise():
         sinkhorn_batch(np.ones((2, 2)))
     with pytest.raises(ValueError, match="writable float ndarray"):
         sinkhorn_augmented_batch(np.ones((2, 3)), tol=1e-3, max_iter=10)
+    # one non-finite entry anywhere, in either domain: named, with how many
+    for bad in (np.nan, np.inf, -np.inf):
+        for domain in ("scaling", "log"):
+            A = np.ones((3, 4, 4))
+            A[2, 1, 3] = bad
+            with pytest.raises(ValueError, match=r"`A` must be finite, got 1 NaN or infinite"):
+                sinkhorn_batch(A, domain=domain)
+        M = np.ones((2, 3, 3))
+        M[1, 0, 1] = bad
+        with pytest.raises(ValueError, match="`M` must be finite and non-negative"):
+            sinkhorn_augmented_batch(M, tol=1e-3, max_iter=10)
 
 
 def test_sinkhorn_batch_equals_the_two_dimensional_call():

@@ -11,7 +11,7 @@ import pytest
 from transync.datasets import make_graph_collection
 from transync.exceptions import ConvergenceWarning
 from transync.graphs import Graph
-from transync.matching import ga, gaussian_edge_affinity, pf, rrwm
+from transync.matching import RRWMStepper, ga, gaussian_edge_affinity, pf, rrwm
 from transync.matching._sinkhorn import (
     sinkhorn_augmented_batch,
     sinkhorn_batch,
@@ -118,6 +118,38 @@ def _truth_blocks(prob, pairs):
 def _accuracy(prob, pairs, assignments):
     return np.mean([np.mean(prob.labels[j][a] == prob.labels[i])
                     for (i, j), a in zip(pairs, assignments)])
+
+
+def test_sync_point_reads_every_pairs_own_iterate():
+    """Pairs settle at different steps (the batch keeps working copies of the active pairs
+    between steps): a sync point reads, for every pair, the iterate of its own pairwise run
+    after that many steps (a settled pair: its last one), and the run goes on from it."""
+    prob = make_graph_collection(n_graphs=5, n_inliers=7, n_outliers=1, deformation=0.15, rng=5)
+    pairs = all_pairs(5)
+    affs = [AFF(prob.graphs[i], prob.graphs[j]) for i, j in pairs]
+    A = PairAffinities.from_affinities(affs, pairs)
+    opts, every = {"variant": "pygmtools"}, 15
+    steps = run_lockstep(A, solver="rrwm", options=opts).info["steps_per_pair"]
+    assert (steps < every).any() and (steps > every).any()
+    seen = []
+
+    def sync(X):
+        seen.append(X.copy())
+        return X
+
+    out = run_lockstep(A, solver="rrwm", sync=sync, sync_every=every, options=opts)
+    ref = []
+    for a in affs:
+        st = RRWMStepper(a, variant="pygmtools")
+        for _ in range(every):
+            if not st.done:
+                st.step()
+        ref.append(st.iterate)
+    assert out.n_sync >= 1
+    np.testing.assert_allclose(seen[0], doubly_stochastic_iterates(np.stack(ref)), rtol=0,
+                               atol=1e-12)
+    # a sync point restarts every pair, settled ones included
+    assert np.all(out.info["steps_per_pair"] > np.minimum(steps, every))
 
 
 @pytest.mark.parametrize("solver,every,opts", [("rrwm", 2, {}), ("ga", None, {}),

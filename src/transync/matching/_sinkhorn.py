@@ -448,7 +448,12 @@ def sinkhorn_batch(A, *, slack: str = "mass", domain: str = "scaling", tol: floa
     """
     check_choice(slack, "slack", ("mass", "none"))
     check_choice(domain, "domain", ("scaling", "log"))
-    A = check_array(A, "A", ndim=3)
+    # finiteness from two reductions that _check_kernels reuses (NaN and inf propagate through
+    # min and max): the lock-step solvers call this at every step on large stacks
+    A = check_array(A, "A", ndim=3, finite=False)
+    stats = (A.min(), A.max(2)) if A.size else None
+    if stats is not None and not (np.isfinite(stats[0]) and np.isfinite(stats[1].max())):
+        check_array(A, "A", ndim=3)                 # raises its message: NaN or inf entries
     if 0 in A.shape:
         raise ValueError(f"`A` must have shape (b, n1, n2) with every size >= 1, got {A.shape}")
     if half_sweeps is not None:
@@ -473,7 +478,7 @@ def sinkhorn_batch(A, *, slack: str = "mass", domain: str = "scaling", tol: floa
         return SinkhornBatchOutput(np.stack([o.X for o in outs]),
                                    np.array([o.n_sweeps for o in outs]),
                                    np.array([o.converged for o in outs]), None)
-    _check_kernels(A, "A", "pass log-kernels with domain='log'")
+    _check_kernels(A, "A", "pass log-kernels with domain='log'", stats=stats)
     return _batch_slack(A, slack=slack, tol=tol, max_iter=max_iter, half_sweeps=half_sweeps,
                         check_every=check_every, v0=warm_start)
 
@@ -528,13 +533,17 @@ def sinkhorn_augmented_batch(M, *, tol: float, max_iter: int, which=None) -> Non
     _batch_augmented(M, tol=tol, max_iter=max_iter, which=which)
 
 
-def _check_kernels(A: np.ndarray, name: str, hint: str = "rescale it") -> None:
+def _check_kernels(A: np.ndarray, name: str, hint: str = "rescale it", *, stats=None) -> None:
     """Non-negative, finite, no all-zero row or column (they would give NaN), and no row or
     column whose largest entry is below MIN_AFFINITY_SCALE (its scaling 1 / (A v) would
-    overflow: the log domain takes such kernels as log-kernels)."""
-    if not np.all(np.isfinite(A)) or A.min() < 0:
-        raise ValueError(f"`{name}` must be finite and non-negative, got minimum {A.min():.3g}")
-    top = min(float(A.max(2).min()), float(A.max(1).min())) if A.size else 1.0
+    overflow: the log domain takes such kernels as log-kernels). ``stats``: ``(A.min(),
+    A.max(2))`` when the caller has them."""
+    if not A.size:
+        return
+    lo, rmax = stats if stats is not None else (A.min(), A.max(2))
+    if not (np.isfinite(lo) and np.isfinite(rmax.max())) or lo < 0:
+        raise ValueError(f"`{name}` must be finite and non-negative, got minimum {lo:.3g}")
+    top = min(float(rmax.min()), float(A.max(1).min()))
     if top <= 0:
         raise ValueError(f"`{name}` has an all-zero row or column in some matrix: Sinkhorn "
                          "cannot normalise it")

@@ -132,6 +132,12 @@ def _norm1(x):
     return np.abs(x).sum((1, 2))
 
 
+def _dist(x, y):
+    """Frobenius distances ``||x_p - y_p||`` of two stacks."""
+    d = x - y
+    return np.sqrt(np.square(d, out=d).sum((1, 2)))
+
+
 class _Batch:
     """Shared bookkeeping: per-pair step counters, convergence, budget."""
 
@@ -241,12 +247,23 @@ class _RRWMPygmtools(_Batch):
         self.v = np.full((self.P, self.n1, self.n2), 1.0 / (self.n1 * self.n2))
         self.w = self.v.copy()
         self.X = np.full((self.P, self.n1, self.n2), 1.0 / max(self.n1, self.n2))
+        # (pairs, X, w, v) of the active pairs between steps: the arrays of the full stack are
+        # written only when a pair settles or the stack is read, not at every step
+        self._work = None
+
+    def _flush(self):
+        if self._work is not None:
+            idx, X, w, v = self._work
+            self.X[idx], self.w[idx], self.v[idx] = X, w, v
+            self._work = None
 
     @property
     def iterate(self):
+        self._flush()
         return self.X
 
     def set_iterate(self, X):
+        self._flush()
         self.X = X.copy()
         v = (1.0 - self.c) * X + self.c * self.w
         self.v = v / v.sum((1, 2))[:, None, None]
@@ -254,28 +271,47 @@ class _RRWMPygmtools(_Batch):
 
     def step(self, a):
         alpha = 1.0 - self.c
-        raw = self.aff._product(self.v[a], a) * self.scale[a, None, None]
+        # The temporaries are reused in place; each value is the same expression as in the
+        # 2-D stepper, evaluated in the same order (bit-identical results, tested).
+        if self._work is not None and np.array_equal(self._work[0], a):
+            va = self._work[3]
+        else:
+            self._flush()
+            va = self.v if len(a) == self.P else self.v[a]
+        raw = self.aff._product(va, a)
+        raw *= self.scale[a, None, None]
         s = _norm1(raw)
         w = raw / np.where(s > 0, s, 1.0)[:, None, None]
         wmax = w.max((1, 2))
-        scores = np.where((wmax > 0)[:, None, None],
-                          self.beta * w / np.where(wmax > 0, wmax, 1.0)[:, None, None], 0.0)
+        if np.all(wmax > 0):
+            scores = w * self.beta
+            scores /= wmax[:, None, None]
+        else:
+            scores = np.where((wmax > 0)[:, None, None],
+                              self.beta * w / np.where(wmax > 0, wmax, 1.0)[:, None, None], 0.0)
         top = scores.max((1, 2))
         if np.all(top - scores.min((1, 2)) < 600.0):
-            S = sinkhorn_batch(np.exp(scores - top[:, None, None]), slack="none",
+            scores -= top[:, None, None]
+            S = sinkhorn_batch(np.exp(scores, out=scores), slack="none",
                                tol=None, half_sweeps=self.sk_half).X
         else:       # amplification >= 600: the log domain (pair by pair)
             S = sinkhorn_batch(scores, slack="none", domain="log", half_sweeps=self.sk_half).X
-        v = alpha * S + (1.0 - alpha) * w
+        v = alpha * S
+        v += (1.0 - alpha) * w
         v /= _norm1(v)[:, None, None]
-        va = self.v[a]
-        settled = np.minimum(np.sqrt(((v - raw) ** 2).sum((1, 2))),
-                             np.sqrt(((v - va) ** 2).sum((1, 2)))) < self.tol
-        self.X[a], self.w[a], self.v[a] = S, w, v
+        settled = np.minimum(_dist(v, raw), _dist(v, va)) < self.tol
         self.n_iter[a] += 1
         self.converged[a] = settled
+        S, w = np.ascontiguousarray(S), np.ascontiguousarray(w)
+        if settled.any():
+            done, keep = np.flatnonzero(settled), np.flatnonzero(~settled)
+            self.X[a[done]], self.w[a[done]], self.v[a[done]] = S[done], w[done], v[done]
+            self._work = (a[keep], S[keep], w[keep], v[keep]) if len(keep) else None
+        else:
+            self._work = (a, S, w, v)
 
     def scores(self):
+        self._flush()
         return self.v
 
 

@@ -448,11 +448,11 @@ def sinkhorn_batch(A, *, slack: str = "mass", domain: str = "scaling", tol: floa
     """
     check_choice(slack, "slack", ("mass", "none"))
     check_choice(domain, "domain", ("scaling", "log"))
-    # finiteness from two reductions that _check_kernels reuses (NaN and inf propagate through
-    # min and max): the lock-step solvers call this at every step on large stacks
+    # the lock-step solvers call this at every step on large stacks: finiteness comes from the
+    # reductions that _check_kernels reuses, not from a pass of its own
     A = check_array(A, "A", ndim=3, finite=False)
-    stats = (A.min(), A.max(2)) if A.size else None
-    if stats is not None and not (np.isfinite(stats[0]) and np.isfinite(stats[1].max())):
+    stats = _kernel_stats(A) if A.size else None
+    if stats is not None and not stats[2]:
         check_array(A, "A", ndim=3)                 # raises its message: NaN or inf entries
     if 0 in A.shape:
         raise ValueError(f"`A` must have shape (b, n1, n2) with every size >= 1, got {A.shape}")
@@ -533,15 +533,22 @@ def sinkhorn_augmented_batch(M, *, tol: float, max_iter: int, which=None) -> Non
     _batch_augmented(M, tol=tol, max_iter=max_iter, which=which)
 
 
+def _kernel_stats(A: np.ndarray):
+    """``(A.min(), A.max(2), all entries finite)`` of a non-empty stack: NaN and inf propagate
+    through min and max, so two reductions also answer finiteness."""
+    lo, rmax = A.min(), A.max(2)
+    return lo, rmax, bool(np.isfinite(lo) and np.isfinite(rmax.max()))
+
+
 def _check_kernels(A: np.ndarray, name: str, hint: str = "rescale it", *, stats=None) -> None:
     """Non-negative, finite, no all-zero row or column (they would give NaN), and no row or
     column whose largest entry is below MIN_AFFINITY_SCALE (its scaling 1 / (A v) would
-    overflow: the log domain takes such kernels as log-kernels). ``stats``: ``(A.min(),
-    A.max(2))`` when the caller has them."""
+    overflow: the log domain takes such kernels as log-kernels). ``stats``: the
+    :func:`_kernel_stats` of ``A`` when the caller has them."""
     if not A.size:
         return
-    lo, rmax = stats if stats is not None else (A.min(), A.max(2))
-    if not (np.isfinite(lo) and np.isfinite(rmax.max())) or lo < 0:
+    lo, rmax, finite = stats if stats is not None else _kernel_stats(A)
+    if not finite or lo < 0:
         raise ValueError(f"`{name}` must be finite and non-negative, got minimum {lo:.3g}")
     top = min(float(rmax.min()), float(A.max(1).min()))
     if top <= 0:

@@ -302,7 +302,7 @@ class _RRWMPygmtools(_Batch):
         settled = np.minimum(_dist(v, raw), _dist(v, va)) < self.tol
         self.n_iter[a] += 1
         self.converged[a] = settled
-        S, w = np.ascontiguousarray(S), np.ascontiguousarray(w)
+        v = np.ascontiguousarray(v)     # next step's input, laid out as a gather of self.v was
         if settled.any():
             done, keep = np.flatnonzero(settled), np.flatnonzero(~settled)
             self.X[a[done]], self.w[a[done]], self.v[a[done]] = S[done], w[done], v[done]

@@ -1,4 +1,4 @@
-"""Row-block threaded sparse products: bit for bit the single product."""
+"""Row-block threaded sparse products: bit for bit the single product; the block eigensolver."""
 
 from __future__ import annotations
 
@@ -43,3 +43,72 @@ def test_one_thread_in_worker_processes():
     assert _linalg._n_threads() >= 1
     with ProcessPoolExecutor(1) as pool:
         assert pool.submit(_linalg._n_threads).result() == 1
+
+
+@pytest.mark.parametrize("n_threads", [1, 2])
+def test_sliced_row_products_give_each_slice_product_exactly(monkeypatch, n_threads):
+    monkeypatch.setattr(_linalg, "_SPLIT_MIN_NNZ", 0)             # split even small slices
+    rng = np.random.default_rng(2)
+    A = sp.random(60, 60, density=0.3, format="csr", random_state=3).tolil()
+    A[20:25] = 0.0                                                 # a slice with empty rows
+    A = A.tocsr()
+    off = np.array([0, 1, 7, 20, 25, 44, 60])                      # a one-row slice too
+    with _linalg.SlicedRowProducts(A, off, n_threads=n_threads) as rows:
+        if n_threads == 2:
+            assert sum(second is not None for _, second in rows.parts) >= 4
+        for _ in range(2):                                         # X changes between calls
+            X = rng.standard_normal((60, 5))
+            for g in range(off.size - 1):
+                out = rows(g, X)
+                ref = A[off[g]:off[g + 1]] @ X
+                assert out.shape == ref.shape
+                np.testing.assert_array_equal(out, ref)
+    assert rows._pool is None                                      # the thread is released
+
+
+def test_block_krylov_caps_its_depth_at_the_operator_size():
+    """A block too wide for depth * block <= M columns runs with fewer Krylov blocks (one:
+    subspace iteration on AV). The former fallback, Rayleigh-Ritz on span(V) alone, never left
+    its start: it used all its restarts and reported no convergence."""
+    from transync.synchronization import _spectral as spec
+    rng = np.random.default_rng(4)
+    M = 60
+    Qm, _ = np.linalg.qr(rng.standard_normal((M, M)))
+    vals = np.r_[np.linspace(2.0, 1.5, 20), np.linspace(0.5, 0.0, M - 20)]
+    A = (Qm * vals) @ Qm.T
+    for block, depth in ((35, 2), (25, 4), (20, 3)):
+        w, U, _, it, ok = spec.block_krylov_eigs(A.__matmul__, M, 20, block=block, depth=depth,
+                                                 tol=1e-8, rng=0)
+        assert ok and it < 300
+        np.testing.assert_allclose(w, vals[:20], atol=1e-8)
+        P = U @ U.T                                                # the top-20 eigenspace
+        np.testing.assert_allclose(P @ Qm[:, :20], Qm[:, :20], atol=1e-6)
+
+
+def test_synchronization_eigs_widens_only_when_narrow_blocks_are_slow():
+    from transync.synchronization import _spectral as spec
+    rng = np.random.default_rng(5)
+    M, k = 400, 20
+    Qm, _ = np.linalg.qr(rng.standard_normal((M, M)))
+
+    def run(vals):
+        A = (Qm * vals) @ Qm.T
+        calls = []
+
+        def matmat(X):
+            calls.append(X.shape[1])
+            return A @ X
+        w, U, n_prod, restarts, ok = spec.synchronization_eigs(matmat, M, k, tol=1e-4, rng=0)
+        assert ok and n_prod == sum(calls)
+        np.testing.assert_allclose(w, vals[:k], atol=1e-4)
+        res = np.linalg.norm(A @ U - U * w, axis=0)             # the stopping rule's residuals
+        assert np.all(res <= 1e-4 * w[0])
+        return restarts, max(calls)
+
+    # a clear gap after the k-th eigenvalue: the narrow blocks converge, nothing wider is used
+    restarts, widest = run(np.r_[np.linspace(1.0, 0.9, k), np.linspace(0.3, 0.0, M - k)])
+    assert restarts <= spec.QUICK_RESTARTS and widest <= 2 * spec.krylov_block(k, M)
+    # no gap: after QUICK_RESTARTS narrow restarts the wide, deep blocks finish the job
+    restarts, widest = run(np.linspace(1.0, 0.0, M))
+    assert restarts > spec.QUICK_RESTARTS
+    assert widest == spec.WIDE_DEPTH * spec.krylov_block(k, M, spec.WIDE_BLOCK_FACTOR)

@@ -325,7 +325,10 @@ def prepare(path, key: str | None = None) -> PreparedSet:
 #: rounding's first prototype fixed by the rows' norms, and for a universe above the largest
 #: graph the eigengap's columns tried in the rounding (2026-11-28).
 #: 5: every graph matched and synchronized in its canonical node order (2026-11-28).
-CACHE_VERSION = 5
+#: 6: pairwise chunks of 8 MiB (RRWM's near-ties fall otherwise) and the matrix-free
+#: eigensolver's wider, deeper Krylov blocks after slow restarts (other eigenvectors within the
+#: same tolerance, so other alignments on noisy sets) (2026-11-29).
+CACHE_VERSION = 6
 
 
 def _hash(obj) -> str:

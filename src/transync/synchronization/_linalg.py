@@ -20,6 +20,8 @@ def polar(M: np.ndarray) -> np.ndarray:
 # a sparse-dense product is split over threads when it has at least this many multiply-adds
 _THREADED_MIN_WORK = 20_000_000
 _MAX_THREADS = 8
+# a row slice of SlicedRowProducts is split over two threads from this many stored entries
+_SPLIT_MIN_NNZ = 2_000
 
 
 def _n_threads() -> int:
@@ -68,3 +70,49 @@ class RowBlockProduct:
         with ThreadPoolExecutor(len(self.blocks)) as pool:
             list(pool.map(run, self.blocks))
         return out
+
+
+class SlicedRowProducts:
+    """``g -> A[row slice g] @ X`` for many consecutive row slices of one CSR matrix ``A`` and
+    a dense ``X`` that changes between calls (a Gauss-Seidel sweep), each slice's two halves
+    (equal numbers of stored entries) on two threads when the process may use two CPUs.
+
+    A slice of a few dozen rows gathers thousands of rows of ``X``: one thread is bound by that
+    gather, and the halves run side by side (ENZYMES' polar sweeps, 33-row slices of a 5.6 M
+    entry operator times 126 columns: 0.86 -> 0.62 ms a slice). Every row is computed as in
+    ``A[s:e] @ X``, so the result is the same bit for bit. Use as a context manager (the
+    helper thread lives until exit).
+    """
+
+    def __init__(self, A, offsets, n_threads: int | None = None):
+        A = A.tocsr()
+        t = _n_threads() if n_threads is None else int(n_threads)
+        self.parts = []
+        for s, e in zip(offsets[:-1], offsets[1:]):
+            block = A[int(s):int(e)]
+            cut = int(np.searchsorted(block.indptr, block.nnz / 2)) if t > 1 else 0
+            if 0 < cut < block.shape[0] and block.nnz >= _SPLIT_MIN_NNZ:
+                self.parts.append((block[:cut], block[cut:]))
+            else:
+                self.parts.append((block, None))
+        self._pool = None
+
+    def __enter__(self):
+        if any(second is not None for _, second in self.parts):
+            from concurrent.futures import ThreadPoolExecutor
+            self._pool = ThreadPoolExecutor(1)
+        return self
+
+    def __exit__(self, *exc):
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+    def __call__(self, g: int, X: np.ndarray) -> np.ndarray:
+        first, second = self.parts[g]
+        if second is None or self._pool is None:
+            return first @ X
+        fut = self._pool.submit(second.__matmul__, X)
+        top = first @ X
+        return np.vstack([top, fut.result()])
+

@@ -24,7 +24,7 @@ from .._validation import (MAX_ITER, as_generator, check_bool, check_choice, che
 from ..exceptions import ConvergenceWarning, DegenerateInputError
 from ..permutations import MultiMatching, cycle_inconsistency_arrays, solve_lap
 from . import _spectral as spec
-from ._linalg import RowBlockProduct, polar
+from ._linalg import RowBlockProduct, SlicedRowProducts, polar
 from ._pairwise_input import StackedPairs, check_universe, parse_pairwise
 from ._result import BlockRounding, PermutationSyncResult
 
@@ -139,7 +139,8 @@ def _free_unsupported(stk: StackedPairs, labels, d: int, dobs=None):
     return new, moved
 
 
-def _refine_labels(stk: StackedPairs, labels, d: int, max_sweeps: int, dobs=None):
+def _refine_labels(stk: StackedPairs, labels, d: int, max_sweeps: int, dobs=None,
+                   start: float | None = None):
     """Projected power method on the discrete objective (Chen & Candes 2016, block form).
 
     Gauss-Seidel sweeps ``X_g <- LMO(sum_j w_gj P_gj X_j)``: the objective is linear in ``X_g``
@@ -147,7 +148,10 @@ def _refine_labels(stk: StackedPairs, labels, d: int, max_sweeps: int, dobs=None
     node per slot) is the exact block maximizer and the objective never decreases. A bonus far
     below any weight keeps the current slot on ties (no drifting between equal optima). Stops
     after a sweep that changes nothing, or after ``max_sweeps``. Returns
-    ``(labels, objective history, sweeps)``.
+    ``(labels, objective history, sweeps)``; ``start``: the objective of ``labels`` when the
+    caller has it. The history after the start is kept by the block updates' gains (the
+    objective's terms of the pairs at ``g``, which are the only ones an update of ``X_g``
+    changes), not recomputed over all pairs each sweep (18 of ENZYMES' 41 refinement seconds).
     """
     sizes = stk.sizes
     N = stk.n_objects
@@ -156,10 +160,13 @@ def _refine_labels(stk: StackedPairs, labels, d: int, max_sweeps: int, dobs=None
     lab = _padded(labels, n_max + 1)                      # column n_max stays -1
     pos = dw[dw > 0]
     tie = 1e-9 * (float(pos.min()) if pos.size else 1.0)
-    history = [_agreement(stk, [lab[g, : sizes[g]] for g in range(N)], d)[0]]
+    if start is None:
+        start = _agreement(stk, [lab[g, : sizes[g]] for g in range(N)], d)[0]
+    history = [float(start)]
     sweeps = 0
     for sweeps in range(1, max_sweeps + 1):
         changed = 0
+        gain = 0.0
         for g in range(N):
             lo, hi = ptr[g], ptr[g + 1]
             n_g = int(sizes[g])
@@ -167,17 +174,26 @@ def _refine_labels(stk: StackedPairs, labels, d: int, max_sweeps: int, dobs=None
                 continue
             a = dmaps[lo:hi, :n_g]
             tgt = lab[dst[lo:hi, None], np.where(a >= 0, a, n_max)]      # (deg, n_g) slots
-            e, u = np.nonzero(tgt >= 0)
-            S = np.bincount(u * d + tgt[e, u], weights=dw[lo:hi][e],
-                            minlength=n_g * d).reshape(n_g, d).astype(float, copy=False)
+            # S[u, slot] = weight of the pairs that put u's partner in slot; no partner: bin
+            # d of row u, dropped (entries are summed in the same order as when they were
+            # selected first, 7 s faster on ENZYMES)
+            key = np.where(tgt >= 0, tgt, d)
+            key += np.arange(n_g) * (d + 1)
+            S = np.bincount(key.ravel(), weights=np.broadcast_to(dw[lo:hi, None], key.shape)
+                            .ravel(), minlength=n_g * (d + 1)).reshape(n_g, d + 1)[:, :d]
+            S = np.ascontiguousarray(S, dtype=float)
             cur = lab[g, :n_g]
             placed = np.flatnonzero(cur >= 0)
+            before = S[placed, cur[placed]]
             S[placed, cur[placed]] += tie
             new = solve_lap(S)
             if not np.array_equal(new, cur):
+                S[placed, cur[placed]] = before
+                put = np.flatnonzero(new >= 0)
+                gain += float(S[put, new[put]].sum() - before.sum())
                 lab[g, :n_g] = new
                 changed += 1
-        history.append(_agreement(stk, [lab[g, : sizes[g]] for g in range(N)], d)[0])
+        history.append(history[-1] + gain)
         if changed == 0:
             break
     return [lab[g, : sizes[g]].copy() for g in range(N)], history, sweeps
@@ -227,13 +243,12 @@ def _spectral_embedding(stk, d, solver, tol, rng, info):
         if use == "dense":
             w, U = sla.eigh(Ad, subset_by_index=[M - max(k_vals, k_vec), M - 1])
             return w[::-1], U[:, ::-1], 1, True
-        b = min(M, max(max(k_vals, k_vec) + 6, int(1.15 * max(k_vals, k_vec))))
-        vals, U, n_p, _, ok = spec.block_krylov_eigs(
-            matmat, M, k_vec, k_values=k_vals, block=b, tol=tol, V0=V0, rng=rng)
+        vals, U, n_p, _, ok = spec.synchronization_eigs(matmat, M, k_vec, k_values=k_vals,
+                                                        tol=tol, V0=V0, rng=rng)
         return vals, U, n_p, ok
 
     V0 = None if use == "dense" else spec.reference_start(
-        stk, min(M, max(max(k_vals, k_vec) + 6, int(1.15 * max(k_vals, k_vec)))), dobs, rng)
+        stk, spec.krylov_block(max(k_vals, k_vec), M), dobs, rng)
     vals, U, n_prod, converged = _eigs(k_vals, k_vec, V0)
     if d is None:
         # Eigengap rule on the leading k_vals eigenvalues (k_vals = 2 n_max + 10 at first). If
@@ -264,8 +279,8 @@ def _spectral_embedding(stk, d, solver, tol, rng, info):
         if d == vals.size - 1 and vals.size < M:
             info["n_universe_warning"] = "estimate at the end of the computed spectrum"
         if d > U.shape[1] and use != "dense":
-            _, U, n2, _, converged = spec.block_krylov_eigs(
-                matmat, M, min(d, M), tol=tol, V0=U, rng=rng)
+            _, U, n2, _, converged = spec.synchronization_eigs(matmat, M, min(d, M), tol=tol,
+                                                               V0=U, rng=rng)
             n_prod += n2
         elif d > U.shape[1]:
             w, U = sla.eigh(Ad, subset_by_index=[M - min(d, M), M - 1])
@@ -335,27 +350,29 @@ def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, re
     T = spec.block_matrix(stk, normalize=False, directed_obs=dobs)
     T.setdiag(0.0)
     T.eliminate_zeros()
-    rows = [T[off[g]:off[g + 1]] for g in range(N)]
     # Q_g: n_g x d with orthonormal rows, stacked object after object
     Q = np.vstack([polar(V[off[g]:off[g + 1]] + 1e-12) for g in range(N)])
 
-    Top = RowBlockProduct(T)
-
-    def _objective():
-        return float(np.sum(Q * (Top @ Q)))
-
-    history = [_objective()]
+    # The objective sum_g <Q_g, B_g> (B_g = sum_j w_gj P_gj Q_j, each pair twice) is computed
+    # once; a sweep then adds each update's change 2 <Q_g' - Q_g, B_g> (T is symmetric with
+    # zero diagonal blocks, so B_g does not depend on Q_g): one full product fewer per sweep
+    # (18 of ENZYMES' 46 polar-sweep seconds)
+    history = [float(np.sum(Q * (RowBlockProduct(T) @ Q)))]
     converged = False
     it = 0
-    for it in range(1, max_iter + 1):
-        for g in range(N):
-            B = rows[g] @ Q
-            if np.any(B):
-                Q[off[g]:off[g + 1]] = polar(B)
-        history.append(_objective())
-        if abs(history[-1] - history[-2]) <= orth_tol * max(abs(history[-1]), 1e-12):
-            converged = True
-            break
+    with SlicedRowProducts(T, off) as rows:
+        for it in range(1, max_iter + 1):
+            gain = 0.0
+            for g in range(N):
+                B = rows(g, Q)
+                if np.any(B):
+                    new = polar(B)
+                    gain += 2.0 * float(np.sum((new - Q[off[g]:off[g + 1]]) * B))
+                    Q[off[g]:off[g + 1]] = new
+            history.append(history[-1] + gain)
+            if abs(history[-1] - history[-2]) <= orth_tol * max(abs(history[-1]), 1e-12):
+                converged = True
+                break
     if not converged:
         warnings.warn(f"orthogonal synchronization stopped after max_iter={max_iter} sweeps "
                       f"(relative change "
@@ -376,7 +393,7 @@ def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, re
         before = _agreement(stk, lab, d)[0]
         sweeps = 0
         if refine > 0:
-            lab, hist, sweeps = _refine_labels(stk, lab, d, refine, dobs)
+            lab, hist, sweeps = _refine_labels(stk, lab, d, refine, dobs, start=before)
             info[f"discrete_objective_history_{name}"] = np.asarray(hist)
         score = _agreement(stk, lab, d)[0]
         scores[name] = {"rounded": before, "refined": score, "refine_sweeps": sweeps}

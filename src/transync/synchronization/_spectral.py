@@ -4,7 +4,8 @@
   ``w_ij P_ij`` and ``w_ij P_ij^T`` for observed pairs and identity blocks on the diagonal, built
   once from the stacked assignments (every block is a gather: ``(P_ij V)[u] = V_j[a_ij[u]]``).
 * ``block_krylov_eigs``: leading eigenpairs, matrix-free (restarted block Krylov with
-  Rayleigh-Ritz; repeated eigenvalues, which consistent input always has, need a block method).
+  Rayleigh-Ritz; repeated eigenvalues, which consistent input always has, need a block method);
+  ``synchronization_eigs``: its narrow-then-wide schedule for the permutation synchronization.
 * ``round_to_universe``: rows -> universe slots (pivoted QR picks one row per slot, a Procrustes
   rotation aligns the slots with the axes, then rectangular Hungarian per object, then a few
   Procrustes/Hungarian refinements).
@@ -23,6 +24,44 @@ from ._pairwise_input import StackedPairs
 __all__: list[str] = []
 
 DENSE_MAX = 2000          # "auto" uses dense eigh up to this total number of nodes
+
+# The permutation synchronization's matrix-free eigensolver (:func:`synchronization_eigs`)
+# runs blocks of max(k + 6, 1.15 k) vectors and depth 2 (bases [V, AV]) for up to
+# QUICK_RESTARTS restarts -- enough where the k-th eigenvalue stands clear of the next (20-30 %
+# corrupted maps: 3-7 restarts) -- then goes on with wider and deeper ones: max(k + 6, 1.5 k)
+# vectors, bases [V, AV, A^2 V, A^3 V]. Noisy input has no gap after the k-th eigenvalue
+# (ENZYMES' all-pairs kernel alignment: l_126 = 0.353, the next ones 0.001 apart), and the k-th
+# Ritz vector converges at the rate of l_k against the first eigenvalue outside the basis: the
+# narrow blocks alone took 140 restarts (143 s) there, 8 narrow and 5 wide ones 29 s, for the
+# same residual tolerance (kernel alignments of MUTAG 1.1 -> 0.8 s, PTC_MR 6.7 -> 2.4 s); on
+# the clear-gap problems wide blocks from the start cost more per restart than they save
+# (N = 128 objects of 30 nodes: 0.61 s against 0.31 s).
+QUICK_RESTARTS = 8
+NARROW_BLOCK_FACTOR = 1.15
+WIDE_BLOCK_FACTOR = 1.5
+WIDE_DEPTH = 4
+
+
+def krylov_block(k: int, M: int, factor: float = NARROW_BLOCK_FACTOR) -> int:
+    """Block size for ``k`` wanted vectors of an ``M``-node operator: ``max(k + 6, factor k)``
+    (at most ``M``)."""
+    return min(M, max(k + 6, int(factor * k)))
+
+
+def synchronization_eigs(matmat, M: int, k: int, *, k_values: int | None = None, tol: float,
+                         V0=None, rng=None):
+    """:func:`block_krylov_eigs` with narrow blocks for :data:`QUICK_RESTARTS` restarts, then,
+    unconverged, wide and deep ones from the narrow run's vectors. Same return value."""
+    kv = max(k, k_values or k)
+    vals, U, n1, r1, ok = block_krylov_eigs(matmat, M, k, k_values=k_values,
+                                            block=krylov_block(kv, M), depth=2, tol=tol,
+                                            max_restarts=QUICK_RESTARTS, V0=V0, rng=rng)
+    if ok:
+        return vals, U, n1, r1, ok
+    vals, U, n2, r2, ok = block_krylov_eigs(matmat, M, k, k_values=k_values,
+                                            block=krylov_block(kv, M, WIDE_BLOCK_FACTOR),
+                                            depth=WIDE_DEPTH, tol=tol, V0=U, rng=rng)
+    return vals, U, n1 + n2, r1 + r2, ok
 
 
 def directed(stk: StackedPairs):
@@ -183,8 +222,10 @@ def block_krylov_eigs(matmat, M: int, k: int, *, k_values: int | None = None,
     """
     gen = np.random.default_rng(rng)
     kv = max(k, k_values or k)
-    b = block or max(kv + 6, int(1.15 * kv))
-    b = min(b, M)
+    b = min(block or krylov_block(kv, M), M)
+    # as many Krylov blocks as the basis can hold (at most M columns); one block is subspace
+    # iteration on [AV] (the former fallback, Rayleigh-Ritz on span(V) alone, never moved)
+    depth = max(1, min(depth, M // b))
     if V0 is not None:
         V = np.array(V0[:, :b], dtype=float)
         if V.shape[1] < b:
@@ -204,7 +245,7 @@ def block_krylov_eigs(matmat, M: int, k: int, *, k_values: int | None = None,
             cur = matmat(_orth(cur))
             n_prod += b
             basis.append(cur)
-        Q = _orth(np.hstack(basis)) if sum(x.shape[1] for x in basis) <= M else _orth(V)
+        Q = _orth(np.hstack(basis))
         AQ = matmat(Q)
         n_prod += Q.shape[1]
         H = Q.T @ AQ

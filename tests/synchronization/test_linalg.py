@@ -67,9 +67,10 @@ def test_sliced_row_products_give_each_slice_product_exactly(monkeypatch, n_thre
 
 
 def test_block_krylov_caps_its_depth_at_the_operator_size():
-    """A block too wide for depth * block <= M columns runs with fewer Krylov blocks (one:
-    subspace iteration on AV). The former fallback, Rayleigh-Ritz on span(V) alone, never left
-    its start: it used all its restarts and reported no convergence."""
+    """A block too wide for depth * block <= M columns runs with fewer Krylov blocks (above
+    M / 2: V and the images of its leading M - block vectors). The former fallback,
+    Rayleigh-Ritz on span(V) alone, never left its start: it used all its restarts and
+    reported no convergence."""
     from transync.synchronization import _spectral as spec
     rng = np.random.default_rng(4)
     M = 60
@@ -112,3 +113,19 @@ def test_synchronization_eigs_widens_only_when_narrow_blocks_are_slow():
     restarts, widest = run(np.linspace(1.0, 0.0, M))
     assert restarts > spec.QUICK_RESTARTS
     assert widest == spec.WIDE_DEPTH * spec.krylov_block(k, M, spec.WIDE_BLOCK_FACTOR)
+
+
+@pytest.mark.parametrize("M, rank, k", [(12, 3, 6), (20, 4, 10)])
+def test_block_krylov_wide_block_on_a_low_rank_operator(M, rank, k):
+    """Blocks above M / 2 keep V in the basis: the eigenvalue-0 vectors of a low-rank operator
+    lie outside span(AV), and a basis of AV alone returned non-orthonormal vectors while
+    reporting convergence."""
+    from transync.synchronization import _spectral as spec
+    rng = np.random.default_rng(6)
+    B = rng.standard_normal((M, rank))
+    A = B @ B.T
+    w, U, _, _, ok = spec.block_krylov_eigs(A.__matmul__, M, k, tol=1e-8, rng=0)
+    assert ok
+    np.testing.assert_allclose(U.T @ U, np.eye(k), atol=1e-8)
+    np.testing.assert_allclose(w, np.linalg.eigvalsh(A)[::-1][:k], atol=1e-8)
+    assert np.all(np.linalg.norm(A @ U - U * w, axis=0) <= 1e-8 * w[0])

@@ -223,9 +223,11 @@ def block_krylov_eigs(matmat, M: int, k: int, *, k_values: int | None = None,
     gen = np.random.default_rng(rng)
     kv = max(k, k_values or k)
     b = min(block or krylov_block(kv, M), M)
-    # as many Krylov blocks as the basis can hold (at most M columns); one block is subspace
-    # iteration on [AV] (the former fallback, Rayleigh-Ritz on span(V) alone, never moved)
-    depth = max(1, min(depth, M // b))
+    # as many Krylov blocks as the basis can hold (at most M columns). A block above M / 2
+    # leaves room for V and the images of its leading M - b vectors only (all of V when b = M:
+    # exact). The former fallback, Rayleigh-Ritz on span(V) alone, never moved.
+    depth = 1 if depth == 1 else max(2, min(depth, M // b))
+    room = M - b
     if V0 is not None:
         V = np.array(V0[:, :b], dtype=float)
         if V.shape[1] < b:
@@ -239,7 +241,7 @@ def block_krylov_eigs(matmat, M: int, k: int, *, k_values: int | None = None,
     prev = None
     it = 0
     for it in range(1, max_restarts + 1):
-        basis = [AV] if depth == 1 else [V, AV]
+        basis = [AV] if depth == 1 else [V, AV[:, :room]]
         cur = AV
         for _d in range(depth - 2):
             cur = matmat(_orth(cur))

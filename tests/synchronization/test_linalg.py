@@ -7,6 +7,7 @@ import pytest
 import scipy.sparse as sp
 
 from transync.synchronization import _linalg
+from transync.synchronization import _spectral as spec
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
@@ -71,7 +72,6 @@ def test_block_krylov_caps_its_depth_at_the_operator_size():
     M / 2: V and the images of its leading M - block vectors). The former fallback,
     Rayleigh-Ritz on span(V) alone, never left its start: it used all its restarts and
     reported no convergence."""
-    from transync.synchronization import _spectral as spec
     rng = np.random.default_rng(4)
     M = 60
     Qm, _ = np.linalg.qr(rng.standard_normal((M, M)))
@@ -87,7 +87,6 @@ def test_block_krylov_caps_its_depth_at_the_operator_size():
 
 
 def test_synchronization_eigs_widens_only_when_narrow_blocks_are_slow():
-    from transync.synchronization import _spectral as spec
     rng = np.random.default_rng(5)
     M, k = 400, 20
     Qm, _ = np.linalg.qr(rng.standard_normal((M, M)))
@@ -120,7 +119,6 @@ def test_block_krylov_wide_block_on_a_low_rank_operator(M, rank, k):
     """Blocks above M / 2 keep V in the basis: the eigenvalue-0 vectors of a low-rank operator
     lie outside span(AV), and a basis of AV alone returned non-orthonormal vectors while
     reporting convergence."""
-    from transync.synchronization import _spectral as spec
     rng = np.random.default_rng(6)
     B = rng.standard_normal((M, rank))
     A = B @ B.T

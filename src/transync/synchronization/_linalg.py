@@ -36,6 +36,13 @@ def _n_threads() -> int:
     return max(1, min(_MAX_THREADS, cpus))
 
 
+def _row_bounds(A, parts: int) -> np.ndarray:
+    """Row boundaries ``0 = b_0 < ... = n_rows`` that cut the CSR matrix ``A`` into at most
+    ``parts`` consecutive row blocks of about equal numbers of stored entries."""
+    cuts = np.searchsorted(A.indptr, np.linspace(0, A.nnz, parts + 1)[1:-1])
+    return np.unique(np.r_[0, cuts, A.shape[0]])
+
+
 class RowBlockProduct:
     """``X -> A @ X`` for a large CSR matrix ``A``, its row blocks on threads.
 
@@ -49,9 +56,7 @@ class RowBlockProduct:
         self.A = A.tocsr()
         self.shape, self.dtype, self.nnz = self.A.shape, self.A.dtype, self.A.nnz
         t = _n_threads() if n_threads is None else int(n_threads)
-        indptr = self.A.indptr
-        cuts = np.searchsorted(indptr, np.linspace(0, self.nnz, t + 1)[1:-1])
-        bounds = np.unique(np.r_[0, cuts, self.shape[0]])
+        bounds = _row_bounds(self.A, t)
         # row slices are copies: one block per thread (about one more copy of A in all)
         self.blocks = ([(0, self.shape[0], self.A)] if len(bounds) <= 2 else
                        [(int(s), int(e), self.A[s:e]) for s, e in zip(bounds[:-1], bounds[1:])])
@@ -90,9 +95,9 @@ class SlicedRowProducts:
         self.parts = []
         for s, e in zip(offsets[:-1], offsets[1:]):
             block = A[int(s):int(e)]
-            cut = int(np.searchsorted(block.indptr, block.nnz / 2)) if t > 1 else 0
-            if 0 < cut < block.shape[0] and block.nnz >= _SPLIT_MIN_NNZ:
-                self.parts.append((block[:cut], block[cut:]))
+            bounds = _row_bounds(block, 2) if t > 1 and block.nnz >= _SPLIT_MIN_NNZ else ()
+            if len(bounds) == 3:
+                self.parts.append((block[:bounds[1]], block[bounds[1]:]))
             else:
                 self.parts.append((block, None))
         self._pool = None

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from transync import match_collection
 from transync.datasets import make_subgraph_collection
 from transync.graphs import Graph
-from transync.matching import Affinity, DenseAffinity, gaussian_edge_affinity
+from transync.matching import Affinity, DenseAffinity, SeparableAffinity, gaussian_edge_affinity
 from transync.metrics import constraint_violations, multimatching_precision_recall
 from transync.multigraph import PairAffinities
 from transync.permutations import cycle_inconsistency_arrays
@@ -237,6 +237,29 @@ def test_padded_affinity_real_block_is_the_pair_affinity_and_dummies_are_zero(af
         PairAffinities.from_graphs(graphs, affinity=affinity, n_pad=4)
     with pytest.raises(ValueError, match="same number of nodes"):
         PairAffinities.from_graphs(graphs, affinity=affinity)
+
+
+@pytest.mark.parametrize("affinity", [None, functools.partial(gaussian_edge_affinity,
+                                                                 sigma2=0.05)])
+def test_one_small_graph_keeps_the_shared_per_graph_factors(affinity):
+    """Whether every pair is separable is decided on the real sizes, as the per-pair function
+    decides it: on the padded size (20) the 6-node graph's pairs looked sparse, and the whole
+    collection fell back to one expansion per pair with no factors shared between pairs."""
+    rng = np.random.default_rng(1)
+    graphs = [Graph.from_points(rng.random((k, 2)), edges="full") for k in (20, 6, 17, 20)]
+    aff = PairAffinities.from_graphs(graphs, affinity=affinity, n_pad=20)
+    assert aff.backend == "separable"
+    assert aff._impl.F.shape[0] == len(graphs)          # one factor set per graph, not per pair
+    f = affinity or functools.partial(gaussian_edge_affinity, sigma2=0.15)
+    X = rng.random((len(aff), 20, 20))
+    Y = aff.matvec(X)
+    for p, (i, j) in enumerate(aff.pairs.tolist()):
+        a, b = graphs[i].n_nodes, graphs[j].n_nodes
+        assert isinstance(f(graphs[i], graphs[j]), SeparableAffinity)      # per-pair choice
+        ref = gaussian_edge_affinity(graphs[i], graphs[j], sigma2=f.keywords["sigma2"],
+                                     backend="dense").matvec(X[p, :a, :b])
+        np.testing.assert_allclose(Y[p, :a, :b], ref, atol=1e-7, rtol=0)
+        assert not Y[p, a:].any() and not Y[p, :, b:].any()
 
 
 # --------------------------------------------------------------------------- input contract

@@ -564,7 +564,7 @@ class PairAffinities:
             remap = np.full(len(graphs), -1, np.int64)
             remap[used] = np.arange(len(used))
             local = remap[pairs]
-            if not mixed and (backend == "separable" or _all_separable(sub, local)):
+            if not mixed and (backend == "separable" or _all_separable(sub, local, sizes[used])):
                 sigma2 = opts.get("sigma2", DEFAULT_SIGMA2)
                 check_positive(opts.get("angle_weight", 0.1), "angle_weight", allow_zero=True)
                 fac = gaussian_edge_factors(sub, sigma2=sigma2, attribute=attribute,
@@ -994,12 +994,17 @@ def _pad_affinity(a: Affinity, n: int) -> Affinity:
     return _PaddedAffinity(a, n)
 
 
-def _all_separable(graphs, pairs) -> bool:
+def _all_separable(graphs, pairs, sizes) -> bool:
     """Whether ``gaussian_edge_affinity(backend="auto")`` picks the separable form for every pair
-    (its rule: ``n1^2 n2 + n1 n2^2 < m1 m2``, edge counts ``m``)."""
+    (its rule: ``n1^2 n2 + n1 n2^2 < m1 m2``, edge counts ``m``), on the graphs' real sizes
+    ``sizes`` (``graphs`` may be padded with isolated dummies: the per-pair function sees the
+    real graphs, and the rule on the padded size refused every pair of a collection holding one
+    small graph, whose per-pair fallback then paid for an expansion per pair and a product
+    without shared factors)."""
     m = np.array([int(g.mask.sum()) for g in graphs], dtype=np.int64)
-    n = graphs[0].n_nodes
-    return bool(np.all(2 * n ** 3 < m[pairs[:, 0]] * m[pairs[:, 1]]))
+    n = np.asarray(sizes, dtype=np.int64)
+    n1, n2 = n[pairs[:, 0]], n[pairs[:, 1]]
+    return bool(np.all(n1 * n1 * n2 + n1 * n2 * n2 < m[pairs[:, 0]] * m[pairs[:, 1]]))
 
 
 def _check_count(N: int, n_graphs, name: str) -> None:

@@ -967,6 +967,10 @@ def _renumbered(graphs, rng):
     return [g.permute(p) for g, p in zip(graphs, perms)], perms
 
 
+# the invariance holds whether or not the polar sweeps meet their tolerance: on the rrwm case
+# they stopped at max_iter on one machine (AMD EPYC, OpenBLAS Haswell kernels: relative change
+# 5.8e-6 against 1e-6) and converged on the one where CI passed the same code (floating point)
+@pytest.mark.filterwarnings("ignore::transync.exceptions.ConvergenceWarning")
 @pytest.mark.parametrize("matcher, sync, kernel", [("node", "orthogonal", "gaussian"),
                                                    ("node", "spectral", "linear"),
                                                    ("rrwm", "orthogonal", "linear"),

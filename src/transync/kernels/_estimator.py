@@ -129,6 +129,32 @@ def _renumber_maps(A: np.ndarray, pairs: np.ndarray, source: np.ndarray,
                               axis=1).astype(A.dtype, copy=False)
 
 
+def _fitted_twins(new_adjacency, new_features, new_labels, fit_adjacency, fit_features,
+                  fit_labels) -> np.ndarray:
+    """For every new graph, the first fitted graph it equals in canonical node order (the same
+    adjacency, node labels and HKS features, the features to 1e-12), or -1.
+
+    Such a copy is placed where the fit put its twin: the identity is its exact map to the
+    twin, and the twin's labels compose it consistently. The vote over its matches to all
+    fitted graphs can land elsewhere when the votes tie (symmetric graphs: which of two
+    automorphic nodes a match picks decides them, and floating-point order decides that).
+    """
+    def key(A, labels):
+        A = np.ascontiguousarray(A, dtype=float)
+        return A.shape[0], A.tobytes(), None if labels is None else labels.tobytes()
+
+    index: dict = {}
+    for j, A in enumerate(fit_adjacency):
+        index.setdefault(key(A, None if fit_labels is None else fit_labels[j]), []).append(j)
+    twins = np.full(len(new_adjacency), -1, dtype=np.int64)
+    for t, A in enumerate(new_adjacency):
+        for j in index.get(key(A, None if new_labels is None else new_labels[t]), ()):
+            if np.allclose(new_features[t], fit_features[j], rtol=0.0, atol=1e-12):
+                twins[t] = j
+                break
+    return twins
+
+
 def _renumber_alignment(alignment, index: np.ndarray):
     """The :class:`~transync.kernels.Alignment` with its node rows (labels, embedding,
     ``info["degrees"]``) taken at ``index`` ((N, n): new node ``k`` of graph ``g`` is old node
@@ -171,9 +197,11 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
     passed to ``fit`` (the same list of the same ``Graph`` objects) returns ``gram_`` (the
     transductive rows) rather than re-placing them.
 
-    The inductive rows approximate the transductive ones: the fitted labels are a fixed point of
-    the placement rule (both ``sync`` methods refine them with it), so a copy of a fitted graph
-    gets that graph's row back when the matches are consistent, but not in general.
+    The inductive rows approximate the transductive ones. A new graph equal to a fitted one up
+    to its node numbering (the same canonical adjacency, node labels and HKS features) is placed
+    where the fit put that graph (the first such, when the fit held duplicates), so it gets that
+    graph's row of ``gram_``: the vote would give it only when the matches are consistent and no
+    votes tie (symmetric graphs tie them, and floating-point order then decides).
 
     **View graph for large sets** (``n_neighbors = k``). Matching all ``N (N - 1) / 2`` pairs
     does not scale (NCI1: 7.6 million pairs). With ``k``, each graph is matched only to its
@@ -625,8 +653,9 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
         """Gram matrix of ``X`` against the fitted graphs, shape ``(len(X), N)``.
 
         New graphs are placed inductively in the fitted universe (see the class docstring) and
-        normalized by their own self-similarity. ``X`` that is the fitted sequence itself (the
-        same ``Graph`` objects, in order) returns a copy of ``gram_``.
+        normalized by their own self-similarity; a graph equal to a fitted one up to its node
+        numbering gets that graph's row of ``gram_``. ``X`` that is the fitted sequence itself
+        (the same ``Graph`` objects, in order) returns a copy of ``gram_``.
 
         Raises
         ------
@@ -686,6 +715,9 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
                              + node_labels, executor=self.executor, progress=self.progress,
                              rng=self.random_state)
         assign = assign.reshape(M, -1, n)                  # int32: (M, N, n) can be large
+        twins = _fitted_twins(adjacency[N:], hks, node_labels, adjacency[:N], fitted_features,
+                              fitted_labels)
+        t_twin = np.flatnonzero(twins >= 0)
         opts = {}
         if not self.sync_dummies_:                        # real-to-real, same-label votes only
             opts = {"sizes": np.array([g.n_nodes for g in graphs]),
@@ -705,6 +737,10 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
                             "eigenvalues": alignment.info["eigenvalues"]}
             labels, Q = place_graphs(assign, alignment.labels, embedding=emb,
                                      method=self.sync_, fitted=nearest, **opts, **spectral)
+            if t_twin.size:                  # copies of fitted graphs: where their twin is
+                labels[t_twin] = alignment.labels[twins[t_twin]]
+                if Q is not None:
+                    Q[t_twin] = alignment.embedding[twins[t_twin]]
             K = assignment_kernel(self._align(self.kernel_, feats, labels, Q, n), fitted,
                                   kernel=self.kernel_, gamma=gamma, normalize=self.normalize_)
             out = K if out is None else out + K

@@ -140,7 +140,7 @@ def _fitted_twins(new_adjacency, new_features, new_labels, fit_adjacency, fit_fe
     automorphic nodes a match picks decides them, and floating-point order decides that).
     """
     def key(A, labels):
-        A = np.ascontiguousarray(A, dtype=float)
+        A = np.ascontiguousarray(A, dtype=float) + 0.0          # -0.0 -> 0.0: the same bytes
         return A.shape[0], A.tobytes(), None if labels is None else labels.tobytes()
 
     index: dict = {}
@@ -197,11 +197,14 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
     passed to ``fit`` (the same list of the same ``Graph`` objects) returns ``gram_`` (the
     transductive rows) rather than re-placing them.
 
-    The inductive rows approximate the transductive ones. A new graph equal to a fitted one up
-    to its node numbering (the same canonical adjacency, node labels and HKS features) is placed
-    where the fit put that graph (the first such, when the fit held duplicates), so it gets that
-    graph's row of ``gram_``: the vote would give it only when the matches are consistent and no
-    votes tie (symmetric graphs tie them, and floating-point order then decides).
+    The inductive rows approximate the transductive ones. A new graph equal to a fitted one in
+    canonical node order (:func:`transync.graphs.canonical_node_order`: the same adjacency, node
+    labels and HKS features) is placed where the fit put that graph (the first such, when the
+    fit held duplicates), so it gets that graph's row of ``gram_``: the vote would give it only
+    when the matches are consistent and no votes tie (symmetric graphs tie them, and
+    floating-point order then decides). The canonical order is not a full canonical labelling
+    (graphs that colour refinement cannot split, e.g. a triangle beside a 4-cycle, can have
+    several forms): a copy of such a graph in another form is placed by the vote.
 
     **View graph for large sets** (``n_neighbors = k``). Matching all ``N (N - 1) / 2`` pairs
     does not scale (NCI1: 7.6 million pairs). With ``k``, each graph is matched only to its
@@ -425,7 +428,8 @@ class TransitiveAssignmentKernel(TransformerMixin, BaseEstimator):
     def __setstate__(self, state):
         """Estimators pickled before the ensemble (``n_alignments``) load as one-member
         ensembles; those pickled before the canonical node order keep computing in the given
-        order (their transform gives what it gave; refit to make it numbering-free)."""
+        order (their transform gives what it gave, but for copies of fitted graphs in the
+        fitted numbering, which now get their fitted rows; refit to make it numbering-free)."""
         state = dict(state)
         state.setdefault("n_alignments", 1)
         state.setdefault("pair_fraction", 0.7)

@@ -13,6 +13,7 @@ from ._affinity import (
     gaussian_edge_affinity,
     gaussian_edge_factors,
     gaussian_node_affinity,
+    prefers_separable,
 )
 from ._front import METHODS, match_graphs, solver_options
 from ._ga import GAStepper, annealing_levels, default_beta_max, ga
@@ -41,6 +42,7 @@ __all__ = [
     "gaussian_edge_affinity",
     "gaussian_edge_factors",
     "gaussian_node_affinity",
+    "prefers_separable",
     "GAStepper",
     "IPFPStepper",
     "METHODS",

@@ -68,6 +68,7 @@ __all__ = [
     "gaussian_edge_affinity",
     "gaussian_edge_factors",
     "gaussian_node_affinity",
+    "prefers_separable",
 ]
 
 
@@ -843,10 +844,7 @@ def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = DEFAULT_SIGM
                           float(np.median(np.abs(np.concatenate([x, y])))))
     if backend == "auto":
         scalar = attribute != "length+angle"
-        separable_cost = 16 * (n1 * n1 * n2 + n1 * n2 * n2)
-        # one factorized entry (fancy indexing + sparse products) costs about as much as 16 GEMM
-        # flops of the separable product (measured on 2 cores, n = 10..50, full graphs)
-        backend = ("auto-separable" if scalar and separable_cost < 16 * m1 * m2
+        backend = ("auto-separable" if scalar and bool(prefers_separable(n1, n2, m1, m2))
                    else "factorized")
     if backend in ("separable", "auto-separable"):
         if attribute == "length+angle":
@@ -869,6 +867,30 @@ def gaussian_edge_affinity(g1: Graph, g2: Graph, *, sigma2: float = DEFAULT_SIGM
         return fac
     K = fac.to_dense()
     return DenseAffinity(K, n1, n2) if backend == "dense" else SparseAffinity(K, n1, n2)
+
+
+def prefers_separable(n1, n2, m1, m2):
+    """Whether a Gaussian edge affinity on scalar edge attributes is cheaper to multiply by in
+    its separable expansion than in its factorized form: the rule of
+    :func:`gaussian_edge_affinity` with ``backend="auto"``.
+
+    For graphs of ``n1``, ``n2`` nodes and ``m1``, ``m2`` (directed) edges: ``n1^2 n2 + n1 n2^2
+    < m1 m2``. One factorized entry (fancy indexing + sparse products) costs about as much as
+    16 GEMM flops of the separable product (measured on 2 cores, n = 10..50, full graphs), and a
+    separable product costs ``16 (n1^2 n2 + n1 n2^2)`` per expansion term in those units.
+    Array arguments broadcast (one answer per pair).
+
+    Examples
+    --------
+    >>> bool(prefers_separable(20, 20, 380, 380))    # complete graphs
+    True
+    >>> bool(prefers_separable(20, 20, 108, 108))    # Delaunay-like: 54 undirected edges
+    False
+    >>> prefers_separable([20, 20], [6, 2], [380, 380], [30, 2]).tolist()
+    [True, False]
+    """
+    n1, n2, m1, m2 = (np.asarray(v, dtype=np.int64) for v in (n1, n2, m1, m2))
+    return n1 * n1 * n2 + n1 * n2 * n2 < m1 * m2
 
 
 def _small_svd(C: np.ndarray):

@@ -70,6 +70,7 @@ from ..matching import (
     as_affinity,
     gaussian_edge_affinity,
     gaussian_edge_factors,
+    prefers_separable,
 )
 
 __all__ = ["PairAffinities", "all_pairs", "check_graphs", "check_pairs"]
@@ -996,15 +997,15 @@ def _pad_affinity(a: Affinity, n: int) -> Affinity:
 
 def _all_separable(graphs, pairs, sizes) -> bool:
     """Whether ``gaussian_edge_affinity(backend="auto")`` picks the separable form for every pair
-    (its rule: ``n1^2 n2 + n1 n2^2 < m1 m2``, edge counts ``m``), on the graphs' real sizes
-    ``sizes`` (``graphs`` may be padded with isolated dummies: the per-pair function sees the
-    real graphs, and the rule on the padded size refused every pair of a collection holding one
-    small graph, whose per-pair fallback then paid for an expansion per pair and a product
-    without shared factors)."""
+    (:func:`~transync.matching.prefers_separable`), on the graphs' real sizes ``sizes``
+    (``graphs`` may be padded with isolated dummies: the per-pair function sees the real graphs,
+    and the rule on the padded size refused every pair of a collection holding one small graph,
+    whose per-pair fallback then paid for an expansion per pair and a product without shared
+    factors)."""
     m = np.array([int(g.mask.sum()) for g in graphs], dtype=np.int64)
     n = np.asarray(sizes, dtype=np.int64)
-    n1, n2 = n[pairs[:, 0]], n[pairs[:, 1]]
-    return bool(np.all(n1 * n1 * n2 + n1 * n2 * n2 < m[pairs[:, 0]] * m[pairs[:, 1]]))
+    i, j = pairs[:, 0], pairs[:, 1]
+    return bool(np.all(prefers_separable(n[i], n[j], m[i], m[j])))
 
 
 def _check_count(N: int, n_graphs, name: str) -> None:

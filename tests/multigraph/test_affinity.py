@@ -305,6 +305,43 @@ def test_from_factors_against_dense_pairs(rng):
     np.testing.assert_allclose(rect.matvec(Xr)[0].ravel("F"), K @ Xr[0].ravel("F"), rtol=1e-12)
 
 
+@pytest.mark.parametrize("symmetric", [True, False])
+@pytest.mark.parametrize("sizes", [(12, 12), (14, 9)])
+def test_sparse_one_factor_products_run_on_csr_rows(symmetric, sizes, rng, monkeypatch):
+    """One sparse factor per graph (the kernels' padded 0/1 adjacencies, here weighted and
+    also asymmetric) takes the block-diagonal CSR product: the same products as the
+    Kronecker matrices and as the dense GEMM path, transposed ones included, on the whole
+    stack, on subsets and on the few-pair products that stay dense."""
+    import transync.multigraph._affinity as backend
+
+    def factors(Ng, n):
+        M = (rng.random((Ng, 1, n, n)) < 0.08) * rng.uniform(0.5, 2.0, (Ng, 1, n, n))
+        return M + np.swapaxes(M, 2, 3) if symmetric else M
+
+    n1, n2 = sizes
+    F, G = factors(5, n1), factors(6, n2)
+    pairs = np.stack([rng.integers(0, 5, 90), rng.integers(0, 6, 90)], axis=1)
+    node = rng.random((90, n1, n2))
+    A = PairAffinities.from_factors(F, G, pairs, node=node)
+    X = rng.random((90, n1, n2))
+    Y, Yt = A.matvec(X), A.rmatvec(X)
+    assert A._impl._csr not in (None, False)            # the CSR path was taken
+    for p in (0, 7, 89):
+        i, j = pairs[p]
+        K = np.kron(G[j, 0], F[i, 0]) + np.diag(node[p].ravel("F"))
+        np.testing.assert_allclose(Y[p].ravel("F"), K @ X[p].ravel("F"), rtol=1e-12)
+        np.testing.assert_allclose(Yt[p].ravel("F"), K.T @ X[p].ravel("F"), rtol=1e-12)
+    for idx in ([5, 1, 88, 5, 40], [3, 2]):             # a subset, then a few-pair product
+        sub = A.subset(idx)
+        np.testing.assert_allclose(sub.matvec(X[idx]), Y[idx], rtol=1e-12)
+        np.testing.assert_allclose(sub.rmatvec(X[idx]), Yt[idx], rtol=1e-12)
+    monkeypatch.setattr(backend, "_CSR_DENSITY", -1.0)  # the dense GEMM path, same products
+    dense = PairAffinities.from_factors(F, G, pairs, node=node)
+    np.testing.assert_allclose(dense.matvec(X), Y, rtol=1e-12)
+    np.testing.assert_allclose(dense.rmatvec(X), Yt, rtol=1e-12)
+    assert dense._impl._csr is False
+
+
 def test_from_factors_validation(rng):
     F = rng.random((2, 1, 3, 3))
     with pytest.raises(ValueError, match="`F` must have shape"):

@@ -154,6 +154,35 @@ def test_bad_assignment_values_name_the_pair(value, exc, match):
         synchronize_permutations({(0, 1): value, (1, 2): np.array([1, 0])})
 
 
+@pytest.mark.parametrize("value, match", [
+    (np.array([0, 0, 1]), r"`pairwise\[\(1, 2\)\]` must be injective"),
+    (np.array([0, -1, -1, 2]), None),                    # valid: several unmatched nodes
+    (np.array([1, -2, 0]), r"`pairwise\[\(1, 2\)\]` entries must be >= -1, got -2"),
+    (np.array([1, 2**62, 0]), r"`pairwise\[\(1, 2\)\]` entries must be node indices"),
+])
+def test_int_assignments_of_different_lengths_are_checked_together(value, match):
+    """Int arrays of different lengths (the kernels' real-node maps) are validated at once:
+    the same labels as the same maps given as lists (checked one by one), and an invalid map
+    named by its pair."""
+    rng = np.random.default_rng(0)
+    sizes = np.array([3, 4, 5, 4])
+    maps = {}
+    for i in range(4):
+        for j in range(i + 1, 4):
+            a = rng.permutation(5)[: sizes[i]]
+            maps[(i, j)] = np.where(a < sizes[j], a, -1)
+    maps[(1, 2)] = value if len(value) == sizes[1] else value[: sizes[1]]
+    if match is not None:
+        with pytest.raises(ValueError, match=match):
+            synchronize_permutations(maps, sizes=sizes)
+        return
+    fast = synchronize_permutations(maps, sizes=sizes, method="spectral", n_universe=5)
+    slow = synchronize_permutations({k: v.tolist() for k, v in maps.items()}, sizes=sizes,
+                                    method="spectral", n_universe=5)
+    for a, b in zip(fast.labels, slow.labels):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_bad_sizes_keys_and_targets():
     with pytest.raises(ValueError, match=r"`pairwise\[\(1, 2\)\]` targets node 5, beyond object "
                                          r"2's 2 nodes \(mismatched sizes\)"):

@@ -20,7 +20,8 @@ Matchers (:data:`PAIRWISE_MATCHERS`)
 ``"rrwm"``  the lock-step RRWM of :func:`transync.multigraph.run_lockstep` (its default variant,
             which reproduces ``transync.matching.rrwm(K, variant="pygmtools")`` pair by pair) on
             :meth:`PairAffinities.from_factors` with the padded adjacencies as factors:
-            ``O(n^3)`` per pair and step, the ``(n^2, n^2)`` matrix is never formed.
+            ``O(n^3)`` per pair and step, ``O(|E| n)`` on sparse graphs (whose adjacencies
+            the products take as CSR rows), the ``(n^2, n^2)`` matrix is never formed.
 ``"sm"``    spectral matching: power iteration on ``K`` for all pairs of a chunk in lock-step
             (each pair stops on :func:`transync.matching.sm`'s own test, same start, same
             defaults), then the Hungarian rounding of the eigenvector.

@@ -15,7 +15,9 @@ Backends (chosen by the constructors, reported by :attr:`PairAffinities.backend`
                  graph, see :func:`gaussian_edge_factors`) or per pair (user affinities that are
                  all :class:`~transync.matching.SeparableAffinity`). A product is two rounds of
                  large GEMMs, grouped by graph: ``O(P R (n1^2 n2 + n1 n2^2))`` flops, memory
-                 ``O(N R n^2)``.
+                 ``O(N R n^2)``. With one factor per graph (``R = 1``) at most a quarter
+                 nonzero, e.g. the graph kernels' 0/1 adjacencies, a product is two
+                 block-diagonal CSR products instead: ``O(P (nnz(F) n2 + nnz(G) n1))``.
 ``"dense"``      stacked ``(P, n1 n2, n1 n2)`` matrices (pygmtools K blocks handed in dense);
                  one batched ``matmul``.
 ``"sparse"``     one block-diagonal CSR matrix of all pairs (sparse K blocks, or per-pair
@@ -83,6 +85,14 @@ _SCORE_CHUNK_BYTES = 64 << 20
 _CHUNK_BYTES = 256 << 10
 # below this many pairs the separable product chunks the pairs in order (no grouping by graph)
 _FEW_PAIRS = 64
+# A separable product with one factor per graph (e.g. 0/1 adjacencies, the graph kernels'
+# RRWM) runs as two block-diagonal CSR products when the factors hold at most this share of
+# nonzeros, graphs have at least _CSR_MIN_SIZE nodes and the product at least _CSR_MIN_PAIRS
+# pairs. Measured on 2 cores (random graphs, mean degree 3 / 6 / 10, n = 12-96, chunks of
+# 8-276 pairs): 1.1-4x faster than the dense GEMMs, the gain growing with n and sparsity.
+_CSR_DENSITY = 0.25
+_CSR_MIN_SIZE = 8
+_CSR_MIN_PAIRS = 4
 
 
 def all_pairs(n_graphs: int) -> np.ndarray:
@@ -148,8 +158,12 @@ class _Separable:
 
     kind = "separable"
 
-    def __init__(self, F, G, gi, gj, node=None, *, exact=None):
+    def __init__(self, F, G, gi, gj, node=None, *, exact=None, csr=None):
         self.F, self.G = F, G             # (Ng, R, n1, n1), (Ng, R, n2, n2)
+        # one-factor stacks sparse enough for CSR products: {transposed: (F rows, G rows)} of
+        # _CsrRows, shared with subsets; None until the first product decides, False: dense
+        self._csr = csr
+        self._csr_last = None             # (transposed, gi, gj, Bi, Bj) of the last CSR product
         # (E as first graph, E as second graph, sigma2, symmetric): per-graph edge attributes of
         # a Gaussian edge affinity (non-edges: sentinels), for exact O(n^2) candidate scores
         self.exact = exact
@@ -185,13 +199,61 @@ class _Separable:
 
     def subset(self, idx):
         node = None if self.node is None else self.node[idx]
-        return _Separable(self.F, self.G, self.gi[idx], self.gj[idx], node, exact=self.exact)
+        return _Separable(self.F, self.G, self.gi[idx], self.gj[idx], node, exact=self.exact,
+                          csr=self._csr)
+
+    def _csr_rows(self, transposed):
+        """Per-graph CSR rows of the factors (transposed ones if asked) when the product should
+        run on them (one factor per graph, at most :data:`_CSR_DENSITY` dense), else None."""
+        if self._csr is None:
+            self._csr = False
+            F, G = self.F, self.G
+            if self.R == 1 and min(self.n1, self.n2) >= _CSR_MIN_SIZE:
+                dense_f = np.count_nonzero(F) / F.size
+                dense_g = dense_f if G is F else np.count_nonzero(G) / G.size
+                if max(dense_f, dense_g) <= _CSR_DENSITY:
+                    self._csr = {}
+        if self._csr is False:
+            return None
+        if transposed not in self._csr:
+            F, G = self.F[:, 0], self.G[:, 0]
+            if transposed:
+                sym_f = np.array_equal(F, np.swapaxes(F, 1, 2))
+                sym_g = sym_f if G is F else np.array_equal(G, np.swapaxes(G, 1, 2))
+                if sym_f and sym_g:
+                    self._csr[True] = self._csr_rows(False)
+                    return self._csr[True]
+                F, G = np.swapaxes(F, 1, 2), np.swapaxes(G, 1, 2)
+            rows_f = _CsrRows(F)
+            self._csr[transposed] = (rows_f, rows_f if G is F else _CsrRows(G))
+        return self._csr[transposed]
+
+    def _csr_product(self, X, gi, gj, transposed, rows):
+        """``F X G^T`` per pair as two block-diagonal CSR products (``O(nnz n)`` per pair)."""
+        last = self._csr_last
+        if (last is not None and last[0] == transposed and np.array_equal(last[1], gi)
+                and np.array_equal(last[2], gj)):
+            Bi, Bj = last[3], last[4]
+        else:
+            Bi, Bj = rows[0].block(gi), rows[1].block(gj)
+            self._csr_last = (transposed, gi, gj, Bi, Bj)
+        k, n1, n2 = len(X), self.n1, self.n2
+        Z = Bi @ np.ascontiguousarray(X).reshape(k * n1, n2)             # F_p X_p, stacked
+        Zt = np.ascontiguousarray(Z.reshape(k, n1, n2).transpose(0, 2, 1)).reshape(k * n2, n1)
+        W = Bj @ Zt                                                      # G_p (F_p X_p)^T
+        return np.ascontiguousarray(W.reshape(k, n2, n1).transpose(0, 2, 1))
 
     def product(self, X, idx, transposed=False):
         gi = self.gi if idx is None else self.gi[idx]
         gj = self.gj if idx is None else self.gj[idx]
-        Fcat, Gcat = self.cats(transposed)
         k, n1, n2, R = len(X), self.n1, self.n2, self.R
+        rows = self._csr_rows(transposed) if k >= _CSR_MIN_PAIRS else None
+        if rows is not None:
+            Y = self._csr_product(X, gi, gj, transposed, rows)
+            if self.node is not None:
+                Y += (self.node if idx is None else self.node[idx]) * X
+            return Y
+        Fcat, Gcat = self.cats(transposed)
         Y = np.empty((k, n1, n2))
         # Pairs sharing their first graph i share Fcat[i]: for a chunk of them, stage 1 is a
         # stacked matmul Z_p = X_p @ Gcat[j_p] (Gcat, N R n^2 floats, stays in cache), stage 2
@@ -285,6 +347,31 @@ class _Separable:
             u = np.arange(n1)[None, :]
             out += (self.node[p_idx[:, None], u, Ac] * valid).sum(1)
         return out
+
+
+class _CsrRows:
+    """Rows of a stack of ``(Ng, n, n)`` matrices in CSR form, for block-diagonal products."""
+
+    def __init__(self, M):
+        Ng, n, _ = M.shape
+        g, r, c = np.nonzero(M)
+        self.n = n
+        self.counts = np.bincount(g * n + r, minlength=Ng * n).reshape(Ng, n).astype(np.int32)
+        self.cols = c.astype(np.int32)
+        self.data = M[g, r, c]
+        self.start = np.zeros(Ng + 1, np.int64)
+        np.cumsum(self.counts.sum(1), out=self.start[1:])
+
+    def block(self, g):
+        """CSR matrix ``blockdiag(M[g[0]], M[g[1]], ...)`` of shape (k n, k n)."""
+        n, k = self.n, len(g)
+        indptr = np.zeros(k * n + 1, np.int32)
+        np.cumsum(self.counts[g].ravel(), out=indptr[1:])
+        nnz = self.start[g + 1] - self.start[g]
+        pos = np.arange(int(indptr[-1]), dtype=np.int64)
+        pos += np.repeat(self.start[g] - indptr[:-1:n], nnz)
+        cols = self.cols[pos] + np.repeat(np.arange(0, k * n, n, dtype=np.int32), nnz)
+        return sp.csr_matrix((self.data[pos], cols, indptr), shape=(k * n, k * n))
 
 
 def _groups(g):

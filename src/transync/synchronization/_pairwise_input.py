@@ -38,6 +38,7 @@ import scipy.sparse as sp
 from .._validation import MAX_AFFINITY_SCALE, check_array, check_int, check_int_array, short_repr
 from ..permutations import (
     MAX_NODES,
+    UNMATCHED,
     assignment_to_matrix,
     check_assignment,
     matrix_to_assignment,
@@ -334,18 +335,51 @@ def _int_keys(pairwise: Mapping):
 def _as_values(ki, kj, raw, soft: bool, name: str) -> _Values:
     """Validate every value (assignments by ``check_assignment``, 0/1 matrices by
     ``matrix_to_assignment``, soft ones by ``check_array``)."""
-    if (not soft and all(isinstance(v, np.ndarray) and v.ndim == 1 and v.dtype.kind == "i"
-                         for v in raw) and len({v.shape[0] for v in raw}) == 1):
-        stacked = np.stack(raw).astype(np.int64, copy=False)      # fast path: one check
-        bad = (stacked < -1).any(1)
-        srt = np.sort(stacked, axis=1)
-        bad |= ((srt[:, 1:] == srt[:, :-1]) & (srt[:, 1:] >= 0)).any(1)
-        if not bad.any():
-            return _Values(None, stacked)
-        q = int(np.flatnonzero(bad)[0])
-        check_assignment(stacked[q], f"{name}[{(int(ki[q]), int(kj[q]))}]")   # raises
+    if not soft and all(isinstance(v, np.ndarray) and v.ndim == 1 and v.dtype.kind == "i"
+                        for v in raw):
+        lengths = np.fromiter((v.shape[0] for v in raw), np.int64, len(raw))
+        if (lengths == lengths[0]).all():
+            stacked = np.stack(raw).astype(np.int64, copy=False)      # fast path: one check
+            bad = (stacked < -1).any(1)
+            srt = np.sort(stacked, axis=1)
+            bad |= ((srt[:, 1:] == srt[:, :-1]) & (srt[:, 1:] >= 0)).any(1)
+            if not bad.any():
+                return _Values(None, stacked)
+            q = int(np.flatnonzero(bad)[0])
+            check_assignment(stacked[q], f"{name}[{(int(ki[q]), int(kj[q]))}]")   # raises
+        else:
+            items = _ragged_assignments(raw, lengths)
+            if isinstance(items, list):
+                return _Values(items)
+            if items is not None:
+                q = items
+                check_assignment(raw[q], f"{name}[{(int(ki[q]), int(kj[q]))}]")    # raises
     return _Values([_as_value(v, f"{name}[{(i, j)}]", soft)
                     for i, j, v in zip(ki.tolist(), kj.tolist(), raw)])
+
+
+def _ragged_assignments(raw: list, lengths: np.ndarray):
+    """Int assignments of different lengths validated at once (the kernels' real-node maps:
+    ENZYMES' 179 700 pairs in under a second instead of 8 s one by one).
+
+    Returns the list of ``(int64 array, None)`` items; or the index of the first invalid one
+    (an entry below -1 or at least 2**62, a target used twice), for ``check_assignment`` to
+    report; or None when the entries are too large for one sort key (checked one by one).
+    """
+    flat = np.concatenate(raw).astype(np.int64, copy=False)
+    row = np.repeat(np.arange(len(raw)), lengths)
+    bad = np.zeros(len(raw), dtype=bool)
+    bad[row[(flat < UNMATCHED) | (flat >= 2**62)]] = True
+    if not bad.any():
+        used = np.flatnonzero(flat >= 0)
+        top = int(flat[used].max()) + 1 if used.size else 1
+        if top >= 2**62 // len(raw):
+            return None
+        key = np.sort(row[used] * top + flat[used])
+        bad[key[1:][key[1:] == key[:-1]] // top] = True
+    if bad.any():
+        return int(np.flatnonzero(bad)[0])
+    return [(a, None) for a in np.split(flat, np.cumsum(lengths)[:-1])]
 
 
 def _as_value(value, label: str, soft: bool) -> tuple[np.ndarray, int | None]:

@@ -175,6 +175,9 @@ def test_int_assignments_of_different_lengths_are_checked_together(value, match)
     if match is not None:
         with pytest.raises(ValueError, match=match):
             synchronize_permutations(maps, sizes=sizes)
+        maps[(2, 3)] = np.array([0, 1, -5, 2])     # a later invalid map: the first is named
+        with pytest.raises(ValueError, match=match):
+            synchronize_permutations(maps, sizes=sizes)
         return
     fast = synchronize_permutations(maps, sizes=sizes, method="spectral", n_universe=5)
     slow = synchronize_permutations({k: v.tolist() for k, v in maps.items()}, sizes=sizes,

@@ -328,7 +328,9 @@ def prepare(path, key: str | None = None) -> PreparedSet:
 #: 6: pairwise chunks of 8 MiB (RRWM's near-ties fall otherwise) and the matrix-free
 #: eigensolver's wider, deeper Krylov blocks after slow restarts (other eigenvectors within the
 #: same tolerance, so other alignments on noisy sets) (2026-11-29).
-CACHE_VERSION = 6
+#: 7: RRWM's adjacency products as CSR products (other rounding: ties between equal-score
+#: matchings fall otherwise) (2026-11-29).
+CACHE_VERSION = 7
 
 
 def _hash(obj) -> str:

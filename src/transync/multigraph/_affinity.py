@@ -88,7 +88,7 @@ _FEW_PAIRS = 64
 # A separable product with one factor per graph (e.g. 0/1 adjacencies, the graph kernels'
 # RRWM) runs as two block-diagonal CSR products when the factors hold at most this share of
 # nonzeros, graphs have at least _CSR_MIN_SIZE nodes and the product at least _CSR_MIN_PAIRS
-# pairs. Measured on 2 cores (random graphs, mean degree 3 / 6 / 10, n = 12-96, chunks of
+# pairs (fewer pairs: the block matrices would cost more than they save). Measured on 2 cores (random graphs, mean degree 3 / 6 / 10, n = 12-96, chunks of
 # 8-276 pairs): 1.1-4x faster than the dense GEMMs, the gain growing with n and sparsity.
 _CSR_DENSITY = 0.25
 _CSR_MIN_SIZE = 8
@@ -161,9 +161,10 @@ class _Separable:
     def __init__(self, F, G, gi, gj, node=None, *, exact=None, csr=None):
         self.F, self.G = F, G             # (Ng, R, n1, n1), (Ng, R, n2, n2)
         # one-factor stacks sparse enough for CSR products: {transposed: (F rows, G rows)} of
-        # _CsrRows, shared with subsets; None until the first product decides, False: dense
+        # _CsrRows, shared with the subsets made after the first product; None until the first
+        # product decides, False: dense GEMMs
         self._csr = csr
-        self._csr_last = None             # (transposed, gi, gj, Bi, Bj) of the last CSR product
+        self._csr_last = None             # (rows, gi, gj, Bi, Bj) of the last CSR product
         # (E as first graph, E as second graph, sigma2, symmetric): per-graph edge attributes of
         # a Gaussian edge affinity (non-edges: sentinels), for exact O(n^2) candidate scores
         self.exact = exact
@@ -205,38 +206,39 @@ class _Separable:
     def _csr_rows(self, transposed):
         """Per-graph CSR rows of the factors (transposed ones if asked) when the product should
         run on them (one factor per graph, at most :data:`_CSR_DENSITY` dense), else None."""
+        same = self.G is self.F                       # e.g. from_factors(A, A)
         if self._csr is None:
-            self._csr = False
-            F, G = self.F, self.G
+            csr = False
             if self.R == 1 and min(self.n1, self.n2) >= _CSR_MIN_SIZE:
-                dense_f = np.count_nonzero(F) / F.size
-                dense_g = dense_f if G is F else np.count_nonzero(G) / G.size
+                dense_f = np.count_nonzero(self.F) / self.F.size
+                dense_g = dense_f if same else np.count_nonzero(self.G) / self.G.size
                 if max(dense_f, dense_g) <= _CSR_DENSITY:
-                    self._csr = {}
+                    csr = {}
+            self._csr = csr
         if self._csr is False:
             return None
         if transposed not in self._csr:
             F, G = self.F[:, 0], self.G[:, 0]
             if transposed:
                 sym_f = np.array_equal(F, np.swapaxes(F, 1, 2))
-                sym_g = sym_f if G is F else np.array_equal(G, np.swapaxes(G, 1, 2))
+                sym_g = sym_f if same else np.array_equal(G, np.swapaxes(G, 1, 2))
                 if sym_f and sym_g:
                     self._csr[True] = self._csr_rows(False)
                     return self._csr[True]
                 F, G = np.swapaxes(F, 1, 2), np.swapaxes(G, 1, 2)
             rows_f = _CsrRows(F)
-            self._csr[transposed] = (rows_f, rows_f if G is F else _CsrRows(G))
+            self._csr[transposed] = (rows_f, rows_f if same else _CsrRows(G))
         return self._csr[transposed]
 
     def _csr_product(self, X, gi, gj, transposed, rows):
         """``F X G^T`` per pair as two block-diagonal CSR products (``O(nnz n)`` per pair)."""
         last = self._csr_last
-        if (last is not None and last[0] == transposed and np.array_equal(last[1], gi)
+        if (last is not None and last[0] is rows and np.array_equal(last[1], gi)
                 and np.array_equal(last[2], gj)):
             Bi, Bj = last[3], last[4]
         else:
             Bi, Bj = rows[0].block(gi), rows[1].block(gj)
-            self._csr_last = (transposed, gi, gj, Bi, Bj)
+            self._csr_last = (rows, gi.copy(), gj.copy(), Bi, Bj)
         k, n1, n2 = len(X), self.n1, self.n2
         Z = Bi @ np.ascontiguousarray(X).reshape(k * n1, n2)             # F_p X_p, stacked
         Zt = np.ascontiguousarray(Z.reshape(k, n1, n2).transpose(0, 2, 1)).reshape(k * n2, n1)
@@ -365,12 +367,15 @@ class _CsrRows:
     def block(self, g):
         """CSR matrix ``blockdiag(M[g[0]], M[g[1]], ...)`` of shape (k n, k n)."""
         n, k = self.n, len(g)
-        indptr = np.zeros(k * n + 1, np.int32)
-        np.cumsum(self.counts[g].ravel(), out=indptr[1:])
         nnz = self.start[g + 1] - self.start[g]
-        pos = np.arange(int(indptr[-1]), dtype=np.int64)
+        total = int(nnz.sum())
+        index = np.int32 if max(total, k * n) < 2**31 else np.int64     # as scipy would pick
+        indptr = np.zeros(k * n + 1, index)
+        np.cumsum(self.counts[g].ravel(), out=indptr[1:])
+        pos = np.arange(total, dtype=np.int64)
         pos += np.repeat(self.start[g] - indptr[:-1:n], nnz)
-        cols = self.cols[pos] + np.repeat(np.arange(0, k * n, n, dtype=np.int32), nnz)
+        cols = self.cols[pos].astype(index, copy=False)
+        cols += np.repeat(np.arange(0, k * n, n, dtype=index), nnz)
         return sp.csr_matrix((self.data[pos], cols, indptr), shape=(k * n, k * n))
 
 
@@ -699,7 +704,10 @@ class PairAffinities:
         ``K_p = diag(vec(node[p])) + sum_r F[i_p, r] (x) G[j_p, r]`` for ``pairs[p] = (i_p,
         j_p)``, i.e. ``K_p[(u, a), (v, b)] = node[p, u, a] [u == v, a == b] + sum_r F[i_p, r, u,
         v] G[j_p, r, a, b]``; a product is ``Y_p = node_p * X_p + sum_r F_r X_p G_r^T``. With
-        ``F = G = A[:, None]`` (adjacencies) the edge term is ``A_i[u, v] A_j[a, b]``.
+        ``F = G = A[:, None]`` (adjacencies) the edge term is ``A_i[u, v] A_j[a, b]``; such
+        one-factor stacks, when at most a quarter of their entries are nonzero, are multiplied
+        as block-diagonal CSR matrices (``O(nnz n)`` per pair instead of ``O(n^3)``; the same
+        products up to rounding).
 
         Parameters
         ----------

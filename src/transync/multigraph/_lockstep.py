@@ -317,10 +317,12 @@ class _RRWMPygmtools(_Batch):
         ``| ||v||_1 - ||raw||_1 | / sqrt(n1 n2)`` with ``||v||_1 = 1`` and ``||raw||_1 = s``,
         and pygmtools' un-normalised walk ``raw`` almost never has unit mass (the test on it
         practically never fires), so one of the two distances is usually skipped. Skipped only
-        with a margin of two: the outcome is the same as computing both.
+        with a margin of two and 1e-10 for the rounding of both masses: the outcome is the
+        same as computing both.
         """
         d = _dist(v, va)
-        close = np.flatnonzero(np.abs(1.0 - s) < 2.0 * self.tol * np.sqrt(self.n1 * self.n2))
+        bound = 2.0 * self.tol * np.sqrt(self.n1 * self.n2) + 1e-10
+        close = np.flatnonzero(np.abs(1.0 - s) < bound)
         if len(close):
             d[close] = np.minimum(d[close], _dist(v[close], raw[close]))
         return d < self.tol

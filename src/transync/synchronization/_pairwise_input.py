@@ -368,15 +368,15 @@ def _ragged_assignments(raw: list, lengths: np.ndarray):
     """
     flat = np.concatenate(raw).astype(np.int64, copy=False)
     row = np.repeat(np.arange(len(raw)), lengths)
+    out_of_range = (flat < UNMATCHED) | (flat >= 2**62)
     bad = np.zeros(len(raw), dtype=bool)
-    bad[row[(flat < UNMATCHED) | (flat >= 2**62)]] = True
-    if not bad.any():
-        used = np.flatnonzero(flat >= 0)
-        top = int(flat[used].max()) + 1 if used.size else 1
-        if top >= 2**62 // len(raw):
-            return None
-        key = np.sort(row[used] * top + flat[used])
-        bad[key[1:][key[1:] == key[:-1]] // top] = True
+    bad[row[out_of_range]] = True
+    used = np.flatnonzero((flat >= 0) & ~out_of_range)
+    top = int(flat[used].max()) + 1 if used.size else 1
+    if top >= 2**62 // len(raw):
+        return None
+    key = np.sort(row[used] * top + flat[used])
+    bad[key[1:][key[1:] == key[:-1]] // top] = True           # a target used twice
     if bad.any():
         return int(np.flatnonzero(bad)[0])
     return [(a, None) for a in np.split(flat, np.cumsum(lengths)[:-1])]

@@ -88,8 +88,9 @@ _FEW_PAIRS = 64
 # A separable product with one factor per graph (e.g. 0/1 adjacencies, the graph kernels'
 # RRWM) runs as two block-diagonal CSR products when the factors hold at most this share of
 # nonzeros, graphs have at least _CSR_MIN_SIZE nodes and the product at least _CSR_MIN_PAIRS
-# pairs (fewer pairs: the block matrices would cost more than they save). Measured on 2 cores (random graphs, mean degree 3 / 6 / 10, n = 12-96, chunks of
-# 8-276 pairs): 1.1-4x faster than the dense GEMMs, the gain growing with n and sparsity.
+# pairs (with fewer, building the block matrices costs more than it saves). Measured on 2
+# cores (random graphs, mean degree 3 / 6 / 10, n = 12-96, chunks of 8-276 pairs): 1.1-4x
+# faster than the dense GEMMs, the gain growing with n and sparsity.
 _CSR_DENSITY = 0.25
 _CSR_MIN_SIZE = 8
 _CSR_MIN_PAIRS = 4

@@ -85,6 +85,9 @@ _SCORE_CHUNK_BYTES = 64 << 20
 _CHUNK_BYTES = 256 << 10
 # below this many pairs the separable product chunks the pairs in order (no grouping by graph)
 _FEW_PAIRS = 64
+# graphs of at most this many nodes do not decide whether a collection's Gaussian edge
+# affinity takes the per-graph separable expansion (see _all_separable)
+_TINY_GRAPH = 2
 # A separable product with one factor per graph (e.g. 0/1 adjacencies, the graph kernels'
 # RRWM) runs as two block-diagonal CSR products when the factors hold at most this share of
 # nonzeros, graphs have at least _CSR_MIN_SIZE nodes and the product at least _CSR_MIN_PAIRS
@@ -1097,11 +1100,16 @@ def _all_separable(graphs, pairs, sizes) -> bool:
     (``graphs`` may be padded with isolated dummies: the per-pair function sees the real graphs,
     and the rule on the padded size refused every pair of a collection holding one small graph,
     whose per-pair fallback then paid for an expansion per pair and a product without shared
-    factors)."""
+    factors). Pairs with a graph of at most :data:`_TINY_GRAPH` nodes do not count, as long as
+    one pair does: the rule prefers their factorized form, but either form costs them
+    ``O(n)`` per expansion term, while per-pair affinities for the whole collection cost an
+    expansion per pair and the per-pair loop."""
     m = np.array([int(g.mask.sum()) for g in graphs], dtype=np.int64)
     n = np.asarray(sizes, dtype=np.int64)
     i, j = pairs[:, 0], pairs[:, 1]
-    return bool(np.all(prefers_separable(n[i], n[j], m[i], m[j])))
+    prefer = prefers_separable(n[i], n[j], m[i], m[j])
+    tiny = np.minimum(n[i], n[j]) <= _TINY_GRAPH
+    return bool(np.all(prefer | tiny) and np.any(prefer))
 
 
 def _check_count(N: int, n_graphs, name: str) -> None:

@@ -49,6 +49,24 @@ def test_transfer_points_round_trip_and_composition():
         transfer_points(np.stack([A, B, A]), np.zeros((2, 5, 2)))
 
 
+def test_transfer_points_ignores_the_scale_of_the_homography():
+    """A homography of huge entries (1e308 I) overflowed its products: every point came back
+    inf or NaN, and corner_error called it infinitely wrong."""
+    rng = np.random.default_rng(3)
+    H = np.stack(_random_homographies(rng, 3))
+    pts = rng.uniform(0, 500, (6, 2))
+    ref = transfer_points(H, pts)
+    for power in (-1000, -200, 200, 1000):      # exact powers of two: the same bits
+        np.testing.assert_array_equal(transfer_points(np.ldexp(H, power), pts), ref)
+    for scale in (1e308, 1e-308):
+        np.testing.assert_allclose(transfer_points(H * scale, pts), ref, rtol=1e-12)
+    big = transfer_points(np.eye(3) * 1e297, [[1e12, 1e12]])
+    np.testing.assert_allclose(big, [[1e12, 1e12]], rtol=1e-12)
+    # a homography that is not finite, or all zero, stays visibly missing
+    assert not np.isfinite(transfer_points(np.full((3, 3), np.nan), pts)).any()
+    assert not np.isfinite(transfer_points(np.zeros((3, 3)), pts)).any()
+
+
 def test_translation_and_corners():
     T = translation(3, -2)
     np.testing.assert_array_equal(transfer_points(T, image_corners((4, 3))),

@@ -154,6 +154,26 @@ def test_cycle_inconsistency_sizes_make_the_direction_irrelevant():
         cycle_inconsistency({(-1, 2): np.array([0])})
 
 
+def test_cycle_inconsistency_refuses_maps_that_give_an_object_two_sizes():
+    """Without `sizes`, object 0 as a source of 3 and of 2 nodes, or object 1 a target of node
+    4 and a source of 2 nodes, was scored (cycle errors 0.33 and 1.0) instead of refused, as
+    `sizes` and the synchronizers refuse it."""
+    from transync.permutations import cycle_inconsistency
+
+    a = np.arange
+    with pytest.raises(ValueError, match=r"`pairwise\[\(0, 2\)\]` has 2 entries, but "
+                                         r"`pairwise\[\(0, 1\)\]` has 3"):
+        cycle_inconsistency({(0, 1): a(3), (1, 2): a(3), (0, 2): a(2)})
+    with pytest.raises(ValueError, match=r"`pairwise\[\(0, 1\)\]` maps a node to node 4 of "
+                                         r"object 1, but `pairwise\[\(1, 2\)\]` gives object 1 "
+                                         r"2 nodes"):
+        cycle_inconsistency({(0, 1): np.array([4, 0]), (1, 2): a(2), (0, 2): a(2)})
+    # partial maps between objects of different sizes, both directions given: consistent
+    p = {(0, 1): np.array([0, 1, -1]), (1, 0): np.array([0, 1]), (1, 2): np.array([0, -1]),
+         (2, 0): np.array([2, 0, 1, -1])}
+    assert cycle_inconsistency(p) == cycle_inconsistency(p, sizes=[3, 2, 4])
+
+
 def test_cycle_inconsistency_of_maps_into_empty_objects():
     # the last object seen only through empty maps was not counted, and an internal `pairs`
     # argument was named in the error

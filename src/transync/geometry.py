@@ -129,6 +129,11 @@ def image_corners(size) -> np.ndarray:
     return np.array([[0.0, 0.0], [w - 1, 0.0], [w - 1, h - 1], [0.0, h - 1]])
 
 
+#: homographies with an entry of magnitude above this (or all below its inverse) are rescaled
+#: by a power of two before :func:`transfer_points` applies them
+_SCALE_LIMIT = 2.0 ** 100
+
+
 def transfer_points(H, points) -> np.ndarray:
     """Map 2-D points through homographies: ``x' ~ H [x, 1]``, then dehomogenize.
 
@@ -142,7 +147,9 @@ def transfer_points(H, points) -> np.ndarray:
     Returns
     -------
     ndarray of shape (..., k, 2)
-        Points at infinity come back as ``inf``/``nan``; callers decide what that means.
+        Points at infinity come back as ``inf``/``nan``; callers decide what that means. A
+        homography's scale does not matter: one with entries as large as ``1e308`` is brought to
+        a safe scale (by a power of two, exactly) before it is applied.
 
     Raises
     ------
@@ -168,6 +175,13 @@ def transfer_points(H, points) -> np.ndarray:
         raise ValueError(f"the leading dimensions of `points` {pts.shape[:-2]} and `H` "
                          f"{H.shape[:-2]} do not broadcast") from None
     with np.errstate(all="ignore"):
+        # a homography is defined up to scale: one of huge or tiny entries (1e308 I) is brought
+        # to entries below 1 by a power of two (exact), so that its products cannot overflow
+        top = np.abs(H).max(axis=(-2, -1), initial=0.0)
+        far = np.isfinite(top) & (top > 0) & ((top > _SCALE_LIMIT) | (top < 1 / _SCALE_LIMIT))
+        if far.any():
+            H = np.where(far[..., None, None],
+                         np.ldexp(H, -np.frexp(np.where(far, top, 1.0))[1][..., None, None]), H)
         p = pts @ H[..., :2, :2].swapaxes(-1, -2) + H[..., None, :2, 2]
         z = pts @ H[..., 2, :2][..., :, None] + H[..., 2, 2][..., None, None]
         return p / z

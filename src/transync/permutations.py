@@ -511,7 +511,8 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
     TypeError
         ``pairwise`` is not a mapping, or holds non-integer assignments.
     ValueError
-        Invalid assignments or ``max_triangles``.
+        Invalid assignments or ``max_triangles``; maps that give an object two sizes (two
+        lengths as a source, or a target beyond its length as a source).
 
     Examples
     --------
@@ -530,6 +531,8 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
             raise ValueError(f"`sizes` must be non-negative node counts, got {given.tolist()}")
     arrays: dict[tuple[int, int], np.ndarray] = {}
     seen: dict[int, int] = {}
+    source: dict[int, tuple[int, tuple[int, int]]] = {}   # object -> (map length, first pair)
+    target: dict[int, tuple[int, tuple[int, int]]] = {}   # object -> (largest target, its pair)
     for key, a in pairwise.items():
         if (not isinstance(key, tuple) or len(key) != 2
                 or not all(isinstance(k, (int, np.integer)) and not isinstance(k, bool)
@@ -546,9 +549,20 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
             raise ValueError(f"`pairwise[{(i, j)}]` has {a.shape[0]} entries, but `sizes` "
                              f"gives object {i} {int(given[i])} nodes")
         arrays[(i, j)] = a
+        if given is None and i in source and source[i][0] != a.shape[0]:
+            raise ValueError(f"`pairwise[{(i, j)}]` has {a.shape[0]} entries, but "
+                             f"`pairwise[{source[i][1]}]` has {source[i][0]}: object {i} cannot "
+                             f"have both sizes")
+        source.setdefault(i, (a.shape[0], (i, j)))
         seen[i] = max(seen.get(i, 0), a.shape[0])
         if a.size and a.max() >= 0:
             seen[j] = max(seen.get(j, 0), int(a.max()) + 1)
+            if int(a.max()) >= target.get(j, (-1,))[0]:
+                target[j] = (int(a.max()), (i, j))
+    for g, (top, key) in target.items():
+        if given is None and g in source and top >= source[g][0]:
+            raise ValueError(f"`pairwise[{key}]` maps a node to node {top} of object {g}, but "
+                             f"`pairwise[{source[g][1]}]` gives object {g} {source[g][0]} nodes")
     if not arrays:
         return {"n_triangles": 0, "inconsistent_triangles": 0.0, "cycle_error": 0.0,
                 "sampled": False}

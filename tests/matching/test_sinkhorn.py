@@ -275,6 +275,51 @@ def test_sinkhorn_batch_refuses_kernels_it_cannot_normalise():
             sinkhorn_augmented_batch(M, tol=1e-3, max_iter=10)
 
 
+def test_sinkhorn_batch_refuses_kernels_whose_sums_overflow():
+    from transync.matching import sinkhorn_augmented_batch, sinkhorn_batch
+
+    # a row sum of two entries of 1e308 is inf: the result was all NaN, with no error
+    with pytest.raises(ValueError, match=r"`A` has an entry 1e\+308.*overflow"):
+        sinkhorn_batch(np.full((1, 2, 2), 1e308), tol=1e-9)
+    with pytest.raises(ValueError, match=r"`M` has an entry 1e\+308.*overflow"):
+        sinkhorn_augmented_batch(np.full((1, 3, 3), 1e308), tol=1e-9, max_iter=20)
+    # large but safe: the same result as the kernel scaled down
+    A = np.random.default_rng(0).random((3, 4, 5)) + 0.1
+    big = sinkhorn_batch(A * 1e295, tol=1e-12).X
+    assert np.all(np.isfinite(big))
+    np.testing.assert_allclose(big, sinkhorn_batch(A, tol=1e-12).X, rtol=1e-9)
+
+
+@pytest.mark.parametrize("which, exc, match", [
+    ([2], ValueError, r"`which` must hold indices in \[0, 2\).*got 2"),
+    ([-1], ValueError, r"`which` must hold indices in \[0, 2\).*got -1"),
+    ([True], ValueError, r"`which` as a boolean mask must have shape \(2,\)"),
+    ([0.0], TypeError, "`which` must hold matrix indices"),
+    ("0", TypeError, "`which`"),
+    ([[0]], ValueError, "`which` must have 1 dimensions"),
+])
+def test_sinkhorn_augmented_batch_checks_which(which, exc, match):
+    from transync.matching import sinkhorn_augmented_batch
+
+    M = np.ones((2, 3, 3))
+    with pytest.raises(exc, match=match):
+        sinkhorn_augmented_batch(M, tol=1e-9, max_iter=5, which=which)
+    assert np.all(M == 1.0)                     # refused before any work
+
+
+def test_sinkhorn_augmented_batch_which_as_indices_or_mask():
+    from transync.matching import sinkhorn_augmented_batch
+
+    base = np.random.default_rng(1).random((3, 4, 4)) + 0.1
+    full = base.copy()
+    sinkhorn_augmented_batch(full, tol=1e-9, max_iter=50)
+    for which in ([0, 2], np.array([True, False, True])):
+        M = base.copy()
+        sinkhorn_augmented_batch(M, tol=1e-9, max_iter=50, which=which)
+        np.testing.assert_array_equal(M[[0, 2]], full[[0, 2]])
+        np.testing.assert_array_equal(M[1], base[1])
+
+
 def test_sinkhorn_batch_equals_the_two_dimensional_call():
     from transync.matching import sinkhorn_batch
 

@@ -108,3 +108,7 @@ def test_corner_error_of_identical_maps_is_zero_or_refused():
     with pytest.raises(ValueError, match=r"`image_size` .* entries in \[1, 1e\+12\]"):
         corner_error(H, H, image_size=(1e308, 1e308))
     assert corner_error(H, H, image_size=(1e12, 1e12)) == 0.0
+    # a homography's scale does not matter, up to 1e308 (was inf: its products overflowed)
+    for big in (1e308 * np.eye(3), 1e297 * H):
+        assert corner_error(big, H, image_size=(640, 480)) < 1e-9
+        assert corner_error(H, big, image_size=(1e12, 1e12)) < 1e-3

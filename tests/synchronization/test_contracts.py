@@ -60,6 +60,17 @@ def test_matcheig_pairwise_is_blockwise_rounding_on_a_disconnected_problem():
     np.testing.assert_array_equal(res.pairwise(1, 3), a.true_pairwise(1, 3))
 
 
+def test_matcheig_pairwise_of_an_object_with_itself_is_the_identity():
+    """An object alone in its component (no embedding) gave all -1 for pairwise(g, g), while
+    connected objects and every other method gave the identity."""
+    res = synchronize_permutations({(0, 1): np.arange(3)}, sizes=[3, 3, 2], method="matcheig")
+    for g, n in enumerate([3, 3, 2]):
+        np.testing.assert_array_equal(res.pairwise(g, g), np.arange(n))
+    np.testing.assert_array_equal(res.pairwise(2, 0), [-1, -1])       # still no partner
+    T = res.to_matrix()
+    np.testing.assert_array_equal(T[6:, 6:], np.eye(2))
+
+
 @pytest.mark.parametrize("fully_corrective", [False, True])
 def test_birkhoff_result_carries_a_matching_pickles_and_has_to_matrix(data, fully_corrective):
     X = _soft(data)
@@ -135,6 +146,16 @@ def test_empty_mask_is_a_clear_error(fn, pw):
 
 
 # ------------------------------------------------------------------------------- bad inputs
+
+@pytest.mark.parametrize("fn", [synchronize_permutations, synchronize_doubly_stochastic])
+@pytest.mark.parametrize("arr", [np.zeros((3, 3), int), np.arange(3), np.array(5.0)])
+def test_an_array_of_too_few_dimensions_is_named_as_an_array(fn, arr):
+    """A (3, 3) int array was read as an iterable of triples: 'must hold (i, j, map) triples,
+    got array([0, 0, 0])'."""
+    with pytest.raises(ValueError, match=r"`pairwise` as an array must have shape \(N, N, "
+                                         r"\.\.\.\), one map per pair of objects, got shape"):
+        fn(arr)
+
 
 @pytest.mark.parametrize("value, exc, match", [
     (np.array([np.nan, 0, 1]), TypeError,

@@ -42,8 +42,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import logsumexp
 
-from .._validation import (MAX_ITER, MIN_AFFINITY_SCALE, check_array, check_choice, check_int,
-                           check_positive)
+from .._validation import (MAX_AFFINITY_SCALE, MAX_ITER, MIN_AFFINITY_SCALE, check_array,
+                           check_choice, check_int, check_int_array, check_positive)
 
 __all__ = ["SinkhornBatchOutput", "SinkhornOutput", "sinkhorn_augmented_batch", "sinkhorn_batch",
            "sinkhorn_normalize"]
@@ -430,8 +430,8 @@ def sinkhorn_batch(A, *, slack: str = "mass", domain: str = "scaling", tol: floa
     Raises
     ------
     ValueError, TypeError
-        ``A`` not a non-empty 3-d stack (negative, non-finite or with an all-zero row or column
-        in the scaling domain), unknown ``slack`` or ``domain``, bad counts or tolerances, a
+        ``A`` not a non-empty 3-d stack (negative, non-finite, with an all-zero row or column
+        or with entries so large that a row or column sum overflows, in the scaling domain), unknown ``slack`` or ``domain``, bad counts or tolerances, a
         ``warm_start`` of the wrong shape, not positive and finite, or given in the log domain.
 
     Examples
@@ -500,7 +500,8 @@ def sinkhorn_augmented_batch(M, *, tol: float, max_iter: int, which=None) -> Non
     max_iter : int
         Maximum sweeps.
     which : array_like of int or bool, optional
-        The matrices of the stack to normalize (default: all).
+        The matrices of the stack to normalize (default: all): indices in ``[0, b)`` or a
+        boolean mask of length ``b``.
 
     Returns
     -------
@@ -511,7 +512,10 @@ def sinkhorn_augmented_batch(M, *, tol: float, max_iter: int, which=None) -> Non
     ------
     ValueError
         ``M`` not a writable float stack of that shape, negative or non-finite entries, an
-        all-zero row or column, bad ``tol`` or ``max_iter``.
+        all-zero row or column, entries so large that a row or column sum overflows, bad
+        ``tol``, ``max_iter`` or ``which``.
+    TypeError
+        ``which`` not integers or booleans.
 
     Examples
     --------
@@ -530,7 +534,26 @@ def sinkhorn_augmented_batch(M, *, tol: float, max_iter: int, which=None) -> Non
     tol = check_positive(tol, "tol")
     max_iter = check_int(max_iter, "max_iter", minimum=1, maximum=MAX_ITER)
     _check_kernels(M, "M")
+    if which is not None:
+        which = _check_which(which, len(M))
     _batch_augmented(M, tol=tol, max_iter=max_iter, which=which)
+
+
+def _check_which(which, b: int) -> np.ndarray:
+    """``which`` as the indices of the matrices of a stack of ``b``: a boolean mask of length
+    ``b`` or integers in ``[0, b)``."""
+    arr = np.asarray(which) if not isinstance(which, (str, bytes)) else None
+    if arr is not None and arr.dtype.kind == "b":
+        if arr.shape != (b,):
+            raise ValueError(f"`which` as a boolean mask must have shape ({b},), one entry per "
+                             f"matrix of `M`, got shape {arr.shape}")
+        return np.flatnonzero(arr)
+    idx = check_int_array(which, "which", ndim=1, what="matrix indices (or a boolean mask)")
+    bad = (idx < 0) | (idx >= b)
+    if bad.any():
+        raise ValueError(f"`which` must hold indices in [0, {b}) of the matrices of `M`, got "
+                         f"{int(idx[bad][0])}")
+    return idx
 
 
 def _kernel_stats(A: np.ndarray):
@@ -557,3 +580,7 @@ def _check_kernels(A: np.ndarray, name: str, hint: str = "rescale it", *, stats=
     if top < MIN_AFFINITY_SCALE:
         raise ValueError(f"`{name}` has a row or column whose largest entry is {top:.3g}, below "
                          f"{MIN_AFFINITY_SCALE:g}: its scaling overflows; {hint}")
+    big, n = float(rmax.max()), max(A.shape[-2:])
+    if big > MAX_AFFINITY_SCALE / n:
+        raise ValueError(f"`{name}` has an entry {big:.3g}, whose row and column sums (up to "
+                         f"{n} entries) can exceed {MAX_AFFINITY_SCALE:g} and overflow; {hint}")

@@ -148,6 +148,9 @@ def observations(pairwise, mask, *, name: str = "pairwise", dense_both: bool = F
         out = _mapping_observations(pairwise, name)
     elif isinstance(pairwise, np.ndarray) and pairwise.ndim >= 3:
         return _dense_observations(pairwise, mask, name=name, dense_both=dense_both)
+    elif isinstance(pairwise, np.ndarray) and pairwise.dtype != object:
+        raise ValueError(f"`{name}` as an array must have shape (N, N, ...), one map per pair "
+                         f"of objects, got shape {pairwise.shape}")
     else:
         if isinstance(pairwise, (str, bytes)) or not hasattr(pairwise, "__iter__"):
             raise TypeError(f"`{name}` must be a dict {{(i, j): map}}, an iterable of (i, j, map) "

@@ -56,6 +56,8 @@ class BlockRounding:
     threshold: float
 
     def __call__(self, i: int, j: int) -> np.ndarray:
+        if i == j:                          # every node is its own partner (as in to_matrix)
+            return np.arange(int(self.sizes[i]), dtype=np.int64)
         ci, cj = int(self.component[i]), int(self.component[j])
         V = self.embeddings[ci]
         if ci != cj or V is None:

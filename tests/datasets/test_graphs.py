@@ -5,6 +5,7 @@ from transync.datasets import (
     make_graph_collection,
     make_pairwise_problem,
     make_point_matching_problem,
+    make_subgraph_collection,
 )
 from transync.permutations import check_assignment
 
@@ -72,6 +73,16 @@ def test_graph_collection_flip_changes_topology():
 def test_generator_validation(kw, msg):
     with pytest.raises((ValueError, TypeError), match=msg):
         make_pairwise_problem(**kw)
+
+
+@pytest.mark.parametrize("make", [make_pairwise_problem, make_point_matching_problem,
+                                  make_graph_collection, make_subgraph_collection])
+def test_a_deformation_too_large_is_named(make):
+    """deformation=1e308 was refused later as "`edge_features` must be finite" (or as a point
+    magnitude), depending on the seed."""
+    with pytest.raises(ValueError, match=r"`deformation` must be at most 1e\+100 .* got 1e\+308"):
+        make(deformation=1e308, rng=0)
+    assert make(deformation=1e100, rng=0) is not None
 
 
 def test_collection_ground_truth_is_a_multimatching():

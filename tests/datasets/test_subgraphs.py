@@ -98,6 +98,8 @@ def test_accuracy_convenience():
     (dict(p_keep=0.0), ValueError, "p_keep"),
     (dict(p_keep=1.2), ValueError, "p_keep"),
     (dict(p_keep=(0.0, 0.5)), ValueError, "p_keep"),
+    (dict(p_keep=1.5), ValueError, r"`p_keep` must lie in \(0, 1\], got 1.5"),
+    (dict(p_keep=float("nan")), ValueError, r"`p_keep` must lie in \(0, 1\], got nan"),
     (dict(p_keep=(0.9, 0.5)), ValueError, "p_keep"),
     (dict(p_keep=(0.1, 0.5, 0.9)), TypeError, "p_keep"),
     (dict(p_keep="high"), TypeError, "p_keep"),

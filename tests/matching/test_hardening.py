@@ -570,3 +570,54 @@ def test_subnormal_sigma2_refused_without_overflow_warnings():
         for backend in ("factorized", "dense"):
             K = gaussian_edge_affinity(h1, h2, sigma2=5e-324, backend=backend).to_dense()
             assert np.isfinite(K).all() and K.max() == 1.0
+
+
+def _user_affinity(kind):
+    """A user's Affinity subclass whose matvec returns NaN, None or a wrong shape."""
+    from transync.matching import Affinity
+
+    class Faulty(Affinity):
+        def __init__(self, n1, n2):
+            self.n1, self.n2 = n1, n2
+
+        def matvec(self, X):
+            Y = np.ones((self.n1, self.n2))
+            if kind == "nan":
+                Y[0, 0] = np.nan
+            return {"nan": Y, "none": None, "shape": Y[:1], "ok": Y}[kind]
+
+        def diag(self):
+            return np.ones((self.n1, self.n2))
+
+        def to_dense(self):
+            return np.ones((self.n1 * self.n2,) * 2)
+
+    return Faulty
+
+
+@pytest.mark.parametrize("method", ["rrwm", "ga", "pf", "sm", "ipfp"])
+@pytest.mark.parametrize("kind, exc, match", [
+    ("nan", ValueError, r"`affinity`\.matvec\(\) \(a Faulty\) returned 1 NaN or infinite"),
+    ("none", TypeError, r"`affinity`\.matvec\(\) \(a Faulty\) must return a float array of "
+                        r"shape \(4, 4\), got None"),
+    ("shape", ValueError, r"`affinity`\.matvec\(\) \(a Faulty\) must return an array of shape "
+                          r"\(4, 4\), got shape \(1, 4\)"),
+])
+def test_a_user_affinity_with_bad_output_is_named(method, kind, exc, match):
+    """A user's Affinity subclass returning NaN, None or a wrong shape from matvec surfaced as
+    "`score` must be finite", "float() argument must be ... NoneType" or a reshape error."""
+    from transync.matching import as_affinity
+
+    rng = np.random.default_rng(0)
+    g1 = Graph.from_points(rng.random((4, 2)), edges="full")
+    with pytest.raises(exc, match=match):
+        match_graphs(g1, g1, method=method, affinity=_user_affinity(kind)(4, 4))
+    ok = _user_affinity("ok")(4, 4)
+    assert match_graphs(g1, g1, method=method, affinity=ok).assignment.shape == (4,)
+    # the library's own affinities pass through as they are; a user's is wrapped, and keeps
+    # its own attributes reachable
+    own = as_affinity(np.eye(16), n1=4, n2=4)
+    assert as_affinity(own) is own
+    ok.tag = "mine"
+    wrapped = as_affinity(ok)
+    assert wrapped is not ok and wrapped.tag == "mine" and wrapped.score(np.eye(4)) == 4.0

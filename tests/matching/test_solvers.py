@@ -336,6 +336,10 @@ def test_validation_errors(rng):
         ga(K, n1=4, n2=4, beta_rate=1.0)
     with pytest.raises(ValueError, match=r"`beta_rate`=1.000000001 anneals .* more than 10000"):
         ga(K, n1=4, n2=4, beta_rate=1 + 1e-9)                 # ~3e9 levels: refused, no hang
+    # a huge beta_max over a tiny beta0: the ratio overflowed (raw OverflowError from int(inf))
+    with pytest.raises(ValueError, match=r"`beta_rate`=1.075 anneals from beta0=1e-300 to "
+                                         r"beta_max=1e\+300 in 1.9\d+e\+04 levels"):
+        ga(K, n1=4, n2=4, beta0=1e-300, beta_max=1e300)
     with pytest.raises(ValueError, match="`min_step` must be <="):
         pf(K, n1=4, n2=4, step=0.01, min_step=0.1)
     with pytest.raises(ValueError, match="`method` must be one of"):

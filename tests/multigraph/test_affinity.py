@@ -356,6 +356,14 @@ def test_from_factors_validation(rng):
         PairAffinities.from_factors(F, F, [[0, 1]], node=np.ones((1, 3, 2)))
     with pytest.raises(ValueError, match="must have 4 dimensions"):
         PairAffinities.from_factors(F[0], F, [[0, 1]])
+    # factors whose products overflow (1e154^2 * 16 > 1e300): scores were NaN, products inf
+    big = np.ones((3, 1, 4, 4)) * 1e154
+    with pytest.raises(ValueError, match="`F, G` is too large to match on"):
+        PairAffinities.from_factors(big, big, [[0, 1], [0, 2], [1, 2]])
+    with pytest.raises(ValueError, match="`F, G, node` is too large to match on"):
+        PairAffinities.from_factors(F, F, [[0, 1]], node=np.full((1, 3, 3), 1e300))
+    ok = PairAffinities.from_factors(big * 1e-14, big * 1e-14, [[0, 1]])
+    assert np.isfinite(ok.score(np.eye(4)[None])).all()
 
 
 @pytest.mark.parametrize("with_node", [False, True])

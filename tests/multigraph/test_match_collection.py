@@ -232,6 +232,37 @@ def test_graphs_without_points_for_a_length_affinity_are_named(attribute):
     assert "graphs[0]" in text
 
 
+@pytest.mark.parametrize("mode", ["online", "offline"])
+def test_a_user_affinity_with_bad_output_is_named_with_its_pair(mode):
+    """A user's Affinity subclass whose matvec returns NaN or None: "`score` must be finite",
+    "`M` must be finite and non-negative", raw AxisError or "bad operand type for abs()"
+    depending on the solver, never naming `affinity` or the pair."""
+    from transync.matching import Affinity
+
+    class Faulty(Affinity):
+        def __init__(self, n1, n2, bad):
+            self.n1, self.n2, self.bad = n1, n2, bad
+
+        def matvec(self, X):
+            return None if self.bad else np.ones((self.n1, self.n2))
+
+        def diag(self):
+            return np.ones((self.n1, self.n2))
+
+        def to_dense(self):
+            return np.ones((self.n1 * self.n2,) * 2)
+
+    p = make_graph_collection(n_graphs=3, n_inliers=4, rng=0)
+    aff = lambda a, b: Faulty(a.n_nodes, b.n_nodes, bad=a is p.graphs[1])   # noqa: E731
+    for solver in ("rrwm", "ga", "pf"):
+        with pytest.raises(TypeError, match=r"`affinity\(graphs\[1\], graphs\[2\]\)`\.matvec"
+                                            r"\(\) \(a Faulty\) must return a float array"):
+            match_collection(p.graphs, solver=solver, mode=mode, affinity=aff, progress=False)
+    good = lambda a, b: Faulty(a.n_nodes, b.n_nodes, bad=False)     # noqa: E731
+    res = match_collection(p.graphs, mode=mode, affinity=good, progress=False)
+    assert res.consistency == 1.0
+
+
 def test_affinity_of_the_wrong_kind_is_refused():
     p = make_graph_collection(n_graphs=3, n_inliers=5, rng=0)
     with pytest.raises(TypeError, match="must return a transync.matching.Affinity"):
@@ -294,7 +325,11 @@ def test_accuracy_names_a_truth_of_the_wrong_shape():
     ({"affinity": {("a", "b"): np.zeros((16, 16))}}, TypeError, "keys"),
     ({"affinity": {(0, 1): np.ones((16, 16))}}, ValueError, r"`affinity` has no block for pair"),
     ({"sync": None, "sync_every": 3}, ValueError, "sync_every"),
-    ({"mode": "offline", "damping": 0.5}, ValueError, "damping"),
+    ({"mode": "offline", "damping": 0.5}, ValueError,
+     r"`damping` steers .*; solver='rrwm' with sync='birkhoff' and mode='offline' runs none"),
+    ({"mode": "offline", "sync_every": 2}, ValueError, r"and mode='offline' runs none"),
+    ({"solver": "ga", "options": {"beta0": 1e-300, "beta_max": 1e300}}, ValueError,
+     "`beta_rate`=1.075 anneals from beta0=1e-300"),
     ({"refine": "no"}, TypeError, "refine"),
     ({"options": {"maxiter": 3}}, TypeError, "`options` has unknown option.*'maxiter'"),
     ({"options": [1]}, TypeError, "`options` must be a dict"),

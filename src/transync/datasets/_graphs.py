@@ -129,11 +129,27 @@ def _sym_mask(rng, n, p):
     return M | M.T
 
 
+#: largest ``deformation`` the generators take: noise this large carries no structure, and
+#: beyond it the attributes or points (and their sums and distances) could overflow float64
+MAX_DEFORMATION = 1e100
+
+
+def check_deformation(deformation) -> float:
+    """``deformation`` as a float in ``[0, MAX_DEFORMATION]``; names it otherwise (1e308 was
+    refused later as "`edge_features` must be finite", or as a point magnitude)."""
+    sigma = check_positive(deformation, "deformation", allow_zero=True)
+    if sigma > MAX_DEFORMATION:
+        raise ValueError(f"`deformation` must be at most {MAX_DEFORMATION:g} (noise this large "
+                         f"leaves no structure, and the attributes would overflow), got "
+                         f"{sigma:g}")
+    return sigma
+
+
 def _check_pair_sizes(n_inliers, n_outliers, deformation):
     """The sizes and deformation of a two-graph problem, validated."""
     n_in = check_int(n_inliers, "n_inliers", minimum=1)
     n_out = check_int(n_outliers, "n_outliers", minimum=0)
-    sigma = check_positive(deformation, "deformation", allow_zero=True)
+    sigma = check_deformation(deformation)
     _check_size(2, n_in + n_out)
     return n_in, n_out, sigma
 
@@ -325,7 +341,7 @@ def make_graph_collection(n_graphs: int = 8, n_inliers: int = 10, n_outliers: in
     N = check_int(n_graphs, "n_graphs", minimum=2)
     n_in = check_int(n_inliers, "n_inliers", minimum=1)
     n_out = check_int(n_outliers, "n_outliers", minimum=0)
-    sigma = check_positive(deformation, "deformation", allow_zero=True)
+    sigma = check_deformation(deformation)
     rho = check_probability(density, "density")
     p_flip = check_probability(flip, "flip")
     shuffle = check_bool(shuffle, "shuffle")

@@ -25,9 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import as_generator, check_bool, check_int, check_positive, check_probability
+from .._validation import as_generator, check_bool, check_int, check_probability
 from ..graphs import Graph
-from ._graphs import GraphCollectionProblem, _check_size, _sym_mask, _sym_uniform
+from ._graphs import (GraphCollectionProblem, _check_size, _sym_mask, _sym_uniform,
+                      check_deformation)
 
 __all__ = ["SubgraphCollectionProblem", "make_subgraph_collection"]
 
@@ -84,6 +85,12 @@ class SubgraphCollectionProblem(GraphCollectionProblem):
 def _check_p_keep(p_keep) -> tuple[float, float]:
     """``p_keep`` as a ``(low, high)`` range in ``(0, 1]`` (a number is the range ``(p, p)``)."""
     if isinstance(p_keep, numbers.Real) and not isinstance(p_keep, bool):
+        try:
+            bad = not 0 < float(p_keep) <= 1                # NaN too
+        except OverflowError:                               # an int beyond float64
+            bad = True
+        if bad:
+            raise ValueError(f"`p_keep` must lie in (0, 1], got {p_keep!r:.40}")
         low = high = check_probability(p_keep, "p_keep")
     elif (isinstance(p_keep, (Sequence, np.ndarray)) and not isinstance(p_keep, (str, bytes))
           and len(p_keep) == 2):
@@ -165,7 +172,7 @@ def make_subgraph_collection(n_graphs: int = 8, n_universe: int = 20, p_keep=(0.
     d = check_int(n_universe, "n_universe", minimum=1)
     low, high = _check_p_keep(p_keep)
     n_out = check_int(n_outliers, "n_outliers", minimum=0)
-    sigma = check_positive(deformation, "deformation", allow_zero=True)
+    sigma = check_deformation(deformation)
     rho = check_probability(density, "density")
     p_flip = check_probability(flip, "flip")
     shuffle = check_bool(shuffle, "shuffle")

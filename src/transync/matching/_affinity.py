@@ -570,14 +570,84 @@ class SeparableAffinity(Affinity):
 # --------------------------------------------------------------------------- construction
 
 
+class _CheckedAffinity(Affinity):
+    """A user's :class:`Affinity` subclass whose every output is checked: arrays of the promised
+    shape, finite; an error names the argument and the method (a ``matvec`` returning ``None``,
+    NaN or a wrong shape surfaced as an unrelated error deep in a solver)."""
+
+    def __init__(self, inner: Affinity, name: str):
+        self.inner, self.name = inner, name
+        self.n1, self.n2 = int(inner.n1), int(inner.n2)
+
+    def __getattr__(self, attr):             # the user's own attributes (not found above)
+        if attr == "inner":                  # not yet set (unpickling): no recursion
+            raise AttributeError(attr)
+        return getattr(self.inner, attr)
+
+    def _overrides(self, method: str) -> bool:
+        return getattr(type(self.inner), method) is not getattr(Affinity, method)
+
+    def _array(self, value, method: str, shape) -> np.ndarray:
+        where = f"`{self.name}`.{method}() (a {type(self.inner).__name__})"
+        if value is None:
+            raise TypeError(f"{where} must return a float array of shape {shape}, got None")
+        try:
+            arr = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise TypeError(f"{where} must return a float array of shape {shape}, got "
+                            f"{type(value).__name__}") from None
+        if arr.shape != shape:
+            raise ValueError(f"{where} must return an array of shape {shape}, got shape "
+                             f"{arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            bad = int(arr.size - np.count_nonzero(np.isfinite(arr)))
+            raise ValueError(f"{where} returned {bad} NaN or infinite entries")
+        return arr
+
+    def matvec(self, X):
+        return self._array(self.inner.matvec(X), "matvec", (self.n1, self.n2))
+
+    def rmatvec(self, X):
+        if not self._overrides("rmatvec"):
+            return Affinity.rmatvec(self, X)   # through the checked matvec
+        return self._array(self.inner.rmatvec(X), "rmatvec", (self.n1, self.n2))
+
+    def diag(self):
+        return self._array(self.inner.diag(), "diag", (self.n1, self.n2))
+
+    def to_dense(self):
+        m = self.n1 * self.n2
+        return self._array(self.inner.to_dense(), "to_dense", (m, m))
+
+    def score(self, X) -> float:
+        if not self._overrides("score"):
+            return Affinity.score(self, X)   # through the checked matvec
+        value = self._array(self.inner.score(X), "score", ())
+        return float(value)
+
+    def column_sums(self):
+        if not self._overrides("column_sums"):
+            return Affinity.column_sums(self)
+        return self._array(self.inner.column_sums(), "column_sums", (self.n1, self.n2))
+
+    def drop_conflicts(self) -> Affinity:
+        out = self.inner.drop_conflicts()
+        return self if out is self.inner else as_affinity(out, name=self.name)
+
+    def __repr__(self) -> str:
+        return repr(self.inner)
+
+
 def as_affinity(K, *, n1: int | None = None, n2: int | None = None, name: str = "K") -> Affinity:
     """Wrap a pygmtools-style ``K`` (dense or sparse) as an :class:`Affinity`; pass through others.
 
     Parameters
     ----------
     K : Affinity, array_like or sparse matrix
-        An :class:`Affinity` (returned as is) or a matrix of shape ``(n1 n2, n1 n2)`` in
-        pygmtools' column-major layout.
+        An :class:`Affinity` (the library's own classes returned as is; a subclass of the
+        user's comes back wrapped, so that every output of its methods is checked: shape,
+        finite values) or a matrix of shape ``(n1 n2, n1 n2)`` in pygmtools' column-major
+        layout.
     n1, n2 : int, optional
         Sizes of the two graphs: required for a matrix, checked against an :class:`Affinity`.
     name : str, default="K"
@@ -586,8 +656,8 @@ def as_affinity(K, *, n1: int | None = None, n2: int | None = None, name: str = 
     Returns
     -------
     Affinity
-        ``K`` itself, a :class:`SparseAffinity` for a sparse matrix, else a
-        :class:`DenseAffinity`.
+        ``K`` itself (a user's subclass: ``K`` behind a checking wrapper), a
+        :class:`SparseAffinity` for a sparse matrix, else a :class:`DenseAffinity`.
 
     Raises
     ------
@@ -609,7 +679,9 @@ def as_affinity(K, *, n1: int | None = None, n2: int | None = None, name: str = 
         if (n1 is not None and n1 != K.n1) or (n2 is not None and n2 != K.n2):
             raise ValueError(f"`{name}` is an Affinity of shape {K.shape}, but n1={n1}, n2={n2} "
                              "were given")
-        return K
+        if type(K).__module__.split(".")[0] == "transync":
+            return K
+        return _CheckedAffinity(K, name)         # a user's subclass: its outputs are checked
     if n1 is None or n2 is None:
         raise TypeError(f"`n1` and `n2` are required when `{name}` is a matrix, got n1={n1!r}, "
                         f"n2={n2!r}")

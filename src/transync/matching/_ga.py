@@ -71,10 +71,12 @@ def annealing_levels(beta0: float, beta_max: float, beta_rate: float) -> int:
     >>> annealing_levels(0.5, 10.0, 1.075)
     43
     """
-    levels = int(np.ceil(np.log(beta_max / beta0) / np.log(beta_rate))) + 1
+    # logs taken apart: the ratio of a huge beta_max and a tiny beta0 overflows to inf
+    span = (np.log(beta_max) - np.log(beta0)) / np.log(beta_rate)
+    levels = int(np.ceil(span)) + 1 if span <= MAX_LEVELS else MAX_LEVELS + 1
     if levels > MAX_LEVELS:
         raise ValueError(f"`beta_rate`={beta_rate!r} anneals from beta0={beta0!r} to "
-                         f"beta_max={beta_max!r} in {levels} levels, more than "
+                         f"beta_max={beta_max!r} in {span + 1:.4g} levels, more than "
                          f"{MAX_LEVELS}: pass a larger `beta_rate` (default "
                          f"{_DEFAULTS['beta_rate']})")
     return levels

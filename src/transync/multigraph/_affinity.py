@@ -698,6 +698,7 @@ class PairAffinities:
             if a.shape != (n_i, n_j):
                 raise ValueError(f"`affinity` returned shape {a.shape} for pair ({i}, {j}), "
                                  f"expected ({n_i}, {n_j})")
+            a = as_affinity(a, name=f"affinity(graphs[{i}], graphs[{j}])")  # a user's: checked
             affs.append(_pad_affinity(a, n) if padded else a)
         return cls.from_affinities(affs, pairs)
 
@@ -727,7 +728,8 @@ class PairAffinities:
         Raises
         ------
         ValueError, TypeError
-            Wrong shapes or dimensions, non-finite values, indices out of range.
+            Wrong shapes or dimensions, non-finite values, indices out of range, factors so
+            large that the products could overflow.
 
         Examples
         --------
@@ -762,6 +764,13 @@ class PairAffinities:
             if node.shape != (len(pairs), n1, n2):
                 raise ValueError(f"`node` must have shape (P, n1, n2) = ({len(pairs)}, {n1}, "
                                  f"{n2}), got {node.shape}")
+        with np.errstate(over="ignore"):        # inf here is refused below
+            # |K_p| <= R max|F| max|G| + max|node| entrywise (as SeparableAffinity checks it):
+            # factors of 1e154 passed, and every score and product came back inf or NaN
+            bound = F.shape[1] * float(np.abs(F).max()) * float(np.abs(G).max())
+            if node is not None:
+                bound += float(np.abs(node).max(initial=0.0))
+        check_affinity_magnitude(bound, n1 * n2, "F, G, node" if node is not None else "F, G")
         impl = _Separable(F, G, pairs[:, 0], pairs[:, 1], node)
         return cls(impl, pairs)
 
@@ -783,6 +792,7 @@ class PairAffinities:
             if (a.n1, a.n2) != (n1, n2):
                 raise ValueError(f"`affinities[{k}]` has shape {(a.n1, a.n2)}, expected "
                                  f"{(n1, n2)} as the first")
+            affs[k] = as_affinity(a, name=f"affinities[{k}]")        # a user's: checked
         types = {type(a) for a in affs}
         if types == {SeparableAffinity}:
             R = max(a.rank for a in affs)

@@ -269,6 +269,7 @@ default="auto"
     pairs = _check_pairs(pairs, N, need_all=solver in CAO_VARIANTS,
                          need_connected=sync is not None)
     online = mode == "online" and sync is not None and solver in ONLINE_SOLVERS
+    asked = f"solver={solver!r} with sync={sync!r} and mode={mode!r}"
     if not online:
         mode = "offline"                 # the pairs are solved independently: as run
     damping = check_positive(damping, "damping")
@@ -276,8 +277,8 @@ default="auto"
         raise ValueError(f"`damping` must be in (0, 1], got {damping}")
     for name, value, default in (("sync_every", sync_every, None), ("damping", damping, 1.0)):
         if not online and value != default:
-            raise ValueError(f"`{name}` steers the online synchronized solvers; solver="
-                             f"{solver!r} with sync={sync!r} runs none, got {name}={value!r}")
+            raise ValueError(f"`{name}` steers the online synchronized solvers; {asked} "
+                             f"runs none, got {name}={value!r}")
     if online and executor is not None:
         raise ValueError("`executor` spreads independent pairwise work (mode='offline', CAO); "
                          "the online solvers run all pairs in lock-step in this process: pass "

@@ -67,6 +67,15 @@ def test_transfer_points_ignores_the_scale_of_the_homography():
     assert not np.isfinite(transfer_points(np.zeros((3, 3)), pts)).any()
 
 
+def test_normalize_determinant_of_huge_entries():
+    """A well-conditioned matrix of 1e308 entries overflowed the LU of its determinant: NaN."""
+    A = np.array([[1.0, 1, 0], [-1, 1, 0], [0, 0, 1]])
+    np.testing.assert_allclose(normalize_determinant(A * 1e308), normalize_determinant(A),
+                               rtol=1e-12)
+    np.testing.assert_allclose(normalize_determinant(A * 1e-320), normalize_determinant(A),
+                               rtol=1e-12)
+
+
 def test_translation_and_corners():
     T = translation(3, -2)
     np.testing.assert_array_equal(transfer_points(T, image_corners((4, 3))),

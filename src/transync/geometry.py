@@ -35,6 +35,7 @@ __all__ = [
     "image_corners",
     "normalization_matrix",
     "normalize_determinant",
+    "rescale_homogeneous",
     "transfer_points",
     "translation",
 ]
@@ -79,6 +80,7 @@ def normalize_determinant(A, *, singular_tol: float = 1e-14) -> np.ndarray:
             0 <= singular_tol < 1):
         raise ValueError(f"`singular_tol` must be a real number in [0, 1), got {singular_tol!r}")
     d = A.shape[-1]
+    A = rescale_homogeneous(A)        # 1e308 entries overflowed the LU of the determinant
     bad = ~np.isfinite(A).all(axis=(-2, -1))
     with np.errstate(all="ignore"):   # NaN maps (disconnected) stay NaN
         # log-determinant: no overflow for large entries
@@ -129,9 +131,53 @@ def image_corners(size) -> np.ndarray:
     return np.array([[0.0, 0.0], [w - 1, 0.0], [w - 1, h - 1], [0.0, h - 1]])
 
 
-#: homographies with an entry of magnitude above this (or all below its inverse) are rescaled
-#: by a power of two before :func:`transfer_points` applies them
+#: matrices with an entry of magnitude above this (or all entries below its inverse) are
+#: rescaled by :func:`rescale_homogeneous`
 _SCALE_LIMIT = 2.0 ** 100
+
+
+def rescale_homogeneous(A) -> np.ndarray:
+    """Bring matrices defined up to scale (homographies) of huge or tiny entries to a safe
+    scale: largest entry in ``[0.5, 1)``, by a power of two (exact, no digit lost).
+
+    Products and inverses of a homography like ``1e308 I`` overflow, and those of ``1e-320 I``
+    (subnormal entries) overflow once inverted, though both are the identity map. Matrices whose
+    largest entry lies in ``[2**-100, 2**100]`` come back unchanged, bit for bit; so do
+    non-finite and all-zero ones.
+
+    Parameters
+    ----------
+    A : array_like of shape (..., m, n)
+        Matrices (a stack).
+
+    Returns
+    -------
+    ndarray of shape (..., m, n)
+        The rescaled matrices (a new array).
+
+    Raises
+    ------
+    ValueError, TypeError
+        ``A`` not an array of real matrices (at least 2 dimensions).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rescale_homogeneous(1e308 * np.eye(2)).max() < 1
+    np.True_
+    >>> rescale_homogeneous(3.0 * np.eye(2)).tolist()
+    [[3.0, 0.0], [0.0, 3.0]]
+    """
+    A = check_array(A, "A", finite=False)
+    if A.ndim < 2:
+        raise ValueError(f"`A` must be matrices of shape (..., m, n), got shape {A.shape}")
+    with np.errstate(invalid="ignore"):
+        top = np.abs(A).max(axis=(-2, -1), initial=0.0)
+        far = np.isfinite(top) & (top > 0) & ((top > _SCALE_LIMIT) | (top < 1 / _SCALE_LIMIT))
+    if not far.any():
+        return A.copy()
+    exponent = np.frexp(np.where(far, top, 1.0))[1]
+    return np.where(far[..., None, None], np.ldexp(A, -exponent[..., None, None]), A)
 
 
 def transfer_points(H, points) -> np.ndarray:
@@ -174,14 +220,8 @@ def transfer_points(H, points) -> np.ndarray:
     except ValueError:
         raise ValueError(f"the leading dimensions of `points` {pts.shape[:-2]} and `H` "
                          f"{H.shape[:-2]} do not broadcast") from None
+    H = rescale_homogeneous(H)      # up to scale: 1e308 I would overflow every product
     with np.errstate(all="ignore"):
-        # a homography is defined up to scale: one of huge or tiny entries (1e308 I) is brought
-        # to entries below 1 by a power of two (exact), so that its products cannot overflow
-        top = np.abs(H).max(axis=(-2, -1), initial=0.0)
-        far = np.isfinite(top) & (top > 0) & ((top > _SCALE_LIMIT) | (top < 1 / _SCALE_LIMIT))
-        if far.any():
-            H = np.where(far[..., None, None],
-                         np.ldexp(H, -np.frexp(np.where(far, top, 1.0))[1][..., None, None]), H)
         p = pts @ H[..., :2, :2].swapaxes(-1, -2) + H[..., None, :2, 2]
         z = pts @ H[..., 2, :2][..., :, None] + H[..., 2, 2][..., None, None]
         return p / z

@@ -80,6 +80,31 @@ def test_experiment_quick_run_and_resume(tmp_path, capsys, toy_registry):
     assert "new trials (0 failed)" in first
 
 
+def _failing_trial(config, rng):
+    if config["method"] == "other":
+        raise ValueError("frame 0: all landmarks coincide")
+    return {"accuracy": 1.0}
+
+
+def test_failed_trials_say_why_in_one_warning(tmp_path, capsys, toy_registry, monkeypatch):
+    """Every trial failing on a bad data folder printed only "(14 failed)" and exit 1; the
+    reason was in a traceback stored in results.sqlite."""
+    import transync_toy_experiment as mod
+
+    build = mod.build
+    monkeypatch.setattr(mod, "build", lambda **kw: build(**kw).__class__(
+        **{**build(**kw).__dict__, "trial": _failing_trial}))
+    out = tmp_path / "exp"
+    assert main(["experiment", "toy", "--quick", "--out", str(out), "--no-progress"]) == 1
+    cap = capsys.readouterr()
+    assert "8 new trials (4 failed)" in cap.out
+    lines = cap.err.splitlines()
+    assert len(lines) == 1, cap.err
+    assert re.fullmatch(r"transync: warning: 4 trial\(s\) failed; the first \(sweep 'noise', "
+                        r"trial 0\): ValueError: frame 0: all landmarks coincide \(tracebacks "
+                        r"stored in .*results\.sqlite; rerun to retry them\)", lines[0]), lines[0]
+
+
 def test_demo_writes_summary(tmp_path, toy_registry):
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--experiments", "toy", "--no-progress"]) == 0
@@ -129,6 +154,7 @@ def bad_inputs(tmp_path):
     (tmp_path / "far.txt").write_text("0 0\n1000 0\n")
     (tmp_path / "deep.json").write_text('{"pairs": ' + "[" * 5000 + "]" * 5000 + "}")
     (tmp_path / "afile").write_text("")
+    (tmp_path / "huge.txt").write_text("1e308 1e308\n-1e308 -1e308\n0 0\n")
     return tmp_path
 
 
@@ -160,6 +186,11 @@ def bad_inputs(tmp_path):
      r"(edge affinity is zero for every candidate pair|`sigma2`=1e-06 is too small)"),
     (["match", "{d}/p2.txt", "{d}/p3.txt"],
      r"different dimensions: .*p2\.txt has 2 coordinates a point, .*p3\.txt has 3"),
+    # a coordinate range beyond float64: the scale was inf, every point 0, JSON "Infinity"
+    (["match", "{d}/huge.txt", "{d}/p2.txt"],
+     r"huge\.txt: the coordinates span more than the largest float \(from -1e\+308 to "
+     r"1e\+308\); rescale them"),
+    (["collection", "{d}/p2.txt", "{d}/huge.txt"], r"huge\.txt: the coordinates span more"),
     (["collection", "{d}/p2.txt"], r"need at least 2 point sets to match, got 1"),
     (["collection", "{d}/p2.txt", "{d}/p3.txt"], r"different dimensions: .*p3\.txt has 3"),
     (["collection", "{d}/p2.txt", "{d}/header.csv"], r"header\.csv, line 1"),

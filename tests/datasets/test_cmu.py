@@ -140,6 +140,9 @@ def test_frame_number_zero(tmp_path):
     ("1.0 abc", "expected two numbers `x y`, got '1.0 abc'"),
     ("nan 2.0", "expected finite coordinates, got 'nan 2.0'"),
     ("1.0 -inf", "expected finite coordinates, got '1.0 -inf'"),
+    # finite, but the bounding box is not: the frame was normalized to all zeros
+    ("-1e308 3", "expected coordinates of magnitude <= 1e+300 (their distances must be "
+                 "finite), got '-1e308 3'"),
 ])
 def test_bad_row_names_file_and_line(tmp_path, line, message):
     _sequence(tmp_path, n_frames=3)

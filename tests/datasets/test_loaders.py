@@ -448,3 +448,46 @@ def test_fuzzed_adelaidermf_file(cut, flip, byte):
         n = pair.labels.size
         assert pair.x1.shape == pair.x2.shape == (n, 2)
         assert np.all(np.isfinite(pair.x1)) and np.all(pair.labels >= 0)
+
+
+def test_one_image_reader_refuses_a_truncated_jpeg(tmp_path):
+    """The homography pipeline read files with cv2.imread, which returned a truncated JPEG half
+    decoded (grey lower half; "Premature end of JPEG file" on stderr only) where the loaders'
+    reader refused it. Both now read through `read_image`."""
+    import cv2
+
+    from transync.datasets import read_image
+    from transync.homography import load_images
+
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 255, (64, 80, 3), np.uint8)
+    ok, buf = cv2.imencode(".jpg", img)
+    full, half = tmp_path / "full.jpg", tmp_path / "half.jpg"
+    full.write_bytes(buf.tobytes())
+    half.write_bytes(buf.tobytes()[: len(buf) * 6 // 10])
+    assert read_image(full).shape == (64, 80, 3)
+    with pytest.raises(ValueError, match=_q(half) + "`: cannot decode the image file"):
+        read_image(half)
+    with pytest.raises(ValueError, match=r"`images\[1\]`: `" + _q(half) + "`: cannot decode"):
+        load_images([full, half])
+    # grey stays grey, RGBA comes back as RGB (OpenCV writes BGR)
+    grey, rgba = tmp_path / "grey.png", tmp_path / "rgba.png"
+    cv2.imwrite(str(grey), img[..., 0])
+    cv2.imwrite(str(rgba), np.dstack([img, np.full((64, 80), 255, np.uint8)]))
+    out = load_images([grey, rgba])
+    np.testing.assert_array_equal(out[0], img[..., 0])
+    np.testing.assert_array_equal(out[1], cv2.cvtColor(img, cv2.COLOR_BGR2RGB))
+    with pytest.raises(TypeError, match="`path` must be a path"):
+        read_image(3)
+    # a number is neither an image nor a path (was "must be a (H, W)... got shape ()")
+    with pytest.raises(TypeError, match=r"`images\[0\]` must be an image array or a path, got int"):
+        load_images([5, full])
+
+
+@pytest.mark.parametrize("scale", ["1e-320", "1e-200", "1e300"])
+def test_a_homography_of_tiny_or_huge_entries_is_read_at_a_safe_scale(tmp_path, scale):
+    """Subnormal entries (1e-320 I) passed the checks, then the inverse overflowed and the
+    loader returned an all-NaN homography without a word."""
+    text = "\n".join(" ".join(scale if i == j else "0" for j in range(3)) for i in range(3))
+    seq = load_oxford_sequence(_oxford(tmp_path, text + "\n"))
+    np.testing.assert_allclose(seq.homographies[1], np.eye(3), atol=1e-12)

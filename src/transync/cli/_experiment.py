@@ -6,6 +6,7 @@ import contextlib
 import functools
 import importlib
 import inspect
+import sys
 import time
 from pathlib import Path
 
@@ -72,7 +73,24 @@ def _cmd_experiment(args) -> int:
     print(f"summary: {out / 'summary.md'}  plot: {report.figure}")
     for path in report.extra_files:
         print(f"also: {path}")
+    _warn_failures(report, out)
     return 1 if report.n_failed else 0
+
+
+def _warn_failures(report, out: Path) -> None:
+    """One warning line saying why the first failed trial failed (its error, stored with the
+    trial, was said nowhere else: 14 of 14 failed trials on a bad --data folder printed only
+    "(14 failed)")."""
+    if not report.n_failed:
+        return
+    bad = [r for r in report.records if r.get("error")]
+    if not bad:
+        return
+    lines = [ln for ln in bad[0]["error"].strip().splitlines() if ln.strip()]
+    where = f"sweep {bad[0]['sweep']!r}, trial {bad[0]['trial']}"
+    print(f"transync: warning: {report.n_failed} trial(s) failed; the first ({where}): "
+          f"{lines[-1] if lines else 'no message'} (tracebacks stored in "
+          f"{out / 'results.sqlite'}; rerun to retry them)", file=sys.stderr)
 
 
 def _stored_trials(store: Path) -> int:
@@ -134,6 +152,7 @@ def _cmd_demo(args) -> int:
                     out.rmdir()
             raise
         failed += report.n_failed
+        _warn_failures(report, out / name)
         lines += [f"## {name}: {exp.description}", "",
                   f"{len(report.records)} trials, {report.n_failed} failed, "
                   f"{report.seconds:.1f} s. Plot: `{name}/{report.figure.name}`"

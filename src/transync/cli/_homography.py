@@ -80,6 +80,7 @@ def _estimate(args):
     except (ValueError, TypeError) as exc:
         msg = str(exc)
         for k, name in enumerate(args.images):   # name the files the user gave, not indices
+            msg = msg.replace(f"`images[{k}]`: `{name}`:", f"{name}:")  # named twice otherwise
             msg = msg.replace(f"`images[{k}]`", str(name))
         raise CLIError(msg) from exc
 

@@ -98,6 +98,25 @@ def _read_text_points(p: Path):
     return np.array(rows, dtype=float).reshape(len(rows), dim or 0)
 
 
+def _point_scale(named_sets) -> float:
+    """The one factor every point set is divided by: the largest coordinate range (1 when every
+    point is the same). A range beyond float64 (points at +-1e308) is refused, naming the file:
+    it made the factor inf and every point 0, and wrote ``Infinity`` into the JSON."""
+    import numpy as np
+
+    scale = 0.0
+    for path, P in named_sets:
+        if P.size:
+            with np.errstate(over="ignore"):
+                span = float(np.ptp(P, axis=0).max())
+            if not np.isfinite(span):
+                raise CLIError(f"{path}: the coordinates span more than the largest float "
+                               f"(from {float(P.min()):.3g} to {float(P.max()):.3g}); rescale "
+                               "them")
+            scale = max(scale, span)
+    return scale if scale > 0 else 1.0       # every point identical: nothing to rescale
+
+
 def _cmd_match(args) -> int:
     import numpy as np
 
@@ -109,9 +128,7 @@ def _cmd_match(args) -> int:
     if P1.shape[1] != P2.shape[1]:
         raise CLIError(f"the point sets have different dimensions: {args.points1} has "
                        f"{P1.shape[1]} coordinates a point, {args.points2} has {P2.shape[1]}")
-    scale = float(max(np.ptp(P1, axis=0).max(), np.ptp(P2, axis=0).max()))
-    if not scale > 0:
-        scale = 1.0                      # every point identical: nothing to rescale
+    scale = _point_scale([(args.points1, P1), (args.points2, P2)])
     graphs = []
     for path, P in ((args.points1, P1), (args.points2, P2)):
         try:
@@ -165,9 +182,7 @@ def _cmd_collection(args) -> int:
     if len(dims) > 1:
         raise CLIError("the point sets have different dimensions: " + ", ".join(
             f"{p} has {P.shape[1]}" for p, P in zip(args.points, sets)))
-    scale = float(max(np.ptp(P, axis=0).max() for P in sets))
-    if not scale > 0:
-        scale = 1.0                      # every point identical: nothing to rescale
+    scale = _point_scale(list(zip(args.points, sets)))
     graphs = []
     for path, P in zip(args.points, sets):
         try:

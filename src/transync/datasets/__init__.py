@@ -30,6 +30,7 @@ _LAZY = {
     "load_graf": "._image_loaders",
     "load_hpatches_sequence": "._image_loaders",
     "load_oxford_sequence": "._image_loaders",
+    "read_image": "._image_loaders",
     "LANDMARK_AFFINITY": "._cmu",
     "LandmarkSequence": "._cmu",
     "load_cmu_sequence": "._cmu",

@@ -306,10 +306,19 @@ def _read_label_file(path: Path) -> np.ndarray:
         if not all(math.isfinite(v) for v in xy):        # 1e999
             raise ValueError(f"{path}, line {lineno}: expected finite coordinates, got "
                              f"{line.strip()!r:.60}")
+        if max(abs(v) for v in xy) > _MAX_COORDINATE:    # 1e308: finite, distances are not
+            raise ValueError(f"{path}, line {lineno}: expected coordinates of magnitude <= "
+                             f"{_MAX_COORDINATE:g} (their distances must be finite), got "
+                             f"{line.strip()!r:.60}")
         rows.append(xy)
     if not rows:
         raise ValueError(f"{path}: no landmark rows (expected rows `x y`)")
     return np.array(rows, dtype=float)
+
+
+#: largest landmark coordinate read (the bound of :class:`~transync.graphs.Graph`'s points): a
+#: frame at +-1e308 has finite coordinates but an infinite bounding box, and normalized to zero
+_MAX_COORDINATE = 1e300
 
 
 def _is_float(token: str) -> bool:

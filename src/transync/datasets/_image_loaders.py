@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import check_path
-from ..geometry import normalize_determinant
+from ..geometry import normalize_determinant, rescale_homogeneous
 from ._home import data_home
 from ._matfile import MatFieldError, MatFileError, read_mat
 from ._text import is_number, text_lines
@@ -44,6 +44,7 @@ __all__ = [
     "load_graf",
     "load_hpatches_sequence",
     "load_oxford_sequence",
+    "read_image",
 ]
 
 _EXTS = (".ppm", ".png", ".jpg", ".jpeg", ".pgm", ".bmp", ".tif", ".tiff")
@@ -85,9 +86,12 @@ class HomographySequence:
 
 
 def _check_homography(H: np.ndarray, where: str) -> np.ndarray:
-    """Refuse non-finite or singular 3x3 matrices read from ``where``."""
+    """Refuse non-finite or singular 3x3 matrices read from ``where``; return the matrix
+    rescaled where its entries are huge or tiny (subnormal entries passed the checks, then the
+    inverse overflowed and the loader returned NaN homographies without a word)."""
     if not np.all(np.isfinite(H)):
         raise ValueError(f"{where}: expected a finite 3x3 homography, got NaN or infinite entries")
+    H = rescale_homogeneous(H)
     s = np.linalg.svd(H, compute_uv=False)
     if s[0] == 0 or s[-1] <= s[0] / _MAX_CONDITION:
         raise ValueError(f"{where}: expected an invertible 3x3 homography, got a singular matrix "
@@ -165,11 +169,44 @@ def _read_matrix_xml(path) -> np.ndarray:
     return _check_homography(np.array(values).reshape(3, 3), f"`{path}`, field <data>")
 
 
-def _read_image(path) -> np.ndarray:
-    """Decode an image file into a uint8 (or uint16) grey or RGB array."""
+def read_image(path) -> np.ndarray:
+    """Decode an image file into a grey or RGB array (the one image reader of the package).
+
+    The file is decoded from its bytes (``cv2.imdecode``), which refuses a damaged file that
+    ``cv2.imread`` would return half decoded (a truncated JPEG came back with a grey lower half,
+    and only a line on stderr said so). OpenCV's own log stays silent: the error says it.
+
+    Parameters
+    ----------
+    path : str or path-like
+        An image file in a format OpenCV reads (PNG, JPEG, PPM/PGM, BMP, TIFF, ...).
+
+    Returns
+    -------
+    ndarray of shape (H, W) or (H, W, 3)
+        Grey (one channel, or grey + alpha) or RGB (the alpha channel dropped), in the file's
+        depth (uint8, or uint16 for 16-bit files).
+
+    Raises
+    ------
+    ValueError
+        The file cannot be read, is empty, or cannot be decoded (unknown or damaged format);
+        the message names the file.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> import cv2, numpy as np
+    >>> from transync.datasets import read_image
+    >>> path = os.path.join(tempfile.mkdtemp(), "im.png")
+    >>> bgr = np.zeros((4, 5, 3), np.uint8); bgr[..., 2] = 255          # red, in OpenCV's BGR
+    >>> _ = cv2.imwrite(path, bgr)
+    >>> im = read_image(path); im.shape, im[0, 0].tolist()
+    ((4, 5, 3), [255, 0, 0])
+    """
     import cv2
 
-    path = Path(path)
+    path = Path(check_path(path, "path"))
     try:
         raw = path.read_bytes()
     except OSError as exc:
@@ -238,7 +275,7 @@ def _sequence(folder: Path, files: dict, h_name) -> HomographySequence:
                          f"numbers images from 1 (image 1 is the reference of the ground "
                          f"truth {h_name(2)}, ...); rename or remove it")
     paths = list(files.values())
-    images = [_read_image(p) for p in paths]
+    images = [read_image(p) for p in paths]
     Hs = [np.eye(3)]
     for k in list(files)[1:]:
         H1k = _read_matrix_text(folder / h_name(k))     # image 1 -> image k
@@ -368,7 +405,7 @@ def load_graf(folder=None) -> HomographySequence:
     else:
         raise FileNotFoundError(f"`{folder}`: no ground truth H1to3p.xml or H1to3p")
     paths = [_find_image(folder, "graf1"), _find_image(folder, "graf3")]
-    images = [_read_image(p) for p in paths]
+    images = [read_image(p) for p in paths]
     return HomographySequence(images=images,
                               homographies=np.stack([np.eye(3),
                                                      normalize_determinant(np.linalg.inv(H13))]),

@@ -21,6 +21,7 @@ from .._validation import (
     check_int,
     check_positive,
 )
+from ..datasets import read_image
 from ..geometry import transfer_points, translation
 
 __all__ = [
@@ -145,7 +146,7 @@ def check_masks(masks, images, name: str) -> list:
 
 
 def load_images(images) -> list:
-    """Read file paths (``cv2.imread``) and pass arrays through.
+    """Read file paths (:func:`transync.datasets.read_image`) and pass arrays through.
 
     Every image is checked: (H, W) or (H, W, C) with C in (1, 3, 4), integer or float pixels,
     finite, at least 16 x 16 pixels.
@@ -165,9 +166,9 @@ def load_images(images) -> list:
     TypeError
         A single path or image instead of a sequence, or non-numeric pixels.
     ValueError
-        Fewer than one image, images smaller than 16 x 16 pixels or not finite, bad shapes.
-    FileNotFoundError
-        A path that cannot be read.
+        Fewer than one image, images smaller than 16 x 16 pixels or not finite, bad shapes, a
+        path that cannot be read or decoded (missing, empty, damaged: the message names
+        ``images[k]`` and the file).
 
     Examples
     --------
@@ -189,13 +190,13 @@ def load_images(images) -> list:
     out = []
     for k, im in enumerate(images):
         if isinstance(im, (str, os.PathLike)):
-            arr = cv2.imread(os.fspath(im), cv2.IMREAD_UNCHANGED)
-            if arr is None:
-                raise ValueError(f"`images[{k}]`: cannot read image file {os.fspath(im)!r}")
-            if arr.ndim == 3:
-                arr = cv2.cvtColor(arr[..., :3], cv2.COLOR_BGR2RGB)
+            try:
+                arr = read_image(im)            # refuses a damaged file (imread half-decoded)
+            except ValueError as exc:
+                raise ValueError(f"`images[{k}]`: {exc}") from None
         else:
-            if np.iscomplexobj(im) or isinstance(im, (str, bytes)) or im is None:
+            if (np.iscomplexobj(im) or isinstance(im, (str, bytes)) or im is None
+                    or np.ndim(im) == 0):               # a number: neither image nor path
                 raise TypeError(f"`images[{k}]` must be an image array or a path, "
                                 f"got {type(im).__name__}")
             arr = np.asarray(im)

@@ -6,6 +6,7 @@ what was expected and what arrived. Internals trust validated inputs.
 
 from __future__ import annotations
 
+import errno
 import numbers
 import os
 from collections.abc import Sequence
@@ -512,9 +513,18 @@ def check_path(value, name: str) -> Path:
     if not text:
         raise ValueError(f"`{name}` must be a path, got '' (write '.' for the working folder)")
     try:
-        return Path(text).expanduser()
+        path = Path(text).expanduser()
     except RuntimeError as exc:             # "~nosuchuser/...": no such home folder
         raise ValueError(f"`{name}`: cannot expand {text!r:.80} ({exc})") from None
+    try:
+        os.stat(path)
+    except OSError as exc:                  # a missing path is the caller's to judge, but a
+        if exc.errno == errno.ENAMETOOLONG:  # name too long made is_dir() raise raw OSError
+            raise ValueError(f"`{name}` is not a usable path: {exc.strerror} "
+                             f"({len(text)} characters: {text!r:.60}...)") from None
+    except ValueError as exc:               # an embedded NUL byte
+        raise ValueError(f"`{name}` is not a usable path ({exc}): {text!r:.60}") from None
+    return path
 
 
 def frozen_copy(a) -> np.ndarray:

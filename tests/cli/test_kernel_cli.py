@@ -113,6 +113,21 @@ def test_too_many_folds_for_the_classes(toy, tmp_path, capsys):
     assert "--folds 13" in err and "12 graphs" in err and not (tmp_path / "o").exists()
 
 
+def test_library_limits_and_pruning_are_said_in_the_commands_terms(toy, tmp_path, capsys):
+    """`--alignments 100000` printed "`n_alignments` must be <= 1000" (a name the command does
+    not have); a set too small printed "prune_by_size keeps no graph" (an internal function)."""
+    assert main(["kernel", str(toy), "--out", str(tmp_path / "o"), "--alignments", "100000",
+                 *FAST]) == 2
+    err = capsys.readouterr().err
+    assert err == "transync: error: `--alignments` must be <= 1000, got 100000\n", err
+    small = write_tu(tmp_path / "tu" / "SMALL", name="SMALL", n_per_class=4)
+    assert main(["kernel", str(small), "--out", str(tmp_path / "o"), *FAST]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("transync: error: data set 'SMALL': the size pruning keeps no graph: "
+                          "every class has fewer than 10 graphs"), err
+    assert err.count("\n") == 1 and not (tmp_path / "o").exists()
+
+
 def test_ctrl_c_exits_130_and_writes_nothing(toy, tmp_path, capsys, monkeypatch):
     from transync.kernels import TransitiveAssignmentKernel
 

@@ -491,3 +491,16 @@ def test_a_homography_of_tiny_or_huge_entries_is_read_at_a_safe_scale(tmp_path, 
     text = "\n".join(" ".join(scale if i == j else "0" for j in range(3)) for i in range(3))
     seq = load_oxford_sequence(_oxford(tmp_path, text + "\n"))
     np.testing.assert_allclose(seq.homographies[1], np.eye(3), atol=1e-12)
+
+
+@pytest.mark.parametrize("loader", ["load_cmu_sequence", "load_oxford_sequence", "load_tu",
+                                    "load_willow_class", "load_adelaidermf", "load_graf",
+                                    "load_hpatches_sequence", "read_image"])
+@pytest.mark.parametrize("arg", ["a" * 300, "./" + "a" * 300, "a\x00b"])
+def test_a_path_too_long_or_with_a_nul_byte_is_a_named_error(loader, arg):
+    """A name of 300 characters made Path.is_dir() raise a raw OSError (File name too long)."""
+    import transync.datasets as ds
+
+    with pytest.raises((ValueError, FileNotFoundError)) as info:
+        getattr(ds, loader)(arg)
+    assert "Errno" not in str(info.value)

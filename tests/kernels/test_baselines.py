@@ -305,3 +305,19 @@ def test_hks_mean_kernel_of_tiny_embeddings_is_the_cosine():
     K = hks_mean_kernel(F)
     np.testing.assert_array_equal(K, [[0.0, 0.0, 0.0], [0.0, 1.0, 1.0], [0.0, 1.0, 1.0]])
     assert min_eigenvalue_ratio(K) >= -1e-9
+
+
+@pytest.mark.parametrize("kernel", ["graphlet3", "hks_oa", "hks_mean", "random_walk", "grakel"])
+def test_normalize_must_be_a_bool(kernel):
+    """`normalize="no"` was accepted (and normalized), `normalize=None` too (and did not)."""
+    tri = np.ones((3, 3)) - np.eye(3)
+    g = Graph(adjacency=tri)
+    F = [np.zeros((3, 2)), np.ones((3, 2))]
+    call = {"graphlet3": lambda **kw: graphlet3_kernel([tri, tri], **kw),
+            "hks_oa": lambda **kw: hks_oa_kernel(F, **kw),
+            "hks_mean": lambda **kw: hks_mean_kernel(F, **kw),
+            "random_walk": lambda **kw: random_walk_kernel([g, g], **kw),
+            "grakel": lambda **kw: grakel_kernel([g, g], "wl", **kw)}[kernel]
+    for bad in ("no", None, 1):
+        with pytest.raises(TypeError, match="`normalize` must be a bool"):
+            call(normalize=bad)

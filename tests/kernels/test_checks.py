@@ -212,3 +212,14 @@ def test_zero_width_features_are_refused_by_name(name):
     with pytest.raises(ValueError, match=r"`features\[0\]` must have at least one feature "
                                          r"column, got shape \(2, 0\)"):
         getattr(kernels, name)([np.ones((2, 0)), np.ones((3, 0))])
+
+
+def test_rng_is_checked_whatever_the_size():
+    """A bad `rng` passed on small inputs (no sampling) and failed on large ones."""
+    from transync.kernels import default_sigma2, median_gamma
+
+    X = np.random.default_rng(0).normal(size=(70, 3, 2))
+    for fn, arg in ((median_gamma, X[:10]), (median_gamma, X),
+                    (default_sigma2, [X[0]]), (default_sigma2, list(X))):
+        with pytest.raises(TypeError, match="`rng` must be None, an int or"):
+            fn(arg, rng="x")

@@ -166,6 +166,14 @@ def test_repeated_cv_validation():
         repeated_cv(np.ones((20, 3)), np.repeat([0, 1], 10))
     with pytest.raises(TypeError, match="n_splits"):
         repeated_cv(K, np.repeat([0, 1], 10), n_splits=2.5)
+    # checked like every other option (accepted before); 10**9 repeats spawned 10**9 seeds
+    y2 = np.repeat([0, 1], 10)
+    with pytest.raises(TypeError, match="`progress` must be a bool, got str 'x'"):
+        repeated_cv(K, y2, n_splits=2, progress="x")
+    with pytest.raises(ValueError, match="`n_repeats` must be <= 1000"):
+        repeated_cv(K, y2, n_splits=2, n_repeats=10**9)
+    with pytest.raises(ValueError, match="`y` must hold class labels, got NaN"):
+        repeated_cv(K, np.where(y2 == 1, np.nan, 0.0), n_splits=2)    # NaN was a class
 
 
 def test_repeated_cv_refuses_kernels_libsvm_cannot_fit():

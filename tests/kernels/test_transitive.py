@@ -588,7 +588,8 @@ def test_prune_by_size_validation():
         prune_by_size([3, 4], [0, 1], quantile=1.5)
     with pytest.raises(ValueError, match="positive"):
         prune_by_size([0, 4], [0, 1])
-    with pytest.raises(ValueError, match="keeps no graph"):
+    with pytest.raises(ValueError, match=r"the size pruning keeps no graph: every class has "
+                                         r"fewer than 5 graphs with n_i <= 3 \(0.95 size "):
         prune_by_size([3, 4], [0, 1], min_class_size=5)
     with pytest.raises(TypeError, match="max_nodes"):
         prune_by_size([3, 4], [0, 1], max_nodes=2.5)
@@ -636,3 +637,22 @@ def test_median_gamma_sampling_seed_is_checked_by_name(rng):
     assert median_gamma(X, rng=3) == median_gamma(X, rng=3)
     with pytest.raises(ValueError, match="`rng` must be None, a non-negative int seed"):
         median_gamma(X, rng=-1)
+
+
+def test_alignment_checks_its_labels_and_indices():
+    """`pairwise(0, 9)` and `pairwise(0.5, 0)` raised raw IndexErrors, `pairwise(-1, 0)`
+    silently returned the last graph's map, and `Alignment(labels=[[0, 1]], ...)` failed later
+    with an AttributeError."""
+    from transync.kernels import Alignment
+
+    al = Alignment(labels=[[0, 1, 2], [2, 0, 1]], embedding=None, objective=0.0)
+    assert al.n_graphs == 2 and al.pairwise(0, 1).tolist() == [1, 2, 0]
+    for i, j, exc, match in [(0, 9, ValueError, "`j` must be <= 1, got 9"),
+                             (-1, 0, ValueError, "`i` must be >= 0, got -1"),
+                             (0.5, 0, TypeError, "`i` must be an int")]:
+        with pytest.raises(exc, match=match):
+            al.pairwise(i, j)
+    with pytest.raises(ValueError, match=r"permutation of range\(3\) in every row, row 1"):
+        Alignment(labels=[[0, 1, 2], [0, 0, 1]], embedding=None, objective=0.0)
+    with pytest.raises(ValueError, match=r"`embedding` must have shape \(2, 3, k\)"):
+        Alignment(labels=[[0, 1, 2], [2, 0, 1]], embedding=np.zeros((2, 2, 3)), objective=0.0)

@@ -63,7 +63,8 @@ positive_int = int_at_least(1)
 def cli_message(exc: BaseException, options=()) -> str:
     """The first line of a library error, with the library's argument names that are this
     command's options written as options (a quoted ``n_universe`` becomes ``--n-universe``,
-    ``verify='affine'`` becomes ``--verify affine``).
+    ``verify='affine'`` becomes ``--verify affine``; ``options`` as a dict maps a name to an
+    option of another name).
 
     >>> cli_message(ValueError("`n_universe` must be >= 5"), ["n_universe"])
     '`--n-universe` must be >= 5'
@@ -72,12 +73,14 @@ def cli_message(exc: BaseException, options=()) -> str:
     >>> cli_message(ValueError("verify=None runs no check, got verify_threshold=0.3"),
     ...             ["verify_threshold", "verify"])
     '--verify none runs no check, got --verify-threshold 0.3'
+    >>> cli_message(ValueError("`n_alignments` must be <= 1000"), {"n_alignments": "--alignments"})
+    '`--alignments` must be <= 1000'
     """
     import re
 
     msg = (str(exc).splitlines() or [""])[0] or type(exc).__name__
     for name in options:
-        flag = "--" + name.replace("_", "-")
+        flag = options[name] if isinstance(options, dict) else "--" + name.replace("_", "-")
         msg = msg.replace(f"`{name}`", f"`{flag}`")
         msg = re.sub(rf"\b{name}=(?:'([^']*)'|([^\s,;)']+))",
                      lambda m, f=flag: f"{f} {m.group(1) or m.group(2).replace('None', 'none')}",

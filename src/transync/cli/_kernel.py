@@ -15,8 +15,8 @@ from __future__ import annotations
 import json
 import time
 
-from ._common import (CLIError, check_output_folder, int_at_least, new_output_folder,
-                      positive_int, seed_int)
+from ._common import (CLIError, check_output_folder, cli_message, int_at_least,
+                      new_output_folder, positive_int, seed_int)
 
 __all__ = ["add_parser"]
 
@@ -26,6 +26,11 @@ KERNEL_VARIANTS = ("linear", "gaussian", "relaxed")
 
 
 _at_least_2 = int_at_least(2)
+
+#: the estimator's parameters that are options of this command, under their option names
+_OPTIONS = {"n_alignments": "--alignments", "n_neighbors": "--neighbors", "matcher": "--matcher",
+            "sync": "--sync", "kernel": "--kernel", "random_state": "--seed",
+            "executor": "--workers"}
 
 
 def _load(spec: str):
@@ -48,7 +53,10 @@ def _cmd_kernel(args) -> int:
     args.interrupt_hint = "nothing was written"
     check_output_folder(args.out)             # before minutes of work, not after
     ds = _load(args.dataset)
-    keep, rule = prune(ds.sizes, ds.y)
+    try:
+        keep, rule = prune(ds.sizes, ds.y)
+    except ValueError as exc:
+        raise CLIError(f"data set {ds.name!r}: {exc}") from None
     sub = ds.subset(keep)
     y = np.asarray(sub.y)
     counts = np.unique(y, return_counts=True)[1]
@@ -63,7 +71,10 @@ def _cmd_kernel(args) -> int:
     progress = not args.no_progress
     est = TransitiveAssignmentKernel(**params, executor=args.workers, progress=progress)
     t0 = time.perf_counter()
-    K = np.asarray(est.fit_transform(list(sub.graphs)), dtype=float)
+    try:
+        K = np.asarray(est.fit_transform(list(sub.graphs)), dtype=float)
+    except (ValueError, TypeError) as exc:     # the library's names written as this command's
+        raise CLIError(cli_message(exc, _OPTIONS)) from exc
     fit_seconds = time.perf_counter() - t0
     ev = spectrum(K)
     top = float(np.max(np.abs(ev)))

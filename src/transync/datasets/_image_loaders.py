@@ -544,7 +544,7 @@ def load_adelaidermf(name, folder=None) -> AdelaideRMFPair:
         raise ValueError(f"`name` must be a sequence name (a file stem without folder), "
                          f"got {name!r:.60}")
     folder = _adelaide_folder(folder)
-    path = folder / f"{name}.mat"
+    path = check_path(folder / f"{name}.mat", "name")     # a name too long: a named error
     if not path.is_file():
         raise FileNotFoundError(f"`name`: no AdelaideRMF file {path}")
     try:

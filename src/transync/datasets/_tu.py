@@ -443,7 +443,11 @@ def _resolve(path_or_name, data_home) -> Path:
     names = _names(root)
     if spec not in names:
         found = ", ".join(names) or "none"
-        local = (f"; a folder here is given as ./{spec}" if Path(spec).is_dir() else "")
+        try:
+            here = Path(spec).is_dir()
+        except (OSError, ValueError):       # a name too long for a file, a NUL byte
+            here = False
+        local = f"; a folder here is given as ./{spec}" if here else ""
         raise FileNotFoundError(f"{root / spec}: no TU data set {spec!r} (names are "
                                 f"case-sensitive; data sets in {root}: {found}{local})")
     return root / spec

@@ -27,7 +27,7 @@ from functools import partial
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .._validation import MAX_ITER, check_choice, check_int, check_positive
+from .._validation import MAX_ITER, check_bool, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning
 from ..graphs import Graph
 from ..parallel import map_chunks, split_chunks
@@ -153,6 +153,7 @@ def graphlet3_kernel(graphs, *, normalize: bool = True) -> np.ndarray:
            [0., 1., 0.],
            [1., 0., 1.]])
     """
+    normalize = check_bool(normalize, "normalize")
     counts = graphlet3_counts(graphs)
     total = counts.sum(1, keepdims=True)
     freq = np.divide(counts, total, out=np.zeros_like(counts), where=total > 0)
@@ -230,6 +231,7 @@ def hks_oa_kernel(features, *, sigma2: float | None = None, node_labels=None,
     array([[2., 2.],
            [2., 3.]])
     """
+    normalize = check_bool(normalize, "normalize")
     feats = check_feature_list(features)
     sizes = np.array([F.shape[0] for F in feats])
     labels = None if node_labels is None else check_node_labels(node_labels, sizes)
@@ -291,6 +293,7 @@ def hks_mean_kernel(features, *, kernel: str = "linear", gamma: float | None = N
     array([[0.5, 2. ],
            [2. , 8. ]])
     """
+    normalize = check_bool(normalize, "normalize")
     feats = check_feature_list(features)
     kernel = check_choice(kernel, "kernel", ("linear", "rbf"))
     block_nodes = check_int(block_nodes, "block_nodes", minimum=1)
@@ -438,6 +441,7 @@ def random_walk_kernel(graphs, *, lamda: float = 1e-2, node_labels=None, normali
     >>> float(K[0, 0])                        # 4 / (1 - 0.1): walks 1 -> 2 -> 1 ... on K2 x K2
     4.444...
     """
+    normalize = check_bool(normalize, "normalize")
     X = _grakel_input(graphs, node_labels)
     adj = [x[0].astype(np.float64) for x in X]
     labels = [np.array([x[1][i] for i in range(len(x[1]))], dtype=np.int64) for x in X]
@@ -550,6 +554,7 @@ def grakel_kernel(graphs, name: str, *, node_labels=None, n_iter: int = 5, lamda
            [1., 1., 0.],
            [0., 0., 1.]])
     """
+    normalize = check_bool(normalize, "normalize")
     name = check_choice(name, "name", GRAKEL_KERNELS)
     n_iter = check_int(n_iter, "n_iter", minimum=0 if name == "wl" else 1)
     lamda = check_positive(lamda, "lamda")

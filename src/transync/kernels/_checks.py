@@ -227,7 +227,10 @@ def check_int_array(x, name: str, ndim: int | None = None,
 
 def class_labels(y: np.ndarray, name: str = "y") -> tuple[np.ndarray, np.ndarray]:
     """``numpy.unique(y, return_inverse=True)`` of 1-d class labels, refusing labels that do
-    not sort (``None``, mixed types in an object array) with a ``TypeError`` naming ``name``."""
+    not sort (``None``, mixed types in an object array) with a ``TypeError`` naming ``name``,
+    and NaN labels (each NaN would be a class of its own) with a ``ValueError``."""
+    if np.asarray(y).dtype.kind in "fc" and not np.all(np.isfinite(y)):
+        raise ValueError(f"`{name}` must hold class labels, got NaN or infinite entries")
     try:
         return np.unique(y, return_inverse=True)
     except TypeError as exc:                   # the sort compares incomparable objects

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from .._progress import progress_bar
-from .._validation import check_array, check_choice, check_int, check_square
+from .._validation import check_array, check_bool, check_choice, check_int, check_square
 from ._checks import class_labels
 
 __all__ = [
@@ -359,6 +359,11 @@ def _check_svm_kernels(Ks: np.ndarray, stack: bool, c_max: float) -> None:
                              "`C_grid`")
 
 
+#: most repetitions :func:`repeated_cv` runs (10**9 spawned that many seeds before any work:
+#: a hang)
+MAX_REPEATS = 1000
+
+
 def repeated_cv(K, y, *, n_splits: int = 10, n_repeats: int = 10, C_grid=None,
                 inner_splits: int = 3, random_state: int = 0,
                 progress: bool = False) -> CVResult:
@@ -385,7 +390,7 @@ def repeated_cv(K, y, *, n_splits: int = 10, n_repeats: int = 10, C_grid=None,
     n_splits : int, default=10
         Outer folds, >= 2; every class needs at least ``n_splits`` samples.
     n_repeats : int, default=10
-        Repetitions with different shuffles, >= 1.
+        Repetitions with different shuffles, 1 to :data:`MAX_REPEATS` (1000).
     C_grid : array_like, optional
         Candidate ``C`` values (> 0); default ``10^-3, ..., 10^3`` (:data:`DEFAULT_C_GRID`).
     inner_splits : int, default=3
@@ -427,7 +432,8 @@ def repeated_cv(K, y, *, n_splits: int = 10, n_repeats: int = 10, C_grid=None,
     if y.ndim != 1 or y.shape[0] != n:
         raise ValueError(f"`y` must have shape ({n},) to match `K`, got shape {y.shape}")
     n_splits = check_int(n_splits, "n_splits", minimum=2)
-    n_repeats = check_int(n_repeats, "n_repeats", minimum=1)
+    n_repeats = check_int(n_repeats, "n_repeats", minimum=1, maximum=MAX_REPEATS)
+    progress = check_bool(progress, "progress")
     inner_splits = check_int(inner_splits, "inner_splits", minimum=2)
     random_state = check_int(random_state, "random_state", minimum=0)
     if C_grid is None:

@@ -174,12 +174,13 @@ def default_sigma2(features, *, rng=None) -> float:
     >>> default_sigma2([np.array([[0.0], [1.0]]), np.array([[3.0]])])
     4.0
     """
+    gen = None if rng is None else as_generator(rng)    # checked whatever the size
     H = np.concatenate(check_feature_list(features, ndim=(1, 2)))
     if len(H) > _SIGMA_NODES:
-        if rng is None:
+        if gen is None:
             sel = np.linspace(0, len(H) - 1, _SIGMA_NODES).round().astype(np.int64)
         else:
-            sel = np.sort(as_generator(rng).choice(len(H), _SIGMA_NODES, replace=False))
+            sel = np.sort(gen.choice(len(H), _SIGMA_NODES, replace=False))
         H = H[sel]
     if len(H) < 2:
         return 1.0

@@ -104,6 +104,21 @@ class Alignment:
     objective: float
     info: Mapping[str, Any] = field(default_factory=dict)
 
+    def __post_init__(self):
+        labels = check_int_array(self.labels, "labels", ndim=2)
+        N, n = labels.shape
+        if N and n and np.any(np.sort(labels, axis=1) != np.arange(n)):
+            bad = int(np.flatnonzero(np.any(np.sort(labels, axis=1) != np.arange(n), axis=1))[0])
+            raise ValueError(f"`labels` must hold a permutation of range({n}) in every row, "
+                             f"row {bad} is not one")
+        object.__setattr__(self, "labels", labels)
+        if self.embedding is not None:
+            emb = check_array(self.embedding, "embedding", ndim=3)
+            if emb.shape[:2] != (N, n):
+                raise ValueError(f"`embedding` must have shape ({N}, {n}, k) as `labels`, got "
+                                 f"{emb.shape}")
+            object.__setattr__(self, "embedding", emb)
+
     @property
     def n_graphs(self) -> int:
         return int(self.labels.shape[0])
@@ -114,6 +129,8 @@ class Alignment:
 
     def pairwise(self, i: int, j: int) -> np.ndarray:
         """The transitive permutation ``i -> j`` of the padded graphs (``a[u] = v``)."""
+        i = check_int(i, "i", minimum=0, maximum=self.n_graphs - 1)
+        j = check_int(j, "j", minimum=0, maximum=self.n_graphs - 1)
         inv = np.argsort(self.labels[j])
         return inv[self.labels[i]]
 
@@ -915,6 +932,7 @@ def median_gamma(aligned, *, rng=0) -> float:
     0.25
     """
     X = check_array(aligned, "aligned", ndim=3)
+    gen = as_generator(rng)                 # checked whatever the size
     N = X.shape[0]
     if N < 2:
         return 1.0
@@ -922,7 +940,6 @@ def median_gamma(aligned, *, rng=0) -> float:
     if n_pairs <= _GAMMA_SAMPLE_PAIRS:
         i, j = np.triu_indices(N, 1)
     else:
-        gen = as_generator(rng)
         i = gen.integers(0, N, _GAMMA_SAMPLE_PAIRS)
         j = (i + gen.integers(1, N, _GAMMA_SAMPLE_PAIRS)) % N
     return _inverse_median(X[i], X[j], "aligned")
@@ -1285,7 +1302,8 @@ def prune_by_size(sizes, y, *, quantile: float | None = 0.95, max_nodes: int | N
     if dropped.size:
         cls_txt += f" (dropped classes {dropped.tolist()})"
     if keep.size == 0:
-        raise ValueError(f"prune_by_size keeps no graph: {cap_txt}; {cls_txt}")
+        raise ValueError(f"the size pruning keeps no graph: every class has fewer than "
+                         f"{min_class_size} graphs with {cap_txt}")
     kept_classes = int(np.unique(inverse[keep]).size)
     rule = (f"kept {keep.size}/{s.size} graphs, {kept_classes}/{classes.size} classes: "
             f"{cap_txt}; {cls_txt}; kept n mean {s[keep].mean():.1f}, max {int(s[keep].max())}")

@@ -301,3 +301,79 @@ def test_workers_beyond_the_trials_start_no_idle_process(tmp_path, monkeypatch):
         Sweep(name="s", variable="x", values=[1], methods=["a", "b"], metrics=("value",))])
     report = run_experiment(exp, tmp_path, workers=40, progress=False, plot=False)
     assert report.n_new == 2 and sizes == [2]
+
+
+def interrupting_trial(config, rng):
+    if config["method"] == "b":
+        raise KeyboardInterrupt
+    return {"value": 1.0}
+
+
+def dying_trial(config, rng):
+    import os
+
+    if config["method"] == "b":
+        os._exit(3)                     # a worker killed mid-trial (signal, out of memory)
+    time.sleep(0.05)
+    return {"value": 1.0}
+
+
+def test_a_pool_stores_every_finished_trial_before_it_reraises(tmp_path, monkeypatch):
+    """Two trials finishing together, one interrupted: the loop re-raised on the first it met,
+    and the finished one later in the same batch was never stored (0 rows in 7 of 8 runs)."""
+    import concurrent.futures as cf
+
+    import transync.experiments._runner as runner   # white-box: both trials done at once
+
+    monkeypatch.setattr(runner, "wait", lambda fs, return_when=None: cf.wait(fs))
+    exp = Experiment(name="t", trial=interrupting_trial, trials=1, sweeps=[
+        Sweep(name="s", variable="x", values=[1], methods=["a", "b"], metrics=("value",))])
+    with pytest.raises(KeyboardInterrupt):
+        run_experiment(exp, tmp_path, workers=2, progress=False, plot=False)
+    with sqlite3.connect(tmp_path / "results.sqlite") as db:
+        rows = db.execute("SELECT config FROM trials").fetchall()
+    assert len(rows) == 1 and '"method": "a"' in rows[0][0]
+
+
+def test_a_dead_worker_is_named_and_the_finished_trials_kept(tmp_path):
+    """A worker that died raised a raw BrokenProcessPool naming no trial."""
+    from transync.exceptions import ExecutorError
+
+    exp = Experiment(name="t", trial=dying_trial, trials=1, sweeps=[
+        Sweep(name="s", variable="x", values=[1], methods=["a", "b"], metrics=("value",))])
+    with pytest.raises(ExecutorError, match=r"a worker process died \(.*\) with [12] trial\(s\) "
+                                            r"running or queued, the first sweep 's', trial 0, "
+                                            r"config \{'x': 1, 'method': '[ab]'\}"):
+        run_experiment(exp, tmp_path, workers=2, progress=False, plot=False)
+
+
+def test_a_trial_that_cannot_reach_the_workers_is_refused_before_any_work(tmp_path):
+    """A lambda or a closure failed inside the pool's feeder thread (PicklingError,
+    AttributeError, tracebacks on stderr)."""
+    exp = Experiment(name="t", trial=lambda c, r: {"value": 1.0}, trials=1, sweeps=[
+        Sweep(name="s", variable="x", values=[1, 2], methods=["a"], metrics=("value",))])
+    with pytest.raises(TypeError, match=r"`Experiment.trial` must be picklable .* or run it "
+                                        r"with workers=1"):
+        run_experiment(exp, tmp_path / "o", workers=2, progress=False, plot=False)
+    assert not (tmp_path / "o").exists()
+    assert run_experiment(exp, tmp_path / "o", progress=False, plot=False).n_new == 2
+
+
+def test_configurations_must_be_plain_data_and_names_fit_a_file():
+    """An object in a configuration was keyed by its address: a rerun repeated every trial.
+    A 300-character name failed with a raw OSError after every trial (its figure's file)."""
+
+    class Opt:
+        pass
+
+    for kw, where in ((dict(base={"opts": Opt()}), r"Sweep\.base\['opts'\]"),
+                      (dict(values=[1, Opt()]), r"Sweep\.values\[1\]"),
+                      (dict(base={"opts": {"inner": [1, Opt()]}}),
+                       r"Sweep\.base\['opts'\]\['inner'\]\[1\]")):
+        with pytest.raises(TypeError, match=where + "` must be plain data"):
+            Sweep(name="s", variable="x", **{"values": [1], "methods": ["a"], **kw})
+    ok = Sweep(name="s", variable="x", values=[np.int64(1), (2, 3), np.arange(2)],
+               methods=["a"], base={"k": {"a": None, "b": [1.5, "x"]}})
+    assert len(list(ok.configs())) == 3
+    with pytest.raises(ValueError, match="`Experiment.name` names its figure file: at most 200"):
+        Experiment(name="x" * 300, trial=noisy_trial, trials=1, sweeps=[ok])

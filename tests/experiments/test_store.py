@@ -349,6 +349,11 @@ def test_a_bad_row_leaves_the_store_open_and_intact(tmp_path):
     for args, exc, match in bad:
         with pytest.raises(exc, match=match):
             store.add(*args)
+    # a wrong `experiment` in a query blamed the file ("not a readable experiment store ...
+    # salvage") and closed the store
+    for query in (store.records, store.done):
+        with pytest.raises(TypeError, match=r"`experiment` must be a non-empty string, got \['e'\]"):
+            query(["e"])
     rows = store.records("e")
     assert len(rows) == 1 and rows[0]["metrics"] == {"a": 1.0}
     store.add("e", "k", 1, "s", {}, {"ok": True}, None, 0.1)   # bools count 0/1, as in trials

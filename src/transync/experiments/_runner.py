@@ -58,7 +58,7 @@ import numpy as np
 
 from .._progress import progress_bar
 from .._validation import check_bool, check_int, check_path, short_repr
-from ..exceptions import ExperimentStoreError
+from ..exceptions import ExecutorError, ExperimentStoreError
 
 __all__ = ["Experiment", "ExperimentReport", "ExperimentStore", "Sweep", "run_experiment",
            "summarize"]
@@ -69,6 +69,39 @@ _FILE_NAME = re.compile(r"(?![.]{1,2}$)[^/\\\x00]+")
 #: trials never finished planning; 10**6 workers would fork without end).
 MAX_TRIALS = 10**6
 MAX_WORKERS = 256
+#: longest experiment name (in UTF-8 bytes): it names ``<name>.png`` and the system's file
+#: names stop at 255 bytes (a 300-character name failed with a raw OSError after every trial)
+_MAX_NAME_BYTES = 200
+
+
+def _check_json(value, name: str, depth: int = 0) -> None:
+    """A configuration value must be plain data (None, bool, numbers, str, NumPy scalars and
+    arrays, lists, tuples and str-keyed dicts of them): its text is the trial's key in the
+    store. An object whose text is its address (``<Opt object at 0x7f...>``) made a new key in
+    every process, so a rerun repeated every trial."""
+    if value is None or isinstance(value, (str, bool, numbers.Number, np.generic)):
+        return
+    if depth > 32:
+        raise ValueError(f"`{name}` is nested more than 32 levels deep")
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind in "biufc":
+            return
+        raise TypeError(f"`{name}` must be plain data (a configuration is stored as JSON), got "
+                        f"an array of dtype {value.dtype}")
+    if isinstance(value, Mapping):
+        for k, v in value.items():
+            if not (k is None or isinstance(k, (str, int, float))):   # JSON's keys (as text)
+                raise TypeError(f"`{name}` must have str or number keys (a configuration is "
+                                f"stored as JSON), got {k!r:.40}")
+            _check_json(v, f"{name}[{k!r}]", depth + 1)
+        return
+    if isinstance(value, (list, tuple)):
+        for i, v in enumerate(value):
+            _check_json(v, f"{name}[{i}]", depth + 1)
+        return
+    raise TypeError(f"`{name}` must be plain data (None, bool, numbers, str, arrays, lists or "
+                    f"dicts of them; a configuration is stored as JSON), got "
+                    f"{type(value).__name__} {short_repr(value, 40)}")
 
 
 def _check_name(value, name: str) -> str:
@@ -129,6 +162,8 @@ class Sweep:
                 raise TypeError(f"`Sweep.{attr}` must be a list, got {type(seq).__name__}")
             if attr != "metrics" and len(seq) == 0:
                 raise ValueError(f"`Sweep.{attr}` must not be empty (sweep {self.name!r})")
+            for k, v in enumerate(seq):
+                _check_json(v, f"Sweep.{attr}[{k}]")
             keys = [json.dumps(v, default=str) for v in seq]
             if len(set(keys)) != len(keys):
                 dup = next(v for v, k in zip(seq, keys) if keys.count(k) > 1)
@@ -143,6 +178,8 @@ class Sweep:
         if not all(isinstance(k, str) for k in self.base):
             raise TypeError(f"`Sweep.base` keys must be str (configuration names), got "
                             f"{[k for k in self.base if not isinstance(k, str)][:5]!r}")
+        for k, v in self.base.items():
+            _check_json(v, f"Sweep.base[{k!r}]")
         if self.xlabel is not None and not isinstance(self.xlabel, str):
             raise TypeError(f"`Sweep.xlabel` must be a string or None, got {self.xlabel!r}")
 
@@ -198,6 +235,10 @@ class Experiment:
         if not _FILE_NAME.fullmatch(self.name):
             raise ValueError(f"`Experiment.name` names its figure file: no '/', '\\' or NUL, "
                              f"not '.' or '..', got {self.name!r}")
+        if len(self.name.encode("utf-8", "surrogatepass")) > _MAX_NAME_BYTES:
+            raise ValueError(f"`Experiment.name` names its figure file: at most "
+                             f"{_MAX_NAME_BYTES} bytes, got {len(self.name)} characters "
+                             f"({self.name[:40]!r}...)")
         if (isinstance(self.sweeps, (str, bytes)) or not isinstance(self.sweeps, Sequence)
                 or not self.sweeps or not all(isinstance(s, Sweep) for s in self.sweeps)):
             raise TypeError(f"`Experiment.sweeps` must be a non-empty list of Sweep, got "
@@ -377,6 +418,7 @@ class ExperimentStore:
     def done(self, experiment: str) -> set[tuple[str, int]]:
         """The (configuration, trial) keys stored *without* an error: a failed trial is run
         again by the next run (its row is replaced), as the CLI's "rerun to retry" says."""
+        _check_name(experiment, "experiment")      # not an SQLite error blaming the file
         with self._guard():
             rows = self._con.execute(
                 "SELECT config_hash, trial FROM trials WHERE experiment = ? AND error IS NULL",
@@ -396,6 +438,7 @@ class ExperimentStore:
     def records(self, experiment: str, keys=None) -> list[dict]:
         """Stored trials of ``experiment``; only those whose configuration hash is in ``keys``
         when given (a run reports the trials of its own configurations and seed)."""
+        _check_name(experiment, "experiment")      # not an SQLite error blaming the file
         with self._guard():
             rows = self._con.execute(
                 "SELECT sweep, config, trial, metrics, error, seconds, config_hash FROM trials "
@@ -688,7 +731,12 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
     Raises
     ------
     ValueError, TypeError
-        ``trials``, ``workers`` or ``seed`` not an integer in range.
+        ``trials``, ``workers`` or ``seed`` not an integer in range; with ``workers > 1`` a
+        trial function that cannot be pickled to the worker processes (checked before any
+        work).
+    ExecutorError
+        A worker process died (a signal, ``os._exit``, the out-of-memory killer); the message
+        names the trials it took with it. Every finished trial is stored.
     ExperimentStoreError
         ``out_dir`` cannot be created or written, another run holds it, or its
         ``results.sqlite`` is corrupted (reported with a salvage hint, never overwritten).
@@ -816,10 +864,32 @@ def _execute(experiment: Experiment, store: ExperimentStore, todo: list, workers
                 n_failed += error is not None
                 bar.update(1)
             return n_failed
+        _check_picklable(experiment.trial)
         pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)),   # no idle processes
                                    initializer=_worker_init, initargs=(os.getpid(),))
+        pending = {}
+
+        def store_done(futures) -> BaseException | None:
+            """Store every finished trial of ``futures``; the first exception a future holds
+            (a worker that died, an interrupt) is returned, after the others are stored."""
+            nonlocal n_failed
+            raised, lost = None, []
+            for fut in futures:
+                if not fut.done() or fut.cancelled():
+                    continue
+                sw_name, key, t, config, _s = pending.pop(fut)
+                exc = fut.exception()
+                if exc is not None:
+                    raised = raised or exc
+                    lost.append((sw_name, t, config))
+                    continue
+                metrics, error, sec = fut.result()
+                store.add(experiment.name, key, t, sw_name, config, metrics, error, sec)
+                n_failed += error is not None
+                bar.update(1)
+            return None if raised is None else _pool_error(raised, lost)
+
         try:
-            pending = {}
             it = iter(todo)
             for item in it:
                 pending[pool.submit(_run_one, experiment.trial, item[3], item[4])] = item
@@ -827,22 +897,56 @@ def _execute(experiment: Experiment, store: ExperimentStore, todo: list, workers
                     break
             while pending:
                 done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    sw_name, key, t, config, _s = pending.pop(fut)
-                    metrics, error, sec = fut.result()
-                    store.add(experiment.name, key, t, sw_name, config, metrics, error, sec)
-                    n_failed += error is not None
-                    bar.update(1)
-                    nxt = next(it, None)
-                    if nxt is not None:
-                        pending[pool.submit(_run_one, experiment.trial, nxt[3], nxt[4])] = nxt
+                raised = store_done(done)
+                if raised is not None:
+                    raise raised
+                for nxt in it:
+                    pending[pool.submit(_run_one, experiment.trial, nxt[3], nxt[4])] = nxt
+                    if len(pending) >= 2 * workers:
+                        break
         except BaseException:
+            with contextlib.suppress(Exception):
+                store_done(list(pending))         # what finished meanwhile is kept too
             _stop_pool(pool)
             raise
         pool.shutdown(wait=True)
         return n_failed
     finally:
         bar.close()
+
+
+def _check_picklable(trial) -> None:
+    """A trial that cannot reach the worker processes is refused before any work (a closure
+    or a lambda raised pickling errors from the pool's feeder thread, with tracebacks)."""
+    import pickle
+
+    try:
+        pickle.dumps(trial)
+    except Exception as exc:  # noqa: BLE001 - any pickling failure means the same here
+        raise TypeError(f"`Experiment.trial` must be picklable to run on worker processes "
+                        f"(a module-level function, not a lambda or a closure), got "
+                        f"{getattr(trial, '__qualname__', type(trial).__name__)!r}: {exc}; "
+                        "or run it with workers=1") from None
+
+
+def _pool_error(exc: BaseException, lost: list) -> BaseException:
+    """The exception of the trials' futures as the run reports it: an interrupt as it is; a
+    worker that died (``os._exit``, a signal, the out-of-memory killer) as an
+    :class:`~transync.exceptions.ExecutorError` naming the trials it took with it (was a raw
+    ``BrokenProcessPool``; the pool cannot tell which of them killed the worker)."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    if isinstance(exc, BrokenProcessPool):
+        sweep, trial, config = lost[0]
+        err = ExecutorError(f"a worker process died (a signal, os._exit, the out-of-memory "
+                            f"killer) with {len(lost)} trial(s) running or queued, the first "
+                            f"sweep {sweep!r}, trial {trial}, config "
+                            f"{short_repr(dict(config), 120)}; the finished trials are "
+                            "stored, rerun to resume (with workers=1 a failing trial is "
+                            "recorded with its error)")
+        err.__cause__ = exc
+        return err
+    return exc
 
 
 def mean_se(values) -> tuple[float, float, int]:

@@ -141,6 +141,25 @@ def test_from_points_weighted_must_be_a_bool():
         Graph.from_points(P, edges="full", weighted="no")
 
 
+@pytest.mark.parametrize("edges", ["full", "knn", "delaunay"])
+def test_weighted_graph_of_coincident_points_is_refused(edges):
+    """The weight of an edge is its length: two coincident points lost their edge silently (6
+    edges unweighted, 5 weighted)."""
+    P = np.array([[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    with pytest.raises(ValueError, match="`weighted=True` .* points 0 and 1 coincide"):
+        Graph.from_points(P, edges=edges, weighted=True)
+    assert Graph.from_points(P[1:], edges=edges, weighted=True).adjacency.min() == 0.0
+
+
+def test_from_networkx_weight_beyond_float64_is_named():
+    import networkx as nx
+
+    G = nx.Graph()
+    G.add_edge(0, 1, weight=10**400)
+    with pytest.raises(ValueError, match="`G`'s edge attribute 'weight' .* must hold numbers"):
+        Graph.from_networkx(G)
+
+
 def test_graph_owns_its_arrays(rng):
     """A frozen Graph does not change when the caller edits the arrays it was built from (it
     kept references: zeroing a row of the caller's adjacency made the graph asymmetric)."""

@@ -362,6 +362,16 @@ def test_default_timeout_is_documented():
     assert "600 s" in map_chunks.__doc__
 
 
+def test_a_timeout_beyond_the_clocks_is_refused():
+    """timeout=1e10 leaked OverflowError ("timestamp out of range for platform time_t") from
+    the futures' wait whenever a chunk was still running."""
+    with ThreadPoolExecutor(2) as pool:
+        for t in (1e10, 1e300):
+            with pytest.raises(ValueError, match="`timeout` must be at most 3.2e\\+07 s"):
+                map_chunks(_demo_chunk, [[0], [1]], executor=pool, timeout=t)
+        assert len(map_chunks(_demo_chunk, [[0], [1]], executor=pool, timeout=3e7)) == 2
+
+
 def _allocator_tuned(_chunk):
     from transync import _malloc
     return _malloc.tune_worker_allocator(), _malloc._DONE["tuned"]
@@ -390,3 +400,13 @@ def test_split_chunks_refuses_index_arrays_beyond_memory():
 
     with pytest.raises(ValueError, match=r"`n_items` must be <= 1000000000"):
         split_chunks(2**40)
+
+
+def test_an_executor_class_instead_of_an_instance_is_named():
+    """ThreadPoolExecutor (the class) failed as "type refused chunk 0 of 2: AttributeError:
+    'function' object has no attribute '_shutdown_lock'"; split_chunks accepted it."""
+    for fn in (lambda: map_chunks(_demo_chunk, [[0], [1]], executor=ThreadPoolExecutor),
+               lambda: split_chunks(10, ThreadPoolExecutor)):
+        with pytest.raises(TypeError, match=r"`executor` must be an executor object, got the "
+                                            r"class ThreadPoolExecutor: create one"):
+            fn()

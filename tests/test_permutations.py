@@ -213,3 +213,21 @@ def test_cycle_inconsistency_arrays_scales_past_ten_thousand_objects():
     rep = cycle_inconsistency_arrays(tri, np.array([[1, 0], [1, 0], [1, 0]]), [2, 2, 2])
     assert rep == {"n_triangles": 1, "inconsistent_triangles": 1.0, "cycle_error": 1.0,
                    "sampled": False}
+
+
+def test_cycle_inconsistency_arrays_refuses_maps_that_are_not_assignments():
+    """The array form scored a node mapped twice (cycle error 0.5) and a target beyond its
+    object, which the dict form refuses."""
+    from transync.permutations import cycle_inconsistency_arrays as cia
+
+    pairs = [[0, 1], [1, 2], [0, 2]]
+    with pytest.raises(ValueError, match=r"`maps\[0\]` \(pair \(0, 1\)\) uses a target twice"):
+        cia(pairs, [[0, 0], [0, 1], [0, 1]], [2, 2, 2])
+    with pytest.raises(ValueError, match=r"`maps\[0\]` \(pair \(0, 1\)\) targets a node beyond "
+                                         r"the size of object 1"):
+        cia(pairs, [[1, 0], [0, -1], [0, 1]], [2, 1, 2])
+    with pytest.raises(ValueError, match=r"`maps\[1\]` \(pair \(1, 2\)\) maps a node beyond "
+                                         r"the size of object 1"):
+        cia(pairs, [[0, -1], [0, 1], [0, 1]], [2, 1, 2])
+    ok = cia(pairs, [[0, -1], [0, -1], [0, 1]], [2, 1, 2])      # partial, padded: valid
+    assert ok["n_triangles"] == 1

@@ -183,3 +183,33 @@ def test_many_objects_need_no_objects_by_slots_table(monkeypatch):
                 monkeypatch.setattr(perm, "_DENSE_INVERSE", 0)
                 np.testing.assert_array_equal(MultiMatching(labels).pairwise(i, j), want)
         monkeypatch.setattr(perm, "_DENSE_INVERSE", 2**24)
+
+
+def test_dense_views_and_pair_lookup_name_their_own_limits():
+    """to_matrix(max_size="a") raised a bare comparison TypeError and max_size=nan switched the
+    limit off; absolute() and to_matrix() named an internal `n2` / `assignment`; pair_rows did
+    no validation ([[0, 5]] among 3 objects collided with the key of (1, 2))."""
+    import numpy as np
+    import pytest
+
+    from transync.permutations import MultiMatching, pair_rows
+
+    m = MultiMatching([np.array([0, -1, 1]), np.array([1, 0])], 3)
+    for bad in ("a", float("nan"), None):
+        with pytest.raises(TypeError, match="`max_size` must be an int"):
+            m.to_matrix(max_size=bad)
+    with pytest.raises(ValueError, match=r"absolute\(0\) would build a 1 x 1000000000000000000 "):
+        MultiMatching([[0]], n_universe=10**18).absolute(0)
+    with pytest.raises(ValueError, match=r"to_matrix\(\) would build a 30000 x 30000 matrix \(at "
+                                         r"most 20000 x 20000"):
+        MultiMatching([np.arange(30000)]).to_matrix(max_size=10**9)
+    T = m.to_matrix()
+    assert T.shape == (5, 5) and np.array_equal(np.diag(T), np.ones(5))
+    assert T[0, 4] == 1 and T[2, 3] == 1 and T[1].sum() == 1       # node 1 unplaced
+    with pytest.raises(ValueError, match=r"`pairs` must hold object indices in \[0, 3\)"):
+        pair_rows([[0, 5]], 3)
+    with pytest.raises(TypeError, match="`pairs`"):
+        pair_rows("ab", 3)
+    with pytest.raises(ValueError, match=r"`pairs` must have shape \(Q, 2\)"):
+        pair_rows([[0, 1, 2]], 3)
+    assert pair_rows([[0, 1], [2, 1]], 3)(np.array([1, 0]), np.array([2, 2])).tolist() == [1, -1]

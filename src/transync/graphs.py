@@ -204,7 +204,8 @@ class Graph:
         ------
         ValueError
             No points, non-finite coordinates, ``edges="delaunay"`` on points that are not 2-d
-            or that no triangulation covers (e.g. all at one place).
+            or that no triangulation covers (e.g. all at one place); with ``weighted``, two
+            coincident points joined by an edge (a weight of 0 is no edge).
         """
         P = _check_coordinates(check_array(points, "points", ndim=2))
         n = P.shape[0]
@@ -235,7 +236,14 @@ class Graph:
         np.fill_diagonal(M, False)
         A = M.astype(float)
         if check_bool(weighted, "weighted"):
-            A = A * _distances(P)
+            D = _distances(P)
+            zero = np.argwhere(M & (D == 0))
+            if zero.size:        # an edge of length 0 is no edge in a weighted adjacency
+                u, v = (int(t) for t in zero[0])
+                raise ValueError(f"`weighted=True` stores edge lengths as weights, but points "
+                                 f"{u} and {v} coincide: their edge would have weight 0 and "
+                                 "vanish (merge duplicate points, or use weighted=False)")
+            A = A * D
         return cls(A, points=P, node_features=node_features, node_labels=node_labels)
 
     @classmethod
@@ -256,7 +264,7 @@ class Graph:
             raise ValueError("`G` must have at least one node")
         try:
             A = nx.to_numpy_array(G, nodelist=nodes, weight=weight, dtype=float)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:    # 10**400: beyond float64
             raise ValueError(f"`G`'s edge attribute {weight!r} (`weight`) must hold numbers: "
                              f"{exc}") from None
         np.fill_diagonal(A, 0.0)

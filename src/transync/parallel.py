@@ -82,6 +82,9 @@ __all__ = ["DEFAULT_TIMEOUT", "map_chunks", "split_chunks"]
 #: Default ``timeout`` of :func:`map_chunks`: the longest wait, in seconds, for the next chunk to
 #: finish before :class:`~transync.exceptions.ExecutorError` is raised.
 DEFAULT_TIMEOUT = 600.0
+#: Largest ``timeout`` of :func:`map_chunks` (a year): 1e10 s raised a raw ``OverflowError``
+#: from the futures' wait (``timestamp out of range for platform time_t``).
+MAX_TIMEOUT = 3.2e7
 
 _DASK_LIVENESS_TIMEOUT = 10.0   # at most this long for the Dask scheduler's first answer
 _DASK_RECONNECT_GRACE = 1.0     # a client that lost its scheduler gets this long to reconnect
@@ -113,7 +116,8 @@ def map_chunks(fn: Callable[[Any], Any], chunks: Iterable, *, executor=None,
     timeout : float, optional
         Seconds to wait for the next chunk to finish (for joblib: for each chunk to finish)
         before giving up with :class:`~transync.exceptions.ExecutorError`. Default
-        :data:`DEFAULT_TIMEOUT` (600 s). Not applied to the serial loop, which runs here.
+        :data:`DEFAULT_TIMEOUT` (600 s), at most :data:`MAX_TIMEOUT` (a year). Not applied to
+        the serial loop, which runs here.
     progress : bool, default False
         Show a tqdm progress bar over the finished chunks.
     desc : str, default "pair chunks"
@@ -154,6 +158,9 @@ def map_chunks(fn: Callable[[Any], Any], chunks: Iterable, *, executor=None,
         raise TypeError(f"`chunks` must be an iterable of chunks, got {type(chunks).__name__}")
     chunks = list(chunks)
     timeout = DEFAULT_TIMEOUT if timeout is None else check_positive(timeout, "timeout")
+    if timeout > MAX_TIMEOUT:          # the waits' clocks overflow (time_t) beyond a point
+        raise ValueError(f"`timeout` must be at most {MAX_TIMEOUT:g} s (about a year), got "
+                         f"{timeout:g}")
     check_bool(progress, "progress")
     kind, handle = _resolve(executor)
     if kind == "dask":
@@ -249,6 +256,9 @@ def _resolve(executor) -> tuple[str, Any]:
             raise TypeError("`executor` must be a synchronous dask.distributed.Client, got an "
                             "asynchronous one (Client(..., asynchronous=True))")
         return "dask", executor
+    if isinstance(executor, type):          # ThreadPoolExecutor, not ThreadPoolExecutor(2)
+        raise TypeError(f"`executor` must be an executor object, got the class "
+                        f"{executor.__qualname__}: create one, e.g. {executor.__qualname__}(2)")
     if callable(getattr(executor, "submit", None)):
         return "futures", executor
     hint = ""

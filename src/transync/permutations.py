@@ -63,6 +63,7 @@ __all__ = [
 
 UNMATCHED = -1
 MAX_NODES = 10**8      # largest object (and dense matching matrix) the converters build
+_MAX_MATRIX_SIDE = 20000   # largest MultiMatching.to_matrix() whatever max_size (3.2 GB)
 _MAX_TRIANGLES = 10**8  # most triangles cycle_inconsistency checks (10**9 ran for hours)
 
 
@@ -91,7 +92,17 @@ def pair_rows(pairs, n_objects: int):
     >>> rows(np.array([1, 1, 0]), np.array([0, 2, 2])).tolist()
     [0, 1, -1]
     """
-    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    n_objects = check_int(n_objects, "n_objects", minimum=0, maximum=2**31)
+    pairs = check_int_array(pairs, "pairs", ndim=2, integral_floats=True,
+                            what="integer object indices")
+    if pairs.size == 0:
+        pairs = pairs.reshape(0, 2)
+    if pairs.shape[1] != 2:
+        raise ValueError(f"`pairs` must have shape (Q, 2), got {pairs.shape}")
+    if pairs.size and (pairs.min() < 0 or pairs.max() >= n_objects):
+        raise ValueError(f"`pairs` must hold object indices in [0, {n_objects}) (keys of "
+                         f"larger indices collide), got range [{int(pairs.min())}, "
+                         f"{int(pairs.max())}]")
     n = np.int64(n_objects)
     keys, first = np.unique(pairs.min(1) * n + pairs.max(1), return_index=True)
 
@@ -596,6 +607,32 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
     return cycle_inconsistency_arrays(pairs, maps, size_arr, max_triangles=max_triangles, rng=rng)
 
 
+def _check_map_rows(pairs: np.ndarray, maps: np.ndarray, sizes: np.ndarray) -> None:
+    """Every row ``maps[q]`` a valid assignment of ``pairs[q] = (i, j)``: entries past
+    ``sizes[i]`` are padding (-1), targets below ``sizes[j]``, no target used twice (as
+    :func:`check_assignment` asks of every map of the dict form; a node mapped twice was
+    scored)."""
+    if not maps.size:
+        return
+    Q, n = maps.shape
+    cols = np.arange(n)[None, :]
+    pad = (cols >= sizes[pairs[:, 0]][:, None]) & (maps >= 0)
+    far = maps >= sizes[pairs[:, 1]][:, None]
+    srt = np.sort(maps, axis=1)
+    twice = np.zeros((Q, n), bool)
+    twice[:, 1:] = (srt[:, 1:] == srt[:, :-1]) & (srt[:, 1:] >= 0)
+    for bad, what in ((pad, "maps a node beyond the size of object {i}"),
+                      (far, "targets a node beyond the size of object {j}"),
+                      (twice, "uses a target twice (not injective)")):
+        rows = np.flatnonzero(bad.any(axis=1))
+        if rows.size:
+            q = int(rows[0])
+            i, j = int(pairs[q, 0]), int(pairs[q, 1])
+            raise ValueError(f"`maps[{q}]` (pair {(i, j)}) " + what.format(i=i, j=j)
+                             + f": {maps[q].tolist()!r:.80}, sizes {int(sizes[i])} and "
+                             f"{int(sizes[j])}")
+
+
 def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_000,
                                rng=None) -> dict[str, float]:
     """:func:`cycle_inconsistency` on stacked arrays (no dict; for large collections).
@@ -626,7 +663,8 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
     ------
     ValueError, TypeError
         Mis-shaped or non-integer arrays, pairs out of range or not ``i < j``, map entries that
-        are not node indices.
+        are not node indices, maps that are not assignments of their pair (a target used
+        twice, beyond the target object, or a source node beyond the source object).
 
     Examples
     --------
@@ -646,6 +684,7 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
         raise ValueError(f"`pairs` must hold object indices i < j in [0, {sizes.size})")
     if maps.size and (maps.min() < UNMATCHED or maps.max() >= max(int(sizes.max()), 1)):
         raise ValueError("`maps` entries must be node indices or -1")
+    _check_map_rows(pairs, maps, sizes)
     check_int(max_triangles, "max_triangles", minimum=1, maximum=_MAX_TRIANGLES)
     gen = as_generator(rng)         # checked even when no sampling needs it
     n_obj = int(sizes.shape[0])
@@ -928,6 +967,10 @@ class MultiMatching:
     def absolute(self, g: int) -> np.ndarray:
         """The ``(n_g, n_universe)`` 0/1 matrix ``X_g`` (node -> universe slot)."""
         lab = self.labels[self._object(g, "g")]
+        if lab.shape[0] * self.n_universe > MAX_NODES:   # (the converter named its own `n2`)
+            raise ValueError(f"absolute({g}) would build a {lab.shape[0]} x {self.n_universe} "
+                             f"matrix (more than {MAX_NODES:.0e} entries): the universe is too "
+                             "large for dense maps; use labels[g]")
         return assignment_to_matrix(lab, self.n_universe)
 
     def to_matrix(self, *, max_size: int = 20000) -> np.ndarray:
@@ -936,13 +979,21 @@ class MultiMatching:
         Diagonal blocks are identities (also for unplaced nodes). Meant for small problems: a
         total above ``max_size`` nodes raises ``ValueError``.
         """
+        max_size = check_int(max_size, "max_size", minimum=0)     # NaN switched it off
         total = int(self.sizes.sum())
         if total > max_size:
             raise ValueError(f"to_matrix() would build a {total} x {total} matrix (more than "
                              f"max_size={max_size} nodes); use pairwise(i, j) for large problems")
+        if total > _MAX_MATRIX_SIDE:
+            raise ValueError(f"to_matrix() would build a {total} x {total} matrix (at most "
+                             f"{_MAX_MATRIX_SIDE} x {_MAX_MATRIX_SIDE} whatever max_size, 3.2 GB); "
+                             "use pairwise(i, j) for large problems")
         k = int(self._padded.max(initial=-1)) + 1           # used slots only: same X X^T
-        X = np.vstack([assignment_to_matrix(self._padded[g, :n], k)
-                       for g, n in enumerate(self.sizes)] or [np.zeros((0, k))])
+        real = np.arange(self._padded.shape[1])[None, :] < self._sizes[:, None]
+        lab = self._padded[real]                  # the real nodes, object by object
+        X = np.zeros((total, k))
+        placed = np.flatnonzero(lab >= 0)
+        X[placed, lab[placed]] = 1.0
         T = X @ X.T
         np.fill_diagonal(T, 1.0)
         return T

@@ -377,3 +377,14 @@ def test_configurations_must_be_plain_data_and_names_fit_a_file():
     assert len(list(ok.configs())) == 3
     with pytest.raises(ValueError, match="`Experiment.name` names its figure file: at most 200"):
         Experiment(name="x" * 300, trial=noisy_trial, trials=1, sweeps=[ok])
+
+
+def test_a_finish_hook_that_returns_no_paths_is_named(tmp_path):
+    """A finish() returning None failed with "'NoneType' object is not iterable"."""
+    sw = Sweep(name="s", variable="x", values=[1], methods=["a"], metrics=("value",))
+    exp = Experiment(name="t", trial=noisy_trial, trials=1, sweeps=[sw],
+                     finish=lambda records, summary, out: None)
+    with pytest.raises(TypeError, match=r"`Experiment.finish` must return the paths of the "
+                                        r"files it wrote .* got None \(the trials are stored\)"):
+        run_experiment(exp, tmp_path, progress=False)
+    assert len(run_experiment(exp, tmp_path, progress=False, plot=False).records) == 1

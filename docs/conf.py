@@ -42,7 +42,8 @@ exclude_patterns = ["_build", "**/.ipynb_checkpoints", "auto_examples/*.ipynb",
                     "auto_examples/*.md5", "sg_execution_times.rst"]
 # the experiments' tables are included from their README pages, not pages of their own
 exclude_patterns += ["experiments/*/summary.md", "experiments/*/table_*.md",
-                     "experiments/*/tables_*.md", "experiments/*/psd.md"]
+                     "experiments/*/tables_*.md", "experiments/*/psd.md",
+                     "experiments/*/rerun_*.md"]
 
 # -- autodoc / autosummary / numpydoc -------------------------------------------------------
 autosummary_generate = True

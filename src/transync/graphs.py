@@ -240,8 +240,10 @@ class Graph:
             zero = np.argwhere(M & (D == 0))
             if zero.size:        # an edge of length 0 is no edge in a weighted adjacency
                 u, v = (int(t) for t in zero[0])
+                why = ("coincide" if np.array_equal(P[u], P[v]) else
+                       "are closer than float64 resolves at the spread of these points")
                 raise ValueError(f"`weighted=True` stores edge lengths as weights, but points "
-                                 f"{u} and {v} coincide: their edge would have weight 0 and "
+                                 f"{u} and {v} {why}: their edge would have weight 0 and "
                                  "vanish (merge duplicate points, or use weighted=False)")
             A = A * D
         return cls(A, points=P, node_features=node_features, node_labels=node_labels)

@@ -294,8 +294,11 @@ def test_graph_other_entry_points_refuse(rng):
         with pytest.raises(ValueError, match=r"`points` must have coordinates of magnitude <= "
                                              r"1e\+300 .*got 1.7e\+308"):
             make(huge)          # distances were inf with an overflow warning; delaunay misreported
-    g = Graph.from_points(huge / 1.7e8, edges="full", weighted=True)
-    assert np.isfinite(g.distances()).all() and g.adjacency.max() == pytest.approx(2e300)
+    g = Graph.from_points(huge / 1.7e8, edges="full")
+    assert np.isfinite(g.distances()).all() and g.distances().max() == pytest.approx(2e300)
+    # weighted, points 2 and 3 (1.2e-8 apart beside a spread of 2e300) lost their edge
+    with pytest.raises(ValueError, match="points 2 and 3 are closer than float64 resolves"):
+        Graph.from_points(huge / 1.7e8, edges="full", weighted=True)
     G = nx.Graph()
     G.add_edge(0, 1, weight="a")            # these three were numpy's or Python's words
     with pytest.raises(ValueError, match=r"`G`'s edge attribute 'weight' \(`weight`\) must hold"):

@@ -198,7 +198,8 @@ def _graphs(sizes, rng=0):
     (_graphs([4, 4, 4]), {"mode": "batch"}, ValueError, "`mode`"),
     (_graphs([4, 4, 4]), {"solver": "sm"}, ValueError, "offline only"),
     (_graphs([4, 4, 4]), {"pairs": [(0, 0), (1, 2)]}, ValueError, "itself"),
-    (_graphs([4, 4, 4]), {"pairs": [(0, 1), (1, 0)]}, ValueError, "repeat a pair"),
+    (_graphs([4, 4, 4]), {"pairs": [(0, 1), (1, 0)]}, ValueError,
+     r"repeat a pair, got \(1, 0\) at row 1 after \(0, 1\)"),
     (_graphs([4, 4, 4]), {"pairs": [(0, 3)]}, ValueError, r"\[0, 3\)"),
     (_graphs([4, 4, 4]), {"pairs": [[0, 1, 2]]}, ValueError, r"\(P, 2\)"),
     (_graphs([4, 4, 4, 4]), {"pairs": [(0, 1), (2, 3)]}, ValueError, "disconnected"),
@@ -370,3 +371,15 @@ def test_view_graph_and_block_dict_contract():
     with pytest.raises(ValueError, match="`affinity` is too small to match on"):
         match_collection(graphs, affinity={k: v * 1e-305 for k, v in K.items()},
                          progress=False)
+
+
+def test_serial_executors_are_accepted_online():
+    """executor="serial" and executor=1 mean "in this process", as None does (the parallel
+    module's definition); the online solvers refused them."""
+    p = make_graph_collection(n_graphs=4, n_inliers=5, rng=0)
+    ref = match_collection(p.graphs, progress=False, rng=0)
+    for ex in ("serial", 1):
+        res = match_collection(p.graphs, executor=ex, progress=False, rng=0)
+        np.testing.assert_array_equal(res.assignments, ref.assignments)
+    with pytest.raises(ValueError, match="`executor` spreads independent pairwise work"):
+        match_collection(p.graphs, executor=2, progress=False)

@@ -7,6 +7,7 @@ and package the result.
 
 from __future__ import annotations
 
+import numbers
 import time
 import warnings
 from collections.abc import Mapping
@@ -16,7 +17,7 @@ import numpy as np
 
 from .._blas import blas_limit
 from .._validation import (as_generator, check_array, check_bool, check_choice, check_choices,
-                           check_int, check_positive)
+                           check_index_pairs, check_int, check_positive)
 from ..exceptions import ConvergenceWarning
 from ..permutations import MultiMatching, cycle_inconsistency_arrays
 from ..synchronization import (
@@ -279,7 +280,10 @@ default="auto"
         if not online and value != default:
             raise ValueError(f"`{name}` steers the online synchronized solvers; {asked} "
                              f"runs none, got {name}={value!r}")
-    if online and executor is not None:
+    serial = executor is None or (isinstance(executor, str) and executor == "serial") or (
+        isinstance(executor, numbers.Integral) and not isinstance(executor, bool)
+        and executor == 1)                   # all three mean "in this process" (parallel)
+    if online and not serial:
         raise ValueError("`executor` spreads independent pairwise work (mode='offline', CAO); "
                          "the online solvers run all pairs in lock-step in this process: pass "
                          f"executor=None or mode='offline', got executor={executor!r}")
@@ -569,6 +573,7 @@ def _check_pairs(pairs, N: int, *, need_all: bool, need_connected: bool) -> np.n
         same = np.flatnonzero(arr[:, 0] == arr[:, 1])
         if same.size:
             raise ValueError(f"`pairs[{same[0]}]` pairs graph {arr[same[0], 0]} with itself")
+        check_index_pairs(arr, N, unique=True)   # a repeat named as given, e.g. (1, 0)
         arr = np.sort(arr, axis=1)
     # shape, integer indices in range, no repeated pair (and all of them for CAO)
     arr = check_pairs(arr, N, complete="CAO composes maps through every third graph"

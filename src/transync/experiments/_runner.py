@@ -76,8 +76,8 @@ _MAX_NAME_BYTES = 200
 
 def _check_json(value, name: str, depth: int = 0) -> None:
     """A configuration value must be plain data (None, bool, numbers, str, NumPy scalars and
-    arrays, lists, tuples and str-keyed dicts of them): its text is the trial's key in the
-    store. An object whose text is its address (``<Opt object at 0x7f...>``) made a new key in
+    arrays, lists, tuples and dicts of them with str or number keys): its text is the trial's
+    key in the store. An object whose text is its address (``<Opt object at 0x7f...>``) made a new key in
     every process, so a rerun repeated every trial."""
     if value is None or isinstance(value, (str, bool, numbers.Number, np.generic)):
         return

@@ -576,19 +576,19 @@ class _CheckedAffinity(Affinity):
     NaN or a wrong shape surfaced as an unrelated error deep in a solver)."""
 
     def __init__(self, inner: Affinity, name: str):
-        self.inner, self.name = inner, name
+        self._inner, self._arg = inner, name
         self.n1, self.n2 = int(inner.n1), int(inner.n2)
 
     def __getattr__(self, attr):             # the user's own attributes (not found above)
-        if attr == "inner":                  # not yet set (unpickling): no recursion
+        if attr == "_inner":                 # not yet set (unpickling): no recursion
             raise AttributeError(attr)
-        return getattr(self.inner, attr)
+        return getattr(self._inner, attr)
 
     def _overrides(self, method: str) -> bool:
-        return getattr(type(self.inner), method) is not getattr(Affinity, method)
+        return getattr(type(self._inner), method) is not getattr(Affinity, method)
 
     def _array(self, value, method: str, shape) -> np.ndarray:
-        where = f"`{self.name}`.{method}() (a {type(self.inner).__name__})"
+        where = f"`{self._arg}`.{method}() (a {type(self._inner).__name__})"
         if value is None:
             raise TypeError(f"{where} must return a float array of shape {shape}, got None")
         try:
@@ -605,37 +605,37 @@ class _CheckedAffinity(Affinity):
         return arr
 
     def matvec(self, X):
-        return self._array(self.inner.matvec(X), "matvec", (self.n1, self.n2))
+        return self._array(self._inner.matvec(X), "matvec", (self.n1, self.n2))
 
     def rmatvec(self, X):
         if not self._overrides("rmatvec"):
             return Affinity.rmatvec(self, X)   # through the checked matvec
-        return self._array(self.inner.rmatvec(X), "rmatvec", (self.n1, self.n2))
+        return self._array(self._inner.rmatvec(X), "rmatvec", (self.n1, self.n2))
 
     def diag(self):
-        return self._array(self.inner.diag(), "diag", (self.n1, self.n2))
+        return self._array(self._inner.diag(), "diag", (self.n1, self.n2))
 
     def to_dense(self):
         m = self.n1 * self.n2
-        return self._array(self.inner.to_dense(), "to_dense", (m, m))
+        return self._array(self._inner.to_dense(), "to_dense", (m, m))
 
     def score(self, X) -> float:
         if not self._overrides("score"):
             return Affinity.score(self, X)   # through the checked matvec
-        value = self._array(self.inner.score(X), "score", ())
+        value = self._array(self._inner.score(X), "score", ())
         return float(value)
 
     def column_sums(self):
         if not self._overrides("column_sums"):
             return Affinity.column_sums(self)
-        return self._array(self.inner.column_sums(), "column_sums", (self.n1, self.n2))
+        return self._array(self._inner.column_sums(), "column_sums", (self.n1, self.n2))
 
     def drop_conflicts(self) -> Affinity:
-        out = self.inner.drop_conflicts()
-        return self if out is self.inner else as_affinity(out, name=self.name)
+        out = self._inner.drop_conflicts()
+        return self if out is self._inner else as_affinity(out, name=self._arg)
 
     def __repr__(self) -> str:
-        return repr(self.inner)
+        return repr(self._inner)
 
 
 def as_affinity(K, *, n1: int | None = None, n2: int | None = None, name: str = "K") -> Affinity:

@@ -231,3 +231,30 @@ def test_cycle_inconsistency_arrays_refuses_maps_that_are_not_assignments():
         cia(pairs, [[0, -1], [0, 1], [0, 1]], [2, 1, 2])
     ok = cia(pairs, [[0, -1], [0, -1], [0, 1]], [2, 1, 2])      # partial, padded: valid
     assert ok["n_triangles"] == 1
+
+
+def test_first_invalid_assignment_is_the_batched_check_assignment():
+    """One home for validating many int assignments at once (the synchronizations' parser and
+    cycle_inconsistency_arrays): the first invalid one in order, or None past one sort key."""
+    from transync.permutations import check_assignment, first_invalid_assignment
+
+    maps = [np.array([1, 0, -1]), np.array([0]), np.array([2, -1, 2]), np.array([-2, 0])]
+    flat, lengths = np.concatenate(maps), np.array([len(m) for m in maps])
+    assert first_invalid_assignment(flat, lengths) == 2
+    for k, m in enumerate(maps):                       # the same verdict as one by one
+        ok = True
+        try:
+            check_assignment(m)
+        except ValueError:
+            ok = False
+        assert ok == (k < 2)
+    assert first_invalid_assignment(flat[:4], lengths[:2]) == -1
+    assert first_invalid_assignment(np.array([2**61, 0, 1]), np.array([1, 1, 1])) is None
+
+
+def test_cycle_inconsistency_arrays_checks_huge_targets_row_by_row():
+    from transync.permutations import cycle_inconsistency_arrays as cia
+
+    big = 2**61
+    with pytest.raises(ValueError, match=r"`maps\[0\]` \(pair \(0, 1\)\) uses a target twice"):
+        cia([[0, 1], [1, 2], [0, 2]], [[big - 1, big - 1], [0, 1], [0, 1]], [2, big, 2])

@@ -52,6 +52,7 @@ __all__ = [
     "compose",
     "cycle_inconsistency",
     "cycle_inconsistency_arrays",
+    "first_invalid_assignment",
     "identity",
     "invert",
     "is_partial_permutation_matrix",
@@ -65,6 +66,49 @@ UNMATCHED = -1
 MAX_NODES = 10**8      # largest object (and dense matching matrix) the converters build
 _MAX_MATRIX_SIDE = 20000   # largest MultiMatching.to_matrix() whatever max_size (3.2 GB)
 _MAX_TRIANGLES = 10**8  # most triangles cycle_inconsistency checks (10**9 ran for hours)
+
+
+def first_invalid_assignment(flat, lengths) -> int | None:
+    """Many int assignments validated at once: the index of the first invalid one.
+
+    ``flat`` is the concatenation of the assignments, ``lengths`` their lengths. An assignment
+    is invalid with an entry below ``-1`` or at least ``2**62``, or a target used twice (what
+    :func:`check_assignment` refuses besides the target range, which depends on the other
+    object; call it on the one returned for its message). One sort for all of them: ENZYMES'
+    179 700 real-node maps in under a second instead of 8 s one by one.
+
+    Parameters
+    ----------
+    flat : ndarray of int64
+        The entries of every assignment, one after the other.
+    lengths : ndarray of int64
+        The length of every assignment (they sum to ``len(flat)``).
+
+    Returns
+    -------
+    int or None
+        -1 when all are valid; the index of the first invalid assignment; None when the
+        entries are too large to share one sort key (then check them one by one).
+
+    Examples
+    --------
+    >>> first_invalid_assignment(np.array([1, 0, 0, -1, 2, 2]), np.array([2, 2, 2]))
+    2
+    >>> first_invalid_assignment(np.array([1, 0, -1]), np.array([2, 1]))
+    -1
+    """
+    n = len(lengths)
+    row = np.repeat(np.arange(n), lengths)
+    out_of_range = (flat < UNMATCHED) | (flat >= 2**62)
+    bad = np.zeros(n, dtype=bool)
+    bad[row[out_of_range]] = True
+    used = np.flatnonzero((flat >= 0) & ~out_of_range)
+    top = int(flat[used].max()) + 1 if used.size else 1
+    if top >= 2**62 // max(n, 1):
+        return None
+    key = np.sort(row[used] * top + flat[used])
+    bad[key[1:][key[1:] == key[:-1]] // top] = True           # a target used twice
+    return int(np.flatnonzero(bad)[0]) if bad.any() else -1
 
 
 def pair_rows(pairs, n_objects: int):
@@ -614,17 +658,19 @@ def _check_map_rows(pairs: np.ndarray, maps: np.ndarray, sizes: np.ndarray) -> N
     scored)."""
     if not maps.size:
         return
-    Q, n = maps.shape
-    cols = np.arange(n)[None, :]
-    pad = (cols >= sizes[pairs[:, 0]][:, None]) & (maps >= 0)
-    far = maps >= sizes[pairs[:, 1]][:, None]
-    srt = np.sort(maps, axis=1)
-    twice = np.zeros((Q, n), bool)
-    twice[:, 1:] = (srt[:, 1:] == srt[:, :-1]) & (srt[:, 1:] >= 0)
+    n_src = np.minimum(sizes[pairs[:, 0]], maps.shape[1])
+    real = np.arange(maps.shape[1])[None, :] < n_src[:, None]
+    pad = (~real & (maps >= 0)).any(axis=1)
+    far = (maps >= sizes[pairs[:, 1]][:, None]).any(axis=1)
+    q = first_invalid_assignment(maps[real], n_src)
+    if q is None:                       # entries too large for one sort key: row by row
+        q = next((r for r, row in enumerate(maps) if (row >= 0).sum() != np.unique(
+            row[row >= 0]).size), -1)
+    twice = np.arange(len(maps)) == q
     for bad, what in ((pad, "maps a node beyond the size of object {i}"),
                       (far, "targets a node beyond the size of object {j}"),
                       (twice, "uses a target twice (not injective)")):
-        rows = np.flatnonzero(bad.any(axis=1))
+        rows = np.flatnonzero(bad)
         if rows.size:
             q = int(rows[0])
             i, j = int(pairs[q, 0]), int(pairs[q, 1])

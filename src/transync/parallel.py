@@ -77,7 +77,7 @@ from ._progress import progress_bar
 from ._validation import check_bool, check_int, check_positive
 from .exceptions import ExecutorError
 
-__all__ = ["DEFAULT_TIMEOUT", "map_chunks", "split_chunks"]
+__all__ = ["DEFAULT_TIMEOUT", "MAX_TIMEOUT", "is_serial", "map_chunks", "split_chunks"]
 
 #: Default ``timeout`` of :func:`map_chunks`: the longest wait, in seconds, for the next chunk to
 #: finish before :class:`~transync.exceptions.ExecutorError` is raised.
@@ -184,6 +184,22 @@ def map_chunks(fn: Callable[[Any], Any], chunks: Iterable, *, executor=None,
         return _run_futures(fn, chunks, handle, timeout, bar, pickler)
     finally:
         bar.close()
+
+
+def is_serial(executor) -> bool:
+    """Whether ``executor`` runs the work in this process: ``None``, ``"serial"`` or ``1``.
+
+    Raises
+    ------
+    ValueError, TypeError
+        ``executor`` is none of the accepted forms (the messages of :func:`map_chunks`).
+
+    Examples
+    --------
+    >>> is_serial(None), is_serial("serial"), is_serial(1), is_serial(2)
+    (True, True, True, False)
+    """
+    return _resolve(executor)[0] == "serial"
 
 
 def split_chunks(n_items: int, executor=None, *, min_chunk: int = 8,

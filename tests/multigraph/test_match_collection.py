@@ -383,3 +383,5 @@ def test_serial_executors_are_accepted_online():
         np.testing.assert_array_equal(res.assignments, ref.assignments)
     with pytest.raises(ValueError, match="`executor` spreads independent pairwise work"):
         match_collection(p.graphs, executor=2, progress=False)
+    with pytest.raises(TypeError, match="`executor` must be None or 'serial'"):
+        match_collection(p.graphs, executor=True, progress=False)   # the executors' own check

@@ -7,7 +7,6 @@ and package the result.
 
 from __future__ import annotations
 
-import numbers
 import time
 import warnings
 from collections.abc import Mapping
@@ -27,7 +26,7 @@ from ..synchronization import (
 )
 from ._affinity import PairAffinities, all_pairs, check_graphs, check_pairs
 from ._cao import cao
-from ..parallel import map_chunks, split_chunks
+from ..parallel import is_serial, map_chunks, split_chunks
 from ._lockstep import SOLVERS as LOCKSTEP_SOLVERS
 from ._lockstep import doubly_stochastic_iterates, lockstep_options, round_blocks, run_lockstep
 from ._refine import refine_consistent
@@ -280,10 +279,7 @@ default="auto"
         if not online and value != default:
             raise ValueError(f"`{name}` steers the online synchronized solvers; {asked} "
                              f"runs none, got {name}={value!r}")
-    serial = executor is None or (isinstance(executor, str) and executor == "serial") or (
-        isinstance(executor, numbers.Integral) and not isinstance(executor, bool)
-        and executor == 1)                   # all three mean "in this process" (parallel)
-    if online and not serial:
+    if online and not is_serial(executor):   # None, "serial" and 1: in this process
         raise ValueError("`executor` spreads independent pairwise work (mode='offline', CAO); "
                          "the online solvers run all pairs in lock-step in this process: pass "
                          f"executor=None or mode='offline', got executor={executor!r}")

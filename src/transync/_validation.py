@@ -616,7 +616,16 @@ def check_image_size(size, name: str = "image_size", *, minimum: int = 1,
     return out[0], out[1]
 
 
-def check_probability(value, name: str) -> float:
+def check_probability(value, name: str, *, allow_zero: bool = True) -> float:
+    """``value`` as a float in ``[0, 1]``, or in ``(0, 1]`` without ``allow_zero`` (then every
+    real value outside it, NaN included, is named with that interval)."""
+    if not allow_zero and isinstance(value, numbers.Real) and not isinstance(value, bool):
+        try:
+            inside = 0 < float(value) <= 1
+        except OverflowError:                   # an int beyond float64
+            inside = False
+        if not inside:
+            raise ValueError(f"`{name}` must lie in (0, 1], got {value!r:.40}")
     value = check_positive(value, name, allow_zero=True)
     if value > 1:
         raise ValueError(f"`{name}` must lie in [0, 1], got {value!r}")

@@ -585,7 +585,7 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
         if given.size and given.min() < 0:
             raise ValueError(f"`sizes` must be non-negative node counts, got {given.tolist()}")
     arrays: dict[tuple[int, int], np.ndarray] = {}
-    seen: dict[int, int] = {}
+    # without `sizes`, the sizes read off the maps (and their evidence, for the messages)
     source: dict[int, tuple[int, tuple[int, int]]] = {}   # object -> (map length, first pair)
     target: dict[int, tuple[int, tuple[int, int]]] = {}   # object -> (largest target, its pair)
     for key, a in pairwise.items():
@@ -604,18 +604,17 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
             raise ValueError(f"`pairwise[{(i, j)}]` has {a.shape[0]} entries, but `sizes` "
                              f"gives object {i} {int(given[i])} nodes")
         arrays[(i, j)] = a
-        if given is None and i in source and source[i][0] != a.shape[0]:
-            raise ValueError(f"`pairwise[{(i, j)}]` has {a.shape[0]} entries, but "
-                             f"`pairwise[{source[i][1]}]` has {source[i][0]}: object {i} cannot "
-                             f"have both sizes")
-        source.setdefault(i, (a.shape[0], (i, j)))
-        seen[i] = max(seen.get(i, 0), a.shape[0])
-        if a.size and a.max() >= 0:
-            seen[j] = max(seen.get(j, 0), int(a.max()) + 1)
-            if int(a.max()) >= target.get(j, (-1,))[0]:
-                target[j] = (int(a.max()), (i, j))
+        if given is None:
+            if i in source and source[i][0] != a.shape[0]:
+                raise ValueError(f"`pairwise[{(i, j)}]` has {a.shape[0]} entries, but "
+                                 f"`pairwise[{source[i][1]}]` has {source[i][0]}: object {i} "
+                                 f"cannot have both sizes")
+            source.setdefault(i, (a.shape[0], (i, j)))
+            top = int(a.max(initial=-1))
+            if top >= 0 and top >= target.get(j, (-1,))[0]:
+                target[j] = (top, (i, j))
     for g, (top, key) in target.items():
-        if given is None and g in source and top >= source[g][0]:
+        if g in source and top >= source[g][0]:
             raise ValueError(f"`pairwise[{key}]` maps a node to node {top} of object {g}, but "
                              f"`pairwise[{source[g][1]}]` gives object {g} {source[g][0]} nodes")
     if not arrays:
@@ -628,7 +627,8 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
     if given is not None:
         size_arr = given[objs].astype(np.int64)
     else:
-        size_arr = np.array([seen.get(g, 0) for g in objs], dtype=np.int64)
+        size_arr = np.array([source[g][0] if g in source else target[g][0] + 1
+                             if g in target else 0 for g in objs], dtype=np.int64)
     n_max = int(size_arr.max())
     longest = max(a.shape[0] for a in arrays.values())
     if given is not None and n_max > longest and len(arrays) * n_max > MAX_NODES:

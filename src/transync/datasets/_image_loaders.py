@@ -206,7 +206,7 @@ def read_image(path) -> np.ndarray:
     """
     import cv2
 
-    path = Path(check_path(path, "path"))
+    path = check_path(path, "path")
     try:
         raw = path.read_bytes()
     except OSError as exc:

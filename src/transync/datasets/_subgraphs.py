@@ -85,25 +85,17 @@ class SubgraphCollectionProblem(GraphCollectionProblem):
 def _check_p_keep(p_keep) -> tuple[float, float]:
     """``p_keep`` as a ``(low, high)`` range in ``(0, 1]`` (a number is the range ``(p, p)``)."""
     if isinstance(p_keep, numbers.Real) and not isinstance(p_keep, bool):
-        try:
-            bad = not 0 < float(p_keep) <= 1                # NaN too
-        except OverflowError:                               # an int beyond float64
-            bad = True
-        if bad:
-            raise ValueError(f"`p_keep` must lie in (0, 1], got {p_keep!r:.40}")
-        low = high = check_probability(p_keep, "p_keep")
+        low = high = check_probability(p_keep, "p_keep", allow_zero=False)
     elif (isinstance(p_keep, (Sequence, np.ndarray)) and not isinstance(p_keep, (str, bytes))
           and len(p_keep) == 2):
-        low = check_probability(p_keep[0], "p_keep[0]")
-        high = check_probability(p_keep[1], "p_keep[1]")
+        low = check_probability(p_keep[0], "p_keep[0]", allow_zero=False)
+        high = check_probability(p_keep[1], "p_keep[1]", allow_zero=False)
         if low > high:
             raise ValueError(f"`p_keep` must be a range (low, high) with low <= high, got "
                              f"({low!r}, {high!r})")
     else:
         raise TypeError("`p_keep` must be a probability in (0, 1] or a (low, high) range, got "
                         f"{type(p_keep).__name__} {p_keep!r:.60}")
-    if low <= 0:
-        raise ValueError(f"`p_keep` must lie in (0, 1], got {p_keep!r}")
     return low, high
 
 

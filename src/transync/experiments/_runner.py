@@ -807,15 +807,13 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
         figure = plot_experiment(experiment, summary, out / f"{experiment.name}.png")
         if experiment.finish is not None:
             written = experiment.finish(records, summary, out)
-            if not isinstance(written, (str, bytes, os.PathLike)) and isinstance(written,
-                                                                                Iterable):
-                written = list(written)
-            if not isinstance(written, list) or not all(isinstance(p, (str, os.PathLike))
-                                                        for p in written):
+            paths = (list(written) if isinstance(written, Iterable)
+                     and not isinstance(written, (str, bytes, os.PathLike)) else [None])
+            if not all(isinstance(p, (str, os.PathLike)) for p in paths):
                 raise TypeError(f"`Experiment.finish` must return the paths of the files it "
                                 f"wrote (a list, possibly empty), got {short_repr(written, 60)}"
                                 " (the trials are stored)")
-            extra = tuple(Path(p) for p in written)
+            extra = tuple(Path(p) for p in paths)
     return ExperimentReport(experiment.name, records, summary, len(todo), n_failed, out, figure,
                             time.perf_counter() - t_start, extra, n_other)
 

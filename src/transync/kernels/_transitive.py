@@ -107,10 +107,10 @@ class Alignment:
     def __post_init__(self):
         labels = check_int_array(self.labels, "labels", ndim=2)
         N, n = labels.shape
-        if N and n and np.any(np.sort(labels, axis=1) != np.arange(n)):
-            bad = int(np.flatnonzero(np.any(np.sort(labels, axis=1) != np.arange(n), axis=1))[0])
+        wrong = np.flatnonzero(np.any(np.sort(labels, axis=1) != np.arange(n), axis=1))
+        if wrong.size:
             raise ValueError(f"`labels` must hold a permutation of range({n}) in every row, "
-                             f"row {bad} is not one")
+                             f"row {int(wrong[0])} is not one")
         object.__setattr__(self, "labels", labels)
         if self.embedding is not None:
             emb = check_array(self.embedding, "embedding", ndim=3)

@@ -764,12 +764,16 @@ class PairAffinities:
             if node.shape != (len(pairs), n1, n2):
                 raise ValueError(f"`node` must have shape (P, n1, n2) = ({len(pairs)}, {n1}, "
                                  f"{n2}), got {node.shape}")
+        def top(a):                             # max |a| without an |a| copy of the stack
+            return max(float(a.max(initial=0.0)), -float(a.min(initial=0.0)))
+
         with np.errstate(over="ignore"):        # inf here is refused below
             # |K_p| <= R max|F| max|G| + max|node| entrywise (as SeparableAffinity checks it):
             # factors of 1e154 passed, and every score and product came back inf or NaN
-            bound = F.shape[1] * float(np.abs(F).max()) * float(np.abs(G).max())
+            top_f = top(F)
+            bound = F.shape[1] * top_f * (top_f if G is F else top(G))
             if node is not None:
-                bound += float(np.abs(node).max(initial=0.0))
+                bound += top(node)
         check_affinity_magnitude(bound, n1 * n2, "F, G, node" if node is not None else "F, G")
         impl = _Separable(F, G, pairs[:, 0], pairs[:, 1], node)
         return cls(impl, pairs)

@@ -896,21 +896,23 @@ def _execute(experiment: Experiment, store: ExperimentStore, todo: list, workers
                 bar.update(1)
             return None if raised is None else _pool_error(raised, lost)
 
-        try:
-            it = iter(todo)
+        it = iter(todo)
+
+        def fill() -> None:
+            """Keep two trials a worker submitted (no more: an interrupt cancels the rest)."""
             for item in it:
                 pending[pool.submit(_run_one, experiment.trial, item[3], item[4])] = item
                 if len(pending) >= 2 * workers:
                     break
+
+        try:
+            fill()
             while pending:
                 done, _ = wait(pending, return_when=FIRST_COMPLETED)
                 raised = store_done(done)
                 if raised is not None:
                     raise raised
-                for nxt in it:
-                    pending[pool.submit(_run_one, experiment.trial, nxt[3], nxt[4])] = nxt
-                    if len(pending) >= 2 * workers:
-                        break
+                fill()
         except BaseException:
             with contextlib.suppress(Exception):
                 store_done(list(pending))         # what finished meanwhile is kept too

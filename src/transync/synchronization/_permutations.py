@@ -37,6 +37,10 @@ NULL_EIGENVALUE = 1e-6
 #: an eigengap this fraction of the largest eigenvalue or more is a candidate cut for a given
 #: universe above the slots the input needs (exact input: 1 against about 0.5)
 _CLEAR_GAP = 1e-3
+#: leading eigenvalues within this fraction of the largest form its cluster: 1 for every
+#: universe node on exactly consistent input, one more for every part of a universe node that
+#: no observed pair links to the rest (matrix-free Ritz values: within about 2e-7 of it)
+_CLUSTER = 1e-5
 _SOLVERS = ("auto", "dense", "matrix_free")
 
 
@@ -203,8 +207,15 @@ def _refine_labels(stk: StackedPairs, labels, d: int, max_sweeps: int, dobs=None
 # one connected component
 # --------------------------------------------------------------------------------------------
 
-def _spectral_embedding(stk, d, solver, tol, rng, info):
-    """Top eigenvectors of the normalized block matrix (and the universe size if ``d`` is None)."""
+def _spectral_embedding(stk, d, solver, tol, rng, info, cluster=False):
+    """Top eigenvectors of the normalized block matrix (and the universe size if ``d`` is None).
+
+    ``cluster``: partial maps only. When more than ``d`` leading eigenvalues equal the largest
+    (exactly consistent input on an incomplete view graph: a universe node whose holders no
+    observed pair links splits into parts, each with eigenvalue 1), the eigenvectors of the
+    whole cluster are returned (more than ``d`` columns): the first ``d`` of them would be an
+    arbitrary cut of one eigenspace, whose rounding contradicted exact input.
+    """
     M = int(stk.sizes.sum())
     n_max = int(stk.sizes.max())
     use = solver
@@ -235,6 +246,7 @@ def _spectral_embedding(stk, d, solver, tol, rng, info):
     else:
         k_vals = d
     given = d is not None and "n_universe_rule" not in info
+    cluster = cluster and not stk.is_full
     k_vec = min(d if d is not None else n_max, M)
     k_vals = min(k_vals, M)
     Ad = A.toarray() if use == "dense" else None
@@ -285,6 +297,17 @@ def _spectral_embedding(stk, d, solver, tol, rng, info):
         elif d > U.shape[1]:
             w, U = sla.eigh(Ad, subset_by_index=[M - min(d, M), M - 1])
             U = U[:, ::-1]
+    n_top = 0
+    while cluster and vals.size and vals[0] > 0:
+        # the leading cluster; noisy input has none (n_top 1 or so) and stops at once, exact
+        # input computes further while every computed eigenvalue is in it
+        n_top = int(np.count_nonzero(vals >= (1.0 - _CLUSTER) * vals[0]))
+        ended = n_top < vals.size or vals.size >= M
+        if ended and (n_top <= d or n_top <= U.shape[1]):
+            break
+        k_vals = min(M, max(2 * vals.size, n_top))
+        vals, U, n2, converged = _eigs(k_vals, k_vals, U if use != "dense" else None)
+        n_prod += n2
     info["eigenvalues"] = np.asarray(vals[: max(k_vals, 1)])
     info["seconds_eigen"] = time.perf_counter() - t0
     k = min(d, M, U.shape[1])
@@ -299,7 +322,25 @@ def _spectral_embedding(stk, d, solver, tol, rng, info):
             info["null_eigenvectors_dropped"] = int(lead.size - k)
         if given and k > n_max:
             k = _given_universe_columns(stk, U, lead[:k], d, n_max, info)
+    if n_top > d:
+        info["eigenvalue_cluster"] = n_top
+        k = min(n_top, U.shape[1])
+    elif n_max <= n_top < k:
+        k = _cluster_columns(stk, U, n_top, k, d, info)
     return U[:, :k], d, n_prod, converged, A
+
+
+def _cluster_columns(stk, U, n_top: int, k: int, d: int, info) -> int:
+    """Round the eigenvalue cluster alone (``n_top`` columns) or all ``k``: the one that agrees
+    strictly more with the input (on ties all). Exactly consistent partial input whose
+    universe is estimated or given above its cluster (an incomplete view graph adds
+    eigenvalues below 1 but near it: 0.93 on a 40 % view graph) got those columns too, and
+    their rounding contradicted the input."""
+    scores = {kk: _agreement(stk, spec.round_to_universe(U[:, :kk], stk.sizes, d), d)[0]
+              for kk in (n_top, k)}
+    best = n_top if scores[n_top] > scores[k] + 1e-9 * max(abs(scores[k]), 1.0) else k
+    info["cluster_columns"] = {"cluster": int(n_top), "all": int(k), "chosen": int(best)}
+    return best
 
 
 def _given_universe_columns(stk, U, lead, d: int, n_max: int, info) -> int:
@@ -321,9 +362,29 @@ def _given_universe_columns(stk, U, lead, d: int, n_max: int, info) -> int:
 
 
 def _component_spectral(stk, d, solver, tol, rng, info, refine=0):
-    V, d, n_prod, ok, _ = _spectral_embedding(stk, d, solver, tol, rng, info)
+    estimated = d is None or "n_universe_rule" in info
+    V, d, n_prod, ok, _ = _spectral_embedding(stk, d, solver, tol, rng, info, cluster=True)
     t0 = time.perf_counter()
-    labels = spec.round_to_universe(V, stk.sizes, d)
+    labels = None
+    if V.shape[1] > d:
+        # the whole eigenvalue-1 cluster, rounded into one slot per part of a universe node,
+        # then the parts packed into d slots where no observation compares them; an estimated
+        # universe grows to the slots that packing needs (exact input is then returned as
+        # given), a given one is honoured
+        labels, info["cluster_packing"] = spec.pack_slots(
+            spec.round_to_universe(V, stk.sizes, V.shape[1]), stk.pairs[stk.weights > 0],
+            V.shape[1] if estimated else d)
+        used = 1 + max((int(lab.max()) for lab in labels or () if lab.size), default=-1)
+        if labels is None:
+            V = V[:, :d]
+        elif used > d:
+            info["n_universe_rule"] = (
+                f"{info['n_universe_rule']}; raised from {d} to {used}: the eigenvalue-1 "
+                f"cluster has {V.shape[1]} parts, and {used} slots (a greedy colouring) keep "
+                f"apart every two that an observation compares")
+            info["n_universe_estimate"] = d = used
+    if labels is None:
+        labels = spec.round_to_universe(V, stk.sizes, d)
     info["seconds_round"] = time.perf_counter() - t0
     if refine > 0:
         t0 = time.perf_counter()
@@ -476,6 +537,16 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
     RRWM matches of 16 graphs (d = 20, each matched to 6 others, deformation 0.05,
     ``benchmarks/universe_estimate.py --graphs 16 --degree 6``): right on 17 of 20
     collections, 0.15 slots too many on average, against 5 of 20 and 28 slots too many.
+
+    Exactly consistent partial maps on an incomplete view graph can have more eigenvalues
+    equal to the largest than the universe has slots: a universe node whose holders no
+    observed pair links is one part per group, each with eigenvalue 1. The spectral methods
+    then round that whole cluster (``info["eigenvalue_cluster"]``), one slot per part, and
+    pack the parts into ``d`` slots by a greedy colouring in which two parts conflict when one
+    object holds both or an observed pair compares them (``info["cluster_packing"]``:
+    ``"faithful"``, or ``"holders"`` when a given ``d`` is too small for that and only the
+    first rule is kept). An estimated ``d`` grows to what the faithful packing needs; exact
+    input then comes back as given. Noisy input has no such cluster.
 
     With ``min_score``, nodes whose placement is weakly supported are left unplaced (label
     ``-1``): a node's score is the weighted fraction of its observed pairs in which the

@@ -292,6 +292,43 @@ def estimate_universe(vals: np.ndarray, n_max: int, *,
     return d, rule
 
 
+def pack_slots(labels, pairs: np.ndarray, d: int):
+    """Merge the slots of ``labels`` into at most ``d``, keeping every observed match.
+
+    Two slots may not merge when one object holds nodes in both (the labels would be invalid).
+    They should not when an observed pair ``(i, j)`` (rows of ``pairs``) has a node of ``i`` in
+    one and a node of ``j`` in the other: the merge would match two nodes that the input leaves
+    unmatched. Slots that neither rule separates are never compared by any observation, so
+    merging them changes no observed map. The conflict graph is coloured greedily (networkx's
+    DSATUR) and the colours are the new slots: first with both rules; when that needs more than
+    ``d`` slots, with the first rule only (every observed match is kept; nodes that the input
+    leaves unmatched may be matched, as a smaller universe requires). Returns ``(labels,
+    rule)`` with ``rule`` 'faithful' or 'holders', or ``(None, None)`` when even the second
+    colouring needs more than ``d`` slots (greedy colouring is not optimal: it can miss a
+    packing that exists).
+    """
+    import networkx as nx
+
+    n_obj = len(labels)
+    n_slots = max((int(lab.max()) + 1 for lab in labels if lab.size), default=0)
+    rows = np.concatenate([np.full(int((lab >= 0).sum()), g) for g, lab in enumerate(labels)])
+    cols = np.concatenate([lab[lab >= 0] for lab in labels])
+    H = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n_obj, n_slots))
+    seen = sp.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                         shape=(n_obj, n_obj))
+    for rule, link in (("faithful", seen + seen.T + sp.identity(n_obj, format="csr")),
+                       ("holders", sp.identity(n_obj, format="csr"))):
+        conflict = sp.triu(H.T @ link @ H, k=1).tocoo()
+        graph = nx.Graph()
+        graph.add_nodes_from(range(n_slots))
+        graph.add_edges_from(zip(conflict.row.tolist(), conflict.col.tolist()))
+        colour = nx.greedy_color(graph, strategy="DSATUR")
+        new = np.array([colour[s] for s in range(n_slots)], dtype=np.int64)
+        if not n_slots or int(new.max()) < d:
+            return [np.where(lab >= 0, new[np.maximum(lab, 0)], -1) for lab in labels], rule
+    return None, None
+
+
 def _hungarian_rows(S_blocks, sizes, off, d):
     labels = []
     for g in range(len(sizes)):

@@ -560,3 +560,23 @@ def test_pack_slots_merges_only_what_no_observation_compares():
     assert MultiMatching(lab, 2).pairwise(0, 1)[0] == 0          # the observed match stays
     # no packing at all: an object with three nodes cannot use two slots
     assert pack_slots([np.array([0, 1, 2])], np.zeros((0, 2), dtype=int), 2) == (None, None)
+
+
+@pytest.mark.parametrize("method", ["spectral", "matcheig"])
+def test_a_weakly_weighted_link_is_still_a_link(method):
+    """Two groups of three objects linked by one pair of weight 1e-5 (only weight ratios
+    matter): its eigenvalues, 1 - 3e-6, are not part of the eigenvalue-1 cluster (a first
+    version of the cluster rule counted them and packed the groups apart, breaking that pair's
+    map with the true universe given; found by a review)."""
+    from transync.permutations import MultiMatching
+
+    labels = [np.array(x) for x in ([0, 1, 2], [0, 1], [1, 2, 0], [2, 0, 1], [1, 2], [0, 2, 1])]
+    every = MultiMatching(labels, 3).pairwise_dict()
+    pairs = [(0, 1), (0, 2), (1, 2), (3, 4), (3, 5), (4, 5), (2, 3)]
+    pw = {p: every[p] for p in pairs}
+    weights = {p: 1e-5 if p == (2, 3) else 1.0 for p in pairs}
+    res = synchronize_permutations(pw, weights=weights, n_universe=3, method=method,
+                                   solver="dense", rng=0)
+    assert "eigenvalue_cluster" not in res.info
+    for p in pairs:
+        np.testing.assert_array_equal(res.pairwise(*p), pw[p])

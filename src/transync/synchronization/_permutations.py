@@ -39,8 +39,11 @@ NULL_EIGENVALUE = 1e-6
 _CLEAR_GAP = 1e-3
 #: leading eigenvalues within this fraction of the largest form its cluster: 1 for every
 #: universe node on exactly consistent input, one more for every part of a universe node that
-#: no observed pair links to the rest (matrix-free Ritz values: within about 2e-7 of it)
-_CLUSTER = 1e-5
+#: no observed pair links to the rest. Dense eigenvalues are exact to about 1e-13; matrix-free
+#: Ritz values were within 2e-7 of 1 here, and a tolerance of 1e-6 still missed one cluster in
+#: 90 exact collections. A pair of relative weight w linking two parts moves an eigenvalue by
+#: about w / 3: below the tolerance, such a pair counts as no link.
+_CLUSTER = {"dense": 1e-9, "matrix_free": 1e-5}
 _SOLVERS = ("auto", "dense", "matrix_free")
 
 
@@ -298,16 +301,24 @@ def _spectral_embedding(stk, d, solver, tol, rng, info, cluster=False):
             w, U = sla.eigh(Ad, subset_by_index=[M - min(d, M), M - 1])
             U = U[:, ::-1]
     n_top = 0
-    while cluster and vals.size and vals[0] > 0:
-        # the leading cluster; noisy input has none (n_top 1 or so) and stops at once, exact
-        # input computes further while every computed eigenvalue is in it
-        n_top = int(np.count_nonzero(vals >= (1.0 - _CLUSTER) * vals[0]))
-        ended = n_top < vals.size or vals.size >= M
-        if ended and (n_top <= d or n_top <= U.shape[1]):
-            break
-        k_vals = min(M, max(2 * vals.size, n_top))
-        vals, U, n2, converged = _eigs(k_vals, k_vals, U if use != "dense" else None)
-        n_prod += n2
+    if cluster and vals.size and vals[0] > 0:
+        n_top = int(np.count_nonzero(vals >= (1.0 - _CLUSTER[use]) * vals[0]))
+        if n_top >= vals.size and vals.size < M:
+            # every computed eigenvalue is in the cluster: eigenvalue 1 has one copy per
+            # connected component of the graph the observed matches draw on the nodes, so the
+            # cluster can go on only when there are more components (exact input: one per
+            # part of a universe node)
+            links = A.copy()
+            links.eliminate_zeros()
+            n_comp = int(connected_components(links, directed=False)[0])
+            if n_comp > vals.size:
+                k_vals = min(M, n_comp + 1)
+                vals, U, n2, converged = _eigs(k_vals, k_vals, U if use != "dense" else None)
+                n_prod += n2
+                n_top = int(np.count_nonzero(vals >= (1.0 - _CLUSTER[use]) * vals[0]))
+        if d < n_top and U.shape[1] < n_top:
+            vals, U, n2, converged = _eigs(vals.size, n_top, U if use != "dense" else None)
+            n_prod += n2
     info["eigenvalues"] = np.asarray(vals[: max(k_vals, 1)])
     info["seconds_eigen"] = time.perf_counter() - t0
     k = min(d, M, U.shape[1])
@@ -331,8 +342,8 @@ def _spectral_embedding(stk, d, solver, tol, rng, info, cluster=False):
 
 
 def _cluster_columns(stk, U, n_top: int, k: int, d: int, info) -> int:
-    """Round the eigenvalue cluster alone (``n_top`` columns) or all ``k``: the one that agrees
-    strictly more with the input (on ties all). Exactly consistent partial input whose
+    """Round the eigenvalue cluster alone (``n_top`` columns) or all ``k``: the cluster only if
+    it agrees strictly more with the input (on ties all ``k``, as before). Exactly consistent partial input whose
     universe is estimated or given above its cluster (an incomplete view graph adds
     eigenvalues below 1 but near it: 0.93 on a 40 % view graph) got those columns too, and
     their rounding contradicted the input."""
@@ -546,7 +557,9 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
     object holds both or an observed pair compares them (``info["cluster_packing"]``:
     ``"faithful"``, or ``"holders"`` when a given ``d`` is too small for that and only the
     first rule is kept). An estimated ``d`` grows to what the faithful packing needs; exact
-    input then comes back as given. Noisy input has no such cluster.
+    input then comes back as given. (Eigenvalue 1 has one copy per connected component of the
+    graph that the observed matches draw on the nodes: noisy input reaches this path when that
+    graph has many components, as partial maps on a sparse view graph can.)
 
     With ``min_score``, nodes whose placement is weakly supported are left unplaced (label
     ``-1``): a node's score is the weighted fraction of its observed pairs in which the

@@ -343,10 +343,10 @@ def _spectral_embedding(stk, d, solver, tol, rng, info, cluster=False):
 
 def _cluster_columns(stk, U, n_top: int, k: int, d: int, info) -> int:
     """Round the eigenvalue cluster alone (``n_top`` columns) or all ``k``: the cluster only if
-    it agrees strictly more with the input (on ties all ``k``, as before). Exactly consistent partial input whose
-    universe is estimated or given above its cluster (an incomplete view graph adds
-    eigenvalues below 1 but near it: 0.93 on a 40 % view graph) got those columns too, and
-    their rounding contradicted the input."""
+    it agrees strictly more with the input (on ties all ``k``, as before). Exactly consistent
+    partial input whose universe is estimated or given above its cluster (an incomplete view
+    graph adds eigenvalues below 1 but near it: 0.93 on a 40 % view graph) got those columns
+    too, and their rounding contradicted the input."""
     scores = {kk: _agreement(stk, spec.round_to_universe(U[:, :kk], stk.sizes, d), d)[0]
               for kk in (n_top, k)}
     best = n_top if scores[n_top] > scores[k] + 1e-9 * max(abs(scores[k]), 1.0) else k

@@ -302,7 +302,8 @@ def pack_slots(labels, pairs: np.ndarray, d: int):
     merging them changes no observed map. The conflict graph is coloured greedily (networkx's
     DSATUR) and the colours are the new slots: first with both rules; when that needs more than
     ``d`` slots, with the first rule only (every observed match is kept; nodes that the input
-    leaves unmatched may be matched, as a smaller universe requires). Returns ``(labels,
+    leaves unmatched may be matched; this colouring uses as few slots as it can, not the room
+    ``d`` leaves, so it can match more of them than ``d`` requires). Returns ``(labels,
     rule)`` with ``rule`` 'faithful' or 'holders', or ``(None, None)`` when even the second
     colouring needs more than ``d`` slots (greedy colouring is not optimal: it can miss a
     packing that exists).

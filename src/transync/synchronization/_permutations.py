@@ -300,9 +300,12 @@ def _spectral_embedding(stk, d, solver, tol, rng, info, cluster=False):
         elif d > U.shape[1]:
             w, U = sla.eigh(Ad, subset_by_index=[M - min(d, M), M - 1])
             U = U[:, ::-1]
+    def cluster_size(vals):
+        return int(np.count_nonzero(vals >= (1.0 - _CLUSTER[use]) * vals[0]))
+
     n_top = 0
     if cluster and vals.size and vals[0] > 0:
-        n_top = int(np.count_nonzero(vals >= (1.0 - _CLUSTER[use]) * vals[0]))
+        n_top = cluster_size(vals)
         if n_top >= vals.size and vals.size < M:
             # every computed eigenvalue is in the cluster: eigenvalue 1 has one copy per
             # connected component of the graph the observed matches draw on the nodes, so the
@@ -315,7 +318,7 @@ def _spectral_embedding(stk, d, solver, tol, rng, info, cluster=False):
                 k_vals = min(M, n_comp + 1)
                 vals, U, n2, converged = _eigs(k_vals, k_vals, U if use != "dense" else None)
                 n_prod += n2
-                n_top = int(np.count_nonzero(vals >= (1.0 - _CLUSTER[use]) * vals[0]))
+                n_top = cluster_size(vals)
         if d < n_top and U.shape[1] < n_top:
             vals, U, n2, converged = _eigs(vals.size, n_top, U if use != "dense" else None)
             n_prod += n2
@@ -347,11 +350,18 @@ def _cluster_columns(stk, U, n_top: int, k: int, d: int, info) -> int:
     partial input whose universe is estimated or given above its cluster (an incomplete view
     graph adds eigenvalues below 1 but near it: 0.93 on a 40 % view graph) got those columns
     too, and their rounding contradicted the input."""
-    scores = {kk: _agreement(stk, spec.round_to_universe(U[:, :kk], stk.sizes, d), d)[0]
-              for kk in (n_top, k)}
-    best = n_top if scores[n_top] > scores[k] + 1e-9 * max(abs(scores[k]), 1.0) else k
+    best = _fewer_if_better(stk, U, n_top, k, d)
     info["cluster_columns"] = {"cluster": int(n_top), "all": int(k), "chosen": int(best)}
     return best
+
+
+def _fewer_if_better(stk, U, fewer: int, k: int, d: int) -> int:
+    """``fewer`` if rounding the first ``fewer`` columns of ``U`` into ``d`` slots agrees
+    strictly more with the input than rounding all ``k``, else ``k`` (ties keep all: fewer
+    columns can merge nodes that the input leaves unmatched, which agreement does not see)."""
+    scores = {kk: _agreement(stk, spec.round_to_universe(U[:, :kk], stk.sizes, d), d)[0]
+              for kk in (fewer, k)}
+    return fewer if scores[fewer] > scores[k] + 1e-9 * max(abs(scores[k]), 1.0) else k
 
 
 def _given_universe_columns(stk, U, lead, d: int, n_max: int, info) -> int:
@@ -365,9 +375,7 @@ def _given_universe_columns(stk, U, lead, d: int, n_max: int, info) -> int:
     k = lead.size
     if k_gap >= k or lead[k_gap - 1] - lead[k_gap] < _CLEAR_GAP * lead[0]:
         return k
-    scores = {kk: _agreement(stk, spec.round_to_universe(U[:, :kk], stk.sizes, d), d)[0]
-              for kk in (k_gap, k)}
-    best = k_gap if scores[k_gap] > scores[k] + 1e-9 * max(abs(scores[k]), 1.0) else k
+    best = _fewer_if_better(stk, U, k_gap, k, d)
     info["eigengap_columns"] = {"eigengap": int(k_gap), "all": int(k), "chosen": int(best)}
     return best
 
@@ -385,15 +393,16 @@ def _component_spectral(stk, d, solver, tol, rng, info, refine=0):
         labels, info["cluster_packing"] = spec.pack_slots(
             spec.round_to_universe(V, stk.sizes, V.shape[1]), stk.pairs[stk.weights > 0],
             V.shape[1] if estimated else d)
-        used = 1 + max((int(lab.max()) for lab in labels or () if lab.size), default=-1)
         if labels is None:
             V = V[:, :d]
-        elif used > d:
-            info["n_universe_rule"] = (
-                f"{info['n_universe_rule']}; raised from {d} to {used}: the eigenvalue-1 "
-                f"cluster has {V.shape[1]} parts, and {used} slots (a greedy colouring) keep "
-                f"apart every two that an observation compares")
-            info["n_universe_estimate"] = d = used
+        else:
+            used = 1 + max((int(lab.max()) for lab in labels if lab.size), default=-1)
+            if used > d:
+                info["n_universe_rule"] = (
+                    f"{info['n_universe_rule']}; raised from {d} to {used}: the eigenvalue-1 "
+                    f"cluster has {V.shape[1]} parts, and {used} slots (a greedy colouring) "
+                    f"keep apart every two that an observation compares")
+                info["n_universe_estimate"] = d = used
     if labels is None:
         labels = spec.round_to_universe(V, stk.sizes, d)
     info["seconds_round"] = time.perf_counter() - t0

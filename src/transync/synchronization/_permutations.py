@@ -119,31 +119,95 @@ def _node_scores(stk: StackedPairs, labels, d: int, dobs=None):
     return [_support(obs, out, w) for obs, out, w in _observed_and_output(stk, labels, d, dobs)]
 
 
-def _free_unsupported(stk: StackedPairs, labels, d: int, dobs=None):
-    """Move nodes that no observation supports out of shared slots into empty ones.
+def _separate_unlinked(stk: StackedPairs, labels, d: int, grow: bool):
+    """Move the groups of a slot that the input keeps apart into slots of their own.
 
-    A node whose output partners agree with none of its observed maps (support 0 in
-    :func:`_node_scores`) while some pair claims one adds only disagreements; in a slot no
-    object uses it claims nothing. The objective is unchanged (the node had no agreement), and
-    exactly consistent partial input is returned as given instead of a tie with spurious
-    matches. Returns ``(labels, number of nodes moved)``.
+    The nodes in one slot form groups: the connected components of the observed matches among
+    them. Nodes of two groups have no observed match with each other, so their placement adds
+    nothing to the objective; when an observed pair compares them (one object holds a node of
+    each, or a pair ``(i, j)`` has one group's node in ``i`` and the other's in ``j``) it adds
+    a match that the input does not make. A slot's largest group stays; every other group that
+    such a pair compares with the rest of the slot moves, largest first, to an empty slot, else
+    to a used slot with which no observed pair compares it, else (``grow``: an estimated
+    universe) to a new slot; with none of these it stays. The objective is unchanged, and
+    exactly consistent partial input comes back as given, where orthogonal synchronization
+    (whose objective ties such matches with none) returned spurious matches on 21 to 40 of 90
+    exact collections. Returns ``(labels, d, number of groups moved)``.
     """
-    used = np.zeros(d, dtype=bool)
-    for lab in labels:
-        used[lab[lab >= 0]] = True
-    free = np.flatnonzero(~used).tolist()
-    if not free:
-        return labels, 0
-    new = [lab.copy() for lab in labels]
+    sizes = stk.sizes
+    off = stk.offsets
+    N = stk.n_objects
+    lab = np.concatenate([np.asarray(x, dtype=np.int64) for x in labels])
+    pos = stk.weights > 0
+    pairs, maps = stk.pairs[pos], stk.maps[pos]
+    ok = maps >= 0
+    src = (off[pairs[:, 0]][:, None] + np.arange(maps.shape[1]))[ok]
+    dst = (off[pairs[:, 1]][:, None] + maps)[ok]
+    same = (lab[src] == lab[dst]) & (lab[src] >= 0)
+    M = int(off[-1])
+    links = sp.coo_matrix((np.ones(int(same.sum())), (src[same], dst[same])), shape=(M, M))
+    group = connected_components(links, directed=False)[1]
+    owner = np.repeat(np.arange(N), sizes)
+    placed = np.flatnonzero(lab >= 0)
+    key, count = np.unique(np.column_stack([lab[placed], group[placed]]), axis=0,
+                           return_counts=True)
+    if len(key) == np.unique(key[:, 0]).size:         # one group per slot: nothing to move
+        return labels, d, 0
+    # objects compared with object g: g itself and its observed partners
+    seen = sp.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(N, N))
+    seen = (seen + seen.T + sp.identity(N, format="csr")).tocsr()
+    holds = np.zeros((N, max(d, 1)), dtype=bool)
+    holds[owner[placed], lab[placed]] = True
+    order = np.lexsort((-count, key[:, 0]))          # per slot, largest group first
+    key, count = key[order], count[order]
+    first = np.r_[True, key[1:, 0] != key[:-1, 0]]
+    loose = np.flatnonzero(~first)
+    loose = loose[np.argsort(-count[loose], kind="stable")]
     moved = 0
-    for g, (obs, out, w) in enumerate(_observed_and_output(stk, labels, d, dobs)):
-        unsupported = (_support(obs, out, w) == 0) & (out >= 0).any(0) & (new[g] >= 0)
-        for u in np.flatnonzero(unsupported):
-            if not free:
-                return new, moved
-            new[g][u] = free.pop(0)
-            moved += 1
-    return new, moved
+    stuck = False
+    lab0 = lab.copy()
+    for q in loose:
+        slot, g = int(key[q, 0]), int(key[q, 1])
+        nodes = placed[(lab[placed] == slot) & (group[placed] == g)]
+        objs = np.zeros(N)
+        objs[owner[nodes]] = 1.0
+        compared = (seen @ objs) > 0
+        holds[owner[nodes], slot] = False
+        if not holds[compared, slot].any():            # nothing in the slot compares it
+            holds[owner[nodes], slot] = True
+            continue
+        used = holds.any(0)
+        free = np.flatnonzero(~used[:d])
+        if free.size:
+            target = int(free[0])
+        else:
+            fits = np.flatnonzero(~holds[compared].any(0)[:d])
+            if fits.size:
+                target = int(fits[0])
+            elif grow:
+                target = d
+                d += 1
+                holds = np.hstack([holds, np.zeros((N, 1), dtype=bool)])
+            else:
+                holds[owner[nodes], slot] = True
+                stuck = True
+                continue
+        lab[nodes] = target
+        holds[owner[nodes], target] = True
+        moved += 1
+    if stuck:
+        # no room for a group one at a time: pack all groups at once (a greedy colouring in
+        # which compared groups differ) when that fits in d
+        parts = np.full(M, -1, dtype=np.int64)
+        parts[placed] = np.unique(np.column_stack([lab0[placed], group[placed]]), axis=0,
+                                  return_inverse=True)[1].ravel()
+        packed, rule = spec.pack_slots([parts[off[g]:off[g + 1]] for g in range(N)], pairs,
+                                       d)
+        if rule == "faithful":
+            return packed, d, len(loose)
+    if not moved:
+        return labels, d, 0
+    return [lab[off[g]:off[g + 1]] for g in range(N)], d, moved
 
 
 def _refine_labels(stk: StackedPairs, labels, d: int, max_sweeps: int, dobs=None,
@@ -380,31 +444,38 @@ def _given_universe_columns(stk, U, lead, d: int, n_max: int, info) -> int:
     return best
 
 
+def _packed_cluster(stk, V, d: int, estimated: bool, info):
+    """``(labels, d)`` from an embedding wider than ``d`` (the eigenvalue-1 cluster), else
+    ``(None, d)``.
+
+    The whole cluster is rounded into one slot per part of a universe node, then the parts are
+    packed into ``d`` slots where no observation compares them; an estimated universe grows to
+    the slots that packing needs (exact input is then returned as given), a given one is
+    honoured. ``(None, d)`` too when no packing fits.
+    """
+    if V.shape[1] <= d:
+        return None, d
+    labels, info["cluster_packing"] = spec.pack_slots(
+        spec.round_to_universe(V, stk.sizes, V.shape[1]), stk.pairs[stk.weights > 0],
+        V.shape[1] if estimated else d)
+    if labels is not None:
+        used = 1 + max((int(lab.max()) for lab in labels if lab.size), default=-1)
+        if used > d:
+            info["n_universe_rule"] = (
+                f"{info['n_universe_rule']}; raised from {d} to {used}: the eigenvalue-1 "
+                f"cluster has {V.shape[1]} parts, and {used} slots (a greedy colouring) "
+                f"keep apart every two that an observation compares")
+            info["n_universe_estimate"] = d = used
+    return labels, d
+
+
 def _component_spectral(stk, d, solver, tol, rng, info, refine=0):
     estimated = d is None or "n_universe_rule" in info
     V, d, n_prod, ok, _ = _spectral_embedding(stk, d, solver, tol, rng, info, cluster=True)
     t0 = time.perf_counter()
-    labels = None
-    if V.shape[1] > d:
-        # the whole eigenvalue-1 cluster, rounded into one slot per part of a universe node,
-        # then the parts packed into d slots where no observation compares them; an estimated
-        # universe grows to the slots that packing needs (exact input is then returned as
-        # given), a given one is honoured
-        labels, info["cluster_packing"] = spec.pack_slots(
-            spec.round_to_universe(V, stk.sizes, V.shape[1]), stk.pairs[stk.weights > 0],
-            V.shape[1] if estimated else d)
-        if labels is None:
-            V = V[:, :d]
-        else:
-            used = 1 + max((int(lab.max()) for lab in labels if lab.size), default=-1)
-            if used > d:
-                info["n_universe_rule"] = (
-                    f"{info['n_universe_rule']}; raised from {d} to {used}: the eigenvalue-1 "
-                    f"cluster has {V.shape[1]} parts, and {used} slots (a greedy colouring) "
-                    f"keep apart every two that an observation compares")
-                info["n_universe_estimate"] = d = used
+    labels, d = _packed_cluster(stk, V, d, estimated, info)
     if labels is None:
-        labels = spec.round_to_universe(V, stk.sizes, d)
+        labels = spec.round_to_universe(V[:, :d], stk.sizes, d)
     info["seconds_round"] = time.perf_counter() - t0
     if refine > 0:
         t0 = time.perf_counter()
@@ -416,8 +487,14 @@ def _component_spectral(stk, d, solver, tol, rng, info, refine=0):
 
 
 def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, refine,
-                          free_unsupported=True):
-    V, d, n_prod, ok_eig, _ = _spectral_embedding(stk, d, solver, tol, rng, info)
+                          separate=True):
+    estimated = d is None or "n_universe_rule" in info
+    V, d, n_prod, ok_eig, _ = _spectral_embedding(stk, d, solver, tol, rng, info,
+                                                  cluster=separate and not stk.is_full)
+    # the spectral candidate: the eigenvalue-1 cluster packed as by the spectral method when
+    # it is wider than d (exact partial input on an incomplete view graph), else rounded below
+    packed, d = _packed_cluster(stk, V, d, estimated, info)
+    V = V[:, :d]
     sizes = stk.sizes
     off = stk.offsets
     N = stk.n_objects
@@ -467,7 +544,8 @@ def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, re
     # by the same discrete objective that the method maximizes, so this is a safeguard against
     # the polar iteration ending in a worse local optimum, not a change of objective.
     cands = {"orthogonal": spec.round_to_universe(stacked, sizes, d),
-             "spectral": spec.round_to_universe(V[:, :k], sizes, d)}
+             "spectral": packed if packed is not None else spec.round_to_universe(V[:, :k],
+                                                                                sizes, d)}
     scores = {}
     best = None
     for name, lab in cands.items():
@@ -483,8 +561,15 @@ def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, re
     info["candidates"] = scores
     info["chosen"] = best[0]
     labels = best[2]
-    if free_unsupported and not stk.is_full:     # partial maps: '-1' entries can tie
-        labels, info["unsupported_nodes_freed"] = _free_unsupported(stk, labels, d, dobs)
+    if separate and not stk.is_full:     # partial maps: '-1' entries tie with matches
+        d_in = d
+        labels, d, info["unlinked_groups_moved"] = _separate_unlinked(stk, labels, d, estimated)
+        if d > d_in:
+            info["n_universe_rule"] = (
+                f"{info['n_universe_rule']}; raised from {d_in} to {d}: groups of nodes that "
+                f"no observed match links to the rest of their slot, and that an observed pair "
+                f"compares with it, took new slots")
+            info["n_universe_estimate"] = d
     return labels, d, it, converged and ok_eig, stacked
 
 
@@ -531,10 +616,15 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
       the discrete objective, at most ``refine`` sweeps, default ``max_iter``), and the one with
       the higher objective is returned (``info["candidates"]``, ``info["chosen"]``). Since every
       candidate is scored by the objective the method maximizes, this is a safeguard against a
-      poor local optimum of the polar iteration, not a change of objective. With partial maps,
-      a node that no observation supports then leaves a shared slot for an empty one when
-      there is one (the objective is unchanged: '-1' entries carry no weight, so the
-      spurious matches tied with none; ``info["unsupported_nodes_freed"]``).
+      poor local optimum of the polar iteration, not a change of objective. With partial maps
+      the spectral candidate is the spectral method's (its eigenvalue-1 cluster packed, see
+      below), and then every group of a slot's nodes that no observed match links to the
+      slot's largest group, and that an observed pair compares with it, moves to an empty
+      slot, else to a used one that no observed pair compares it with, else (estimated
+      universe) to a new one (``info["unlinked_groups_moved"]``). The objective is unchanged:
+      '-1' entries carry no weight, so a match the input does not make tied with none, and
+      exactly consistent partial input came back with such matches on 21-40 of 90 exact
+      collections; it now comes back as given.
     * ``"matcheig"`` (Maset, Arrigoni, Fusiello 2017), a fast baseline: the same eigenvectors,
       rows normalized, and each block ``U_i U_j^T`` rounded independently by Hungarian,
       dropping matches below ``threshold``. Its ``pairwise(i, j)`` need not be cycle-consistent
@@ -767,7 +857,7 @@ def _view_graph_universe(stk, opts, gen, info) -> int:
         warnings.simplefilter("ignore", ConvergenceWarning)
         lab, d0, *_ = _component_orthogonal(stk, None, opts["solver"], opts["eig_tol"], gen,
                                             tmp, opts["max_iter"], opts["tol"],
-                                            opts["max_iter"], free_unsupported=False)
+                                            opts["max_iter"], separate=False)
     used = np.unique(np.concatenate([np.asarray(x)[np.asarray(x) >= 0] for x in lab]))
     d = max(int(stk.sizes.max()), int(used.size))
     info["n_universe_rule"] = (

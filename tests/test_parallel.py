@@ -92,6 +92,19 @@ def test_joblib_matches_serial(executor):
     _assert_same(map_chunks(_demo_chunk, chunks, executor=executor), chunks)
 
 
+def test_an_int_executor_starts_at_most_one_process_per_cpu_and_chunk(monkeypatch):
+    """`executor=1000` on 2 cores started hundreds of loky processes and never finished (found
+    by a review through `transync kernel --workers 1000`): the count is capped at the CPUs."""
+    pytest.importorskip("joblib")
+    import transync.parallel as par
+
+    monkeypatch.setattr(par, "_cpu_count", lambda: 2)
+    assert par._n_workers("joblib", 1000) == 2
+    assert len(split_chunks(1000, 1000, min_chunk=1, chunks_per_worker=1)) == 2
+    chunks = split_chunks(N_ITEMS, 1000, min_chunk=3)
+    _assert_same(map_chunks(_demo_chunk, chunks, executor=1000), chunks)
+
+
 def test_concurrent_futures_match_serial():
     chunks = split_chunks(N_ITEMS, 2, min_chunk=3)
     with ThreadPoolExecutor(max_workers=3) as pool:

@@ -258,3 +258,36 @@ def test_cycle_inconsistency_arrays_checks_huge_targets_row_by_row():
     big = 2**61
     with pytest.raises(ValueError, match=r"`maps\[0\]` \(pair \(0, 1\)\) uses a target twice"):
         cia([[0, 1], [1, 2], [0, 2]], [[big - 1, big - 1], [0, 1], [0, 1]], [2, big, 2])
+
+
+def test_first_invalid_assignment_checks_its_arrays():
+    """Public since it validates ENZYMES' maps at once; it leaked numpy's IndexError on lengths
+    that do not add up and on float entries (found by a review)."""
+    from transync.permutations import first_invalid_assignment
+
+    assert first_invalid_assignment(np.array([1, 0, 0, -1, 2, 2]), np.array([2, 2, 2])) == 2
+    assert first_invalid_assignment([0, 1, 0], [2, 1]) == -1            # lists are arrays
+    with pytest.raises(ValueError, match=r"`lengths` must sum to len\(flat\) = 1, got 2"):
+        first_invalid_assignment(np.array([0]), np.array([2]))
+    with pytest.raises(TypeError, match="`flat` must hold integers"):
+        first_invalid_assignment(np.array([0.5]), np.array([1]))
+    with pytest.raises(ValueError, match="`lengths` must be non-negative, got -1"):
+        first_invalid_assignment(np.array([0, 1]), np.array([-1, 3]))
+
+
+def test_cycle_inconsistency_refuses_a_target_too_large_to_pad_to():
+    """A target of 10**12 made the object that size, and padding the maps to it asked for
+    7 TiB (a MemoryError); it is refused by name, as `sizes` that large already were."""
+    with pytest.raises(ValueError, match=r"`pairwise\[\(0, 1\)\]` maps a node to node "
+                                         r"1000000000000 of object 1: .*\(more than 1e\+08\)"):
+        cycle_inconsistency({(0, 1): np.array([10**12, -1, 0])})
+    res = cycle_inconsistency({(0, 1): np.array([5, -1, 0]), (1, 2): np.arange(6),
+                               (0, 2): np.array([5, -1, 0])})
+    assert res["n_triangles"] == 1 and res["cycle_error"] == 0.0
+
+
+def test_none_is_not_an_assignment():
+    with pytest.raises(TypeError, match="`assignment` must be a 1-d integer index array, got "
+                                        "NoneType"):
+        check_assignment(None)
+

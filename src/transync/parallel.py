@@ -13,7 +13,9 @@ independent, so they can run in this process, on local processes, or on any
 * ``None`` or ``"serial"``: a plain loop in this process;
 * ``"processes"``: joblib's loky process pool on all cores (joblib is an optional dependency:
   ``pip install transync[distributed]``); an int ``n_jobs``: that many processes (joblib's
-  convention: ``-1`` = all cores, ``-2`` = all but one; ``1`` = serial, without joblib);
+  convention: ``-1`` = all cores, ``-2`` = all but one; ``1`` = serial, without joblib), at
+  most one per CPU and per chunk of work (more only compete for the same cores: 1000 asked
+  for on 2 cores started hundreds of processes and never finished);
 * any object with ``submit(fn, *args)`` returning futures with ``result(timeout)``: a
   ``concurrent.futures.ThreadPoolExecutor`` or ``ProcessPoolExecutor`` (the caller keeps
   ownership and shuts it down), a loky executor, or a ``dask.distributed.Client``.
@@ -299,8 +301,8 @@ def _n_workers(kind: str, handle) -> int:
             from joblib import effective_n_jobs
         except ImportError:
             cpus = _cpu_count()
-            return max(1, handle if handle > 0 else cpus + 1 + handle)
-        return max(1, int(effective_n_jobs(handle)))
+            return min(cpus, max(1, handle if handle > 0 else cpus + 1 + handle))
+        return min(_cpu_count(), max(1, int(effective_n_jobs(handle))))
     if kind == "dask":
         info = _check_dask_client(handle, _DASK_LIVENESS_TIMEOUT)
         workers = info.get("workers") or {}
@@ -418,6 +420,7 @@ def _run_joblib(fn, chunks: list, n_jobs: int, timeout: float, bar) -> list:
         raise ImportError("`executor='processes'` or an int n_jobs needs joblib: "
                           "pip install 'transync[distributed]' (or joblib)") from exc
     n = len(chunks)
+    n_jobs = min(_n_workers("joblib", n_jobs), n)      # one per CPU and per chunk at most
     kwargs = dict(n_jobs=n_jobs, backend="loky", timeout=timeout, batch_size=1)
     try:
         parallel = Parallel(return_as="generator_unordered", **kwargs)

@@ -96,7 +96,20 @@ def first_invalid_assignment(flat, lengths) -> int | None:
     2
     >>> first_invalid_assignment(np.array([1, 0, -1]), np.array([2, 1]))
     -1
+
+    Raises
+    ------
+    TypeError, ValueError
+        ``flat`` or ``lengths`` not a 1-d integer array, negative lengths, or lengths that do
+        not sum to ``len(flat)``.
     """
+    flat = check_int_array(flat, "flat", ndim=1)
+    lengths = check_int_array(lengths, "lengths", ndim=1)
+    if lengths.size and int(lengths.min()) < 0:
+        raise ValueError(f"`lengths` must be non-negative, got {int(lengths.min())}")
+    if int(lengths.sum()) != flat.size:
+        raise ValueError(f"`lengths` must sum to len(flat) = {flat.size}, got "
+                         f"{int(lengths.sum())}")
     n = len(lengths)
     row = np.repeat(np.arange(n), lengths)
     out_of_range = (flat < UNMATCHED) | (flat >= 2**62)
@@ -165,7 +178,7 @@ def pair_rows(pairs, n_objects: int):
 def _as_label_array(lab, name: str) -> np.ndarray:
     """A 1-d int64 copy of an index array; integral floats are accepted, NaN, fractions,
     strings, complex and other dtypes refused with a message naming ``name``."""
-    if isinstance(lab, (str, bytes)):
+    if lab is None or isinstance(lab, (str, bytes)):
         raise TypeError(f"`{name}` must be a 1-d integer index array, got {type(lab).__name__}")
     try:
         arr = np.asarray(lab)
@@ -631,11 +644,12 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
                              if g in target else 0 for g in objs], dtype=np.int64)
     n_max = int(size_arr.max())
     longest = max(a.shape[0] for a in arrays.values())
-    if given is not None and n_max > longest and len(arrays) * n_max > MAX_NODES:
+    if n_max > longest and len(arrays) * n_max > MAX_NODES:
         g = objs[int(np.argmax(size_arr))]      # padding to a size no map has
-        raise ValueError(f"`sizes` gives object {g} {n_max} nodes: the {len(arrays)} maps, "
-                         f"padded to that width, would need {len(arrays) * n_max:.3g} entries "
-                         f"(more than {MAX_NODES:.0e})")
+        why = (f"`sizes` gives object {g} {n_max} nodes" if given is not None else
+               f"`pairwise[{target[g][1]}]` maps a node to node {n_max - 1} of object {g}")
+        raise ValueError(f"{why}: the {len(arrays)} maps, padded to that width, would need "
+                         f"{len(arrays) * n_max:.3g} entries (more than {MAX_NODES:.0e})")
     arrays = {(rank[i], rank[j]): a for (i, j), a in arrays.items()}
     canon: dict[tuple[int, int], np.ndarray] = {}
     for (i, j), a in arrays.items():

@@ -445,6 +445,13 @@ def test_cli_homography_failures_leave_no_output_folder(tmp_path, capsys):
     assert "notes.txt: not an image format OpenCV can read" in capsys.readouterr().err
     assert main(["homography", paths[0], str(tmp_path / "gone.png"), "--out", str(out)]) == 2
     assert "no such image file" in capsys.readouterr().err
+    assert main(["homography", str(tmp_path), paths[0], "--out", str(out)]) == 2
+    assert "a folder, not an image file" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:                  # argparse's own exit
+        main(["homography", *paths, "--features", str(10**11), "--out", str(out)])
+    assert exc.value.code == 2
+    assert "argument --features: expected a positive integer and <= 1000000" in \
+        capsys.readouterr().err
     assert main(["homography", *paths, "--reference", "2", "--out", str(out)]) == 2
     assert "--reference must be an image index in [0, 1], got 2" in capsys.readouterr().err
     assert not out.exists()

@@ -231,6 +231,10 @@ def test_mask_and_block_array_input():
     assert _all_pairs_exact(res, data)
     res2 = synchronize_permutations(data.pairwise, mask=mask)
     assert _all_pairs_exact(res2, data)
+    # a dict is not a mask ("must have 2 dimensions, got shape ()" did not say what arrived)
+    with pytest.raises(TypeError, match=r"`mask` must be an \(N, N\) boolean array .* got "
+                                        r"dict"):
+        synchronize_permutations(data.pairwise, mask={(0, 1): True})
 
 
 def test_disconnected_components_are_synchronized_separately():

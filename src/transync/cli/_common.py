@@ -23,13 +23,15 @@ class CLIError(Exception):
     """
 
 
-def int_at_least(minimum: int):
-    """``argparse`` type factory: an integer >= ``minimum``.
+def int_at_least(minimum: int, maximum: int | None = None):
+    """``argparse`` type factory: an integer >= ``minimum`` (and <= ``maximum`` if given).
 
     Parameters
     ----------
     minimum : int
         The smallest accepted value.
+    maximum : int, optional
+        The largest accepted value.
 
     Returns
     -------
@@ -42,13 +44,15 @@ def int_at_least(minimum: int):
     3
     """
     what = "a positive integer" if minimum == 1 else f"an integer >= {minimum}"
+    if maximum is not None:
+        what += f" and <= {maximum}"
 
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
-        if value < minimum:
+        if value < minimum or (maximum is not None and value > maximum):
             raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
         return value
 

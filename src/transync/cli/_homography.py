@@ -9,8 +9,8 @@ import re
 import time
 from pathlib import Path
 
-from ._common import (CLIError, check_output_folder, new_output_folder, positive_float,
-                      positive_int, seed_int)
+from ._common import (CLIError, check_output_folder, int_at_least, new_output_folder,
+                      positive_float, positive_int, seed_int)
 
 __all__ = ["add_parser"]
 
@@ -28,6 +28,9 @@ def _check_images(paths) -> None:
         raise CLIError(f"need at least 2 images, got {len(paths)}")
     for path in paths:
         p = Path(path)
+        if p.is_dir():
+            raise CLIError(f"{path}: a folder, not an image file (list the images, e.g. "
+                           f"{path}/*.png)")
         if not p.is_file():
             raise CLIError(f"no such image file: {path}")
         if not cv2.haveImageReader(str(p)):
@@ -244,7 +247,8 @@ def add_parser(sub) -> None:
                    help="robust estimator of the pairwise homographies (OpenCV's)")
     p.add_argument("--threshold", type=positive_float, default=3.0,
                    help="RANSAC threshold (pixels)")
-    p.add_argument("--features", type=positive_int, default=2000, help="SIFT features per image")
+    p.add_argument("--features", type=int_at_least(1, maximum=10**6), default=2000,
+                   help="SIFT features per image (at most 10**6)")
     p.add_argument("--max-iter", type=positive_int, default=3, help="segmentation + dense rounds")
     p.add_argument("--dense-target", default="auto", choices=["auto", "mean", "reference"],
                    help="what the dense step aligns each view to: the mean of the warped views, "

@@ -707,8 +707,8 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
         ``"matcheig"`` drops block entries below it.
     refine : int, optional
         Maximum projected-power sweeps on the discrete objective after rounding. Default: 0 for
-        ``"spectral"`` (plain Pachauri et al.) and ``max_iter`` for ``"orthogonal"``; not
-        allowed for ``"matcheig"``.
+        ``"spectral"`` (plain Pachauri et al.) and ``max_iter`` for ``"orthogonal"``; only 0
+        (or None) for ``"matcheig"``.
     min_score : float in [0, 1], optional
         Leave nodes whose support is below it unplaced (``-1``); default: every node placed.
     max_triangles : int, default=100000

@@ -487,8 +487,9 @@ def test_maps_that_match_nothing_keep_every_node_apart(method):
 def test_orthogonal_returns_consistent_partial_input_as_given():
     """Orthogonal synchronization of exactly consistent *partial* maps matched nodes that the
     input leaves unmatched (a tie: '-1' entries carry no weight) on 23-28 of 150 planted
-    collections; nodes that no observation supports now leave shared slots for empty ones
-    (the objective unchanged), and the input comes back exactly (metamorphic test)."""
+    collections; groups of a slot's nodes that no observed match links to the rest, and that
+    an observed pair compares with it, now leave it (the objective unchanged), and the input
+    comes back exactly (metamorphic test)."""
     from transync.metrics import multimatching_precision_recall
 
     for seed in range(60):
@@ -612,6 +613,16 @@ def test_separate_unlinked_moves_only_groups_an_observation_compares():
     check(lab, d)
     # one group per slot: nothing to do
     assert _separate_unlinked(stk, lab, 3, grow=True)[2] == 0
+    # no room one group at a time, but all groups packed at once fit: object 1's node (compared
+    # with object 2's in slot 0) can share slot 1 with object 0's, which nothing compares it with
+    pw = {(0, 2): np.array([0]), (1, 2): np.array([-1])}
+    stk = parse_pairwise(pw, sizes=np.ones(3, dtype=int))
+    labels = [np.array([1]), np.array([0]), np.array([0])]
+    lab, d, moved = _separate_unlinked(stk, labels, 2, grow=False)
+    assert d == 2 and moved == 1
+    out = MultiMatching(lab, 2)
+    assert out.pairwise(1, 2)[0] == -1 and out.pairwise(0, 1)[0] == 0
+    assert _agreement(stk, lab, 2)[0] >= _agreement(stk, labels, 2)[0]
 
 
 @pytest.mark.parametrize("method", ["spectral", "matcheig"])

@@ -292,7 +292,7 @@ def estimate_universe(vals: np.ndarray, n_max: int, *,
     return d, rule
 
 
-def pack_slots(labels, pairs: np.ndarray, d: int):
+def pack_slots(labels, pairs: np.ndarray, d: int, *, faithful_only: bool = False):
     """Merge the slots of ``labels`` into at most ``d``, keeping every observed match.
 
     Two slots may not merge when one object holds nodes in both (the labels would be invalid).
@@ -306,7 +306,8 @@ def pack_slots(labels, pairs: np.ndarray, d: int):
     ``d`` leaves, so it can match more of them than ``d`` requires). Returns ``(labels,
     rule)`` with ``rule`` 'faithful' or 'holders', or ``(None, None)`` when even the second
     colouring needs more than ``d`` slots (greedy colouring is not optimal: it can miss a
-    packing that exists).
+    packing that exists). ``faithful_only``: no second colouring (``(None, None)`` when the
+    first needs more than ``d`` slots).
     """
     import networkx as nx
 
@@ -317,8 +318,9 @@ def pack_slots(labels, pairs: np.ndarray, d: int):
     H = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n_obj, n_slots))
     seen = sp.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
                          shape=(n_obj, n_obj))
-    for rule, link in (("faithful", seen + seen.T + sp.identity(n_obj, format="csr")),
-                       ("holders", sp.identity(n_obj, format="csr"))):
+    rules = (("faithful", seen + seen.T + sp.identity(n_obj, format="csr")),
+             ("holders", sp.identity(n_obj, format="csr")))
+    for rule, link in rules[:1] if faithful_only else rules:
         conflict = sp.triu(H.T @ link @ H, k=1).tocoo()
         graph = nx.Graph()
         graph.add_nodes_from(range(n_slots))

@@ -649,17 +649,18 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
       the discrete objective, at most ``refine`` sweeps, default ``max_iter``), and the one with
       the higher objective is returned (``info["candidates"]``, ``info["chosen"]``). Since every
       candidate is scored by the objective the method maximizes, this is a safeguard against a
-      poor local optimum of the polar iteration, not a change of objective. With partial maps
-      (exactly representable input only) the spectral candidate is the spectral method's
-      packed eigenvalue-1 cluster (below), and the nodes of each slot then form groups (the
-      components of the observed matches among them); every group but the largest that an observed pair compares with another node of
-      its slot moves to an empty slot, else to a used one that no observed pair compares it
-      with; when some group finds neither, all groups are packed at once by a greedy
-      colouring in which compared groups differ, if that fits in ``d``, else (estimated
-      universe only) the groups left take new slots (``info["unlinked_groups_moved"]``). The
-      objective is unchanged: '-1' entries carry no weight, so a match the input does not
-      make tied with none, and exactly consistent partial input came back with such matches
-      on 21-40 of 90 exact collections; all 90 now come back as given, with either solver.
+      poor local optimum of the polar iteration, not a change of objective. On exactly
+      representable partial input the spectral candidate is the spectral method's packed
+      eigenvalue-1 cluster (below). With partial maps the nodes of each slot then form groups
+      (the components of the observed matches among them); every group but the largest that
+      an observed pair compares with another node of its slot moves to an empty slot, else to
+      a used one that no observed pair compares it with; when some group finds neither, all
+      groups are packed at once by a greedy colouring in which compared groups differ, if
+      that fits in ``d``, else (estimated universe only) the groups left take new slots
+      (``info["unlinked_groups_moved"]``). The objective is unchanged: '-1' entries carry no
+      weight, so a match the input does not make tied with none, and exactly consistent
+      partial input came back with such matches on 21-40 of 90 exact collections; all 90 now
+      come back as given, with either solver.
     * ``"matcheig"`` (Maset, Arrigoni, Fusiello 2017), a fast baseline: the same eigenvectors,
       rows normalized, and each block ``U_i U_j^T`` rounded independently by Hungarian,
       dropping matches below ``threshold``. Its ``pairwise(i, j)`` need not be cycle-consistent

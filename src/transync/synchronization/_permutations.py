@@ -287,23 +287,46 @@ def _refine_labels(stk: StackedPairs, labels, d: int, max_sweeps: int, dobs=None
 # one connected component
 # --------------------------------------------------------------------------------------------
 
-def _consistent_parts(stk: StackedPairs, A) -> int | None:
-    """The number of connected components of the graph that the observed matches draw on the
-    nodes (``A``'s nonzeros) when none of them holds two nodes of one object, else None.
+def _consistent_parts(stk: StackedPairs) -> int | None:
+    """The number of connected components of the graph that the observed matches (pairs of
+    positive weight) draw on the nodes when the input is exactly representable, else None.
 
-    Only then is the input exactly representable (each component a part of a universe node)
-    and the eigenvalue-1 cluster, one copy per component, the parts to round. On noisy input
-    a component holds two nodes of one object; its cluster, hundreds of components on sparse
-    view graphs, cost the eigensolver 8x and scrambled the rounding (500 objects of 30 nodes,
-    1 % of the pairs observed, 20 % corrupted, ``d`` given: 13 s -> 106 s, accuracy 0.23 ->
-    0.06), so noisy input keeps the leading ``d`` eigenvectors.
+    Exactly representable: no component holds two nodes of one object, and no node that an
+    observed pair leaves unmatched (in either direction) shares a component with a node of the
+    other object. Each component is then a part of a universe node, and the eigenvalue-1
+    cluster, one copy per component, holds the parts to round. Other input keeps the leading
+    ``d`` eigenvectors: noisy maps on sparse view graphs have hundreds of components, whose
+    cluster cost the eigensolver 8x and scrambled the rounding (500 objects of 30 nodes, 1 %
+    of the pairs observed, 20 % corrupted, ``d`` given: 13 s -> 106 s, accuracy 0.23 -> 0.06).
     """
-    links = A.copy()
-    links.eliminate_zeros()
+    if stk.maps is None:
+        return None
+    off, sizes, N = stk.offsets, stk.sizes, stk.n_objects
+    pos = stk.weights > 0
+    pairs, maps = stk.pairs[pos], stk.maps[pos]
+    cols = np.arange(maps.shape[1])
+    src = off[pairs[:, 0]][:, None] + cols
+    ok = maps >= 0
+    M = int(off[-1])
+    links = sp.coo_matrix((np.ones(int(ok.sum())), (src[ok], (off[pairs[:, 1]][:, None]
+                                                              + maps)[ok])), shape=(M, M))
     n_comp, comp = connected_components(links, directed=False)
-    owner = np.repeat(np.arange(stk.n_objects, dtype=np.int64), stk.sizes)
-    key = comp.astype(np.int64) * stk.n_objects + owner
-    return int(n_comp) if np.unique(key).size == key.size else None
+    comp = comp.astype(np.int64)
+    key = comp * N + np.repeat(np.arange(N, dtype=np.int64), sizes)
+    if np.unique(key).size != key.size:
+        return None
+    # unmatched by the pair: the nodes of i mapped to -1, the nodes of j that no node hits
+    hit = np.zeros(maps.shape, dtype=bool)
+    rows = np.broadcast_to(np.arange(len(maps))[:, None], maps.shape)
+    hit[rows[ok], maps[ok]] = True
+    alone_i = (cols < sizes[pairs[:, 0]][:, None]) & ~ok
+    alone_j = (cols < sizes[pairs[:, 1]][:, None]) & ~hit
+    other_i = np.broadcast_to(pairs[:, 1][:, None], maps.shape)
+    other_j = np.broadcast_to(pairs[:, 0][:, None], maps.shape)
+    src_j = off[pairs[:, 1]][:, None] + cols
+    claimed = np.concatenate([comp[src[alone_i]] * N + other_i[alone_i],
+                              comp[src_j[alone_j]] * N + other_j[alone_j]])
+    return None if np.isin(claimed, key).any() else int(n_comp)
 
 
 def _spectral_embedding(stk, d, solver, tol, rng, info, cluster=False):
@@ -402,7 +425,7 @@ def _spectral_embedding(stk, d, solver, tol, rng, info, cluster=False):
         return int(np.count_nonzero(vals >= (1.0 - _CLUSTER[use]) * vals[0]))
 
     n_top = 0
-    n_comp = _consistent_parts(stk, A) if cluster and vals.size and vals[0] > 0 else None
+    n_comp = _consistent_parts(stk) if cluster and vals.size and vals[0] > 0 else None
     if n_comp is not None:
         n_top = cluster_size(vals)
         if n_top >= vals.size and vals.size < M:
@@ -525,7 +548,7 @@ def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, re
                                                   cluster=separate and not stk.is_full)
     # exactly representable input whose eigenvalue-1 cluster is wider than d: the spectral
     # method's packed cluster is the spectral candidate, the polar sweeps start from the
-    # leading d columns (noisy input never gets the cluster, see _consistent_parts)
+    # leading d columns (other input never gets the cluster, see _consistent_parts)
     packed, d = _packed_cluster(stk, V, d, estimated, info)
     V = V[:, :d]
     sizes = stk.sizes
@@ -693,10 +716,11 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
     ``"faithful"``, or ``"holders"`` when a given ``d`` is too small for that and only the
     first rule is kept). An estimated ``d`` grows to what the faithful packing needs; exact
     input then comes back as given. (Eigenvalue 1 has one copy per connected component of the
-    graph that the observed matches draw on the nodes. These rules apply only when no
-    component holds two nodes of one object, i.e. to exactly representable input; noisy input
-    keeps the leading ``d`` eigenvectors: on sparse view graphs its hundreds of components
-    made the eigensolver 8x slower and the rounding worse.)
+    graph that the observed matches draw on the nodes. These rules apply only to exactly
+    representable input: no component holds two nodes of one object, and no node that an
+    observed pair leaves unmatched shares a component with a node of the other object. Other
+    input keeps the leading ``d`` eigenvectors: on sparse view graphs its hundreds of
+    components made the eigensolver 8x slower and the rounding worse.)
 
     With ``min_score``, nodes whose placement is weakly supported are left unplaced (label
     ``-1``): a node's score is the weighted fraction of its observed pairs in which the

@@ -82,7 +82,7 @@ def check_mask(mask, n: int | None = None, *, against: str = "pairwise") -> np.n
     """Validate ``mask``: square, boolean or 0/1, ``(n, n)`` if given; the diagonal is ignored."""
     if mask is None:
         return None
-    if isinstance(mask, Mapping) or isinstance(mask, (set, frozenset)):
+    if isinstance(mask, (Mapping, set, frozenset)):
         raise TypeError(f"`mask` must be an (N, N) boolean array (True where the pair is "
                         f"used), got {type(mask).__name__}")
     arr = check_array(mask, "mask", ndim=2, dtype=None, finite=False)

@@ -119,6 +119,23 @@ def _node_scores(stk: StackedPairs, labels, d: int, dobs=None):
     return [_support(obs, out, w) for obs, out, w in _observed_and_output(stk, labels, d, dobs)]
 
 
+def _observed_matches(stk: StackedPairs):
+    """``(pairs, maps, ok, src, dst)`` of the observed pairs of positive weight: ``ok`` marks
+    the entries that match, ``src`` / ``dst`` are each entry's flat node indices in the first
+    / second object (``offsets[i] + u``, ``offsets[j] + maps[q, u]``; valid where ``ok``)."""
+    pos = stk.weights > 0
+    pairs, maps = stk.pairs[pos], stk.maps[pos]
+    off = stk.offsets
+    src = off[pairs[:, 0]][:, None] + np.arange(maps.shape[1])
+    return pairs, maps, maps >= 0, src, off[pairs[:, 1]][:, None] + maps
+
+
+def _raise_estimate(info, d_old: int, d_new: int, why: str) -> None:
+    """Record that an estimated universe grew from ``d_old`` to ``d_new``, and why."""
+    info["n_universe_rule"] = f"{info['n_universe_rule']}; raised from {d_old} to {d_new}: {why}"
+    info["n_universe_estimate"] = d_new
+
+
 def _separate_unlinked(stk: StackedPairs, labels, d: int, grow: bool):
     """Move the groups of a slot that the input keeps apart into slots of their own.
 
@@ -140,24 +157,19 @@ def _separate_unlinked(stk: StackedPairs, labels, d: int, grow: bool):
     off = stk.offsets
     N = stk.n_objects
     lab = np.concatenate([np.asarray(x, dtype=np.int64) for x in labels])
-    pos = stk.weights > 0
-    pairs, maps = stk.pairs[pos], stk.maps[pos]
-    ok = maps >= 0
-    src = (off[pairs[:, 0]][:, None] + np.arange(maps.shape[1]))[ok]
-    dst = (off[pairs[:, 1]][:, None] + maps)[ok]
+    pairs, _, ok, src, dst = _observed_matches(stk)
+    src, dst = src[ok], dst[ok]
     same = (lab[src] == lab[dst]) & (lab[src] >= 0)
     M = int(off[-1])
     links = sp.coo_matrix((np.ones(int(same.sum())), (src[same], dst[same])), shape=(M, M))
     group = connected_components(links, directed=False)[1]
     owner = np.repeat(np.arange(N), sizes)
     placed = np.flatnonzero(lab >= 0)
-    key, count = np.unique(np.column_stack([lab[placed], group[placed]]), axis=0,
-                           return_counts=True)
+    key, part, count = np.unique(np.column_stack([lab[placed], group[placed]]), axis=0,
+                                 return_inverse=True, return_counts=True)
     if len(key) == np.unique(key[:, 0]).size:         # one group per slot: nothing to move
         return labels, d, 0
-    # objects compared with object g: g itself and its observed partners
-    seen = sp.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(N, N))
-    seen = (seen + seen.T + sp.identity(N, format="csr")).tocsr()
+    seen = spec.compared_objects(pairs, N)
     holds = np.zeros((N, max(d, 1)), dtype=bool)
     holds[owner[placed], lab[placed]] = True
     order = np.lexsort((-count, key[:, 0]))          # per slot, largest group first
@@ -167,7 +179,6 @@ def _separate_unlinked(stk: StackedPairs, labels, d: int, grow: bool):
     loose = loose[np.argsort(-count[loose], kind="stable")]
     moved = 0
     stuck = []                                          # groups with no room one at a time
-    lab0 = lab.copy()
 
     def compared_with(nodes):
         objs = np.zeros(N)
@@ -197,8 +208,7 @@ def _separate_unlinked(stk: StackedPairs, labels, d: int, grow: bool):
         # groups left take new slots (each the first new one that no observed pair compares
         # it with)
         parts = np.full(M, -1, dtype=np.int64)
-        parts[placed] = np.unique(np.column_stack([lab0[placed], group[placed]]), axis=0,
-                                  return_inverse=True)[1].ravel()
+        parts[placed] = part.ravel()                    # each group as it was: its own slot
         packed, _ = spec.pack_slots([parts[off[g]:off[g + 1]] for g in range(N)], pairs, d,
                                     faithful_only=True)
         if packed is not None:
@@ -302,14 +312,10 @@ def _consistent_parts(stk: StackedPairs) -> int | None:
     if stk.maps is None:
         return None
     off, sizes, N = stk.offsets, stk.sizes, stk.n_objects
-    pos = stk.weights > 0
-    pairs, maps = stk.pairs[pos], stk.maps[pos]
+    pairs, maps, ok, src, dst = _observed_matches(stk)
     cols = np.arange(maps.shape[1])
-    src = off[pairs[:, 0]][:, None] + cols
-    ok = maps >= 0
     M = int(off[-1])
-    links = sp.coo_matrix((np.ones(int(ok.sum())), (src[ok], (off[pairs[:, 1]][:, None]
-                                                              + maps)[ok])), shape=(M, M))
+    links = sp.coo_matrix((np.ones(int(ok.sum())), (src[ok], dst[ok])), shape=(M, M))
     n_comp, comp = connected_components(links, directed=False)
     comp = comp.astype(np.int64)
     key = comp * N + np.repeat(np.arange(N, dtype=np.int64), sizes)
@@ -516,11 +522,10 @@ def _packed_cluster(stk, V, d: int, estimated: bool, info):
     if labels is not None:
         used = 1 + max((int(lab.max()) for lab in labels if lab.size), default=-1)
         if used > d:
-            info["n_universe_rule"] = (
-                f"{info['n_universe_rule']}; raised from {d} to {used}: the eigenvalue-1 "
-                f"cluster has {V.shape[1]} parts, and {used} slots (a greedy colouring) "
-                f"keep apart every two that an observation compares")
-            info["n_universe_estimate"] = d = used
+            _raise_estimate(info, d, used, f"the eigenvalue-1 cluster has {V.shape[1]} parts, "
+                            f"and {used} slots (a greedy colouring) keep apart every two that "
+                            f"an observation compares")
+            d = used
     return labels, d
 
 
@@ -545,7 +550,7 @@ def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, re
                           separate=True):
     estimated = d is None or "n_universe_rule" in info
     V, d, n_prod, ok_eig, _ = _spectral_embedding(stk, d, solver, tol, rng, info,
-                                                  cluster=separate and not stk.is_full)
+                                                  cluster=separate)
     # exactly representable input whose eigenvalue-1 cluster is wider than d: the spectral
     # method's packed cluster is the spectral candidate, the polar sweeps start from the
     # leading d columns (other input never gets the cluster, see _consistent_parts)
@@ -621,11 +626,9 @@ def _component_orthogonal(stk, d, solver, tol, rng, info, max_iter, orth_tol, re
         d_in = d
         labels, d, info["unlinked_groups_moved"] = _separate_unlinked(stk, labels, d, estimated)
         if d > d_in:
-            info["n_universe_rule"] = (
-                f"{info['n_universe_rule']}; raised from {d_in} to {d}: groups of nodes that "
-                f"no observed match links to the rest of their slot, and that an observed pair "
-                f"compares with it, took new slots")
-            info["n_universe_estimate"] = d
+            _raise_estimate(info, d_in, d, "groups of nodes that no observed match links to "
+                            "the rest of their slot, and that an observed pair compares with "
+                            "it, took new slots")
     return labels, d, it, converged and ok_eig, stacked
 
 

@@ -292,6 +292,14 @@ def estimate_universe(vals: np.ndarray, n_max: int, *,
     return d, rule
 
 
+def compared_objects(pairs: np.ndarray, n_obj: int) -> sp.csr_matrix:
+    """``(n_obj, n_obj)`` sparse: nonzero where two objects are one object or an observed pair
+    (a row of ``pairs``, either direction): the objects whose nodes an observation compares."""
+    seen = sp.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                         shape=(n_obj, n_obj))
+    return (seen + seen.T + sp.identity(n_obj, format="csr")).tocsr()
+
+
 def pack_slots(labels, pairs: np.ndarray, d: int, *, faithful_only: bool = False):
     """Merge the slots of ``labels`` into at most ``d``, keeping every observed match.
 
@@ -316,9 +324,7 @@ def pack_slots(labels, pairs: np.ndarray, d: int, *, faithful_only: bool = False
     rows = np.concatenate([np.full(int((lab >= 0).sum()), g) for g, lab in enumerate(labels)])
     cols = np.concatenate([lab[lab >= 0] for lab in labels])
     H = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n_obj, n_slots))
-    seen = sp.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
-                         shape=(n_obj, n_obj))
-    rules = (("faithful", seen + seen.T + sp.identity(n_obj, format="csr")),
+    rules = (("faithful", compared_objects(pairs, n_obj)),
              ("holders", sp.identity(n_obj, format="csr")))
     for rule, link in rules[:1] if faithful_only else rules:
         conflict = sp.triu(H.T @ link @ H, k=1).tocoo()

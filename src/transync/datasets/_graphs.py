@@ -361,8 +361,8 @@ def make_graph_collection(n_graphs: int = 8, n_inliers: int = 10, n_outliers: in
         np.fill_diagonal(M, False)
         lab = np.concatenate([np.arange(n_in), np.full(n_out, -1)]).astype(np.int64)
         perm = rng.permutation(n) if shuffle else np.arange(n)
-        g = Graph(M.astype(float), edge_features=E * M).permute(perm)
-        graphs.append(g)
+        ix = np.ix_(perm, perm)         # relabel the arrays: one Graph validation, not two
+        graphs.append(Graph(M[ix].astype(float), edge_features=(E * M)[ix]))
         labels.append(lab[perm])
     return GraphCollectionProblem(graphs, labels, n_in,
                                   params=dict(n_graphs=N, n_inliers=n_in, n_outliers=n_out,

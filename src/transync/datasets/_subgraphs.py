@@ -189,7 +189,8 @@ def make_subgraph_collection(n_graphs: int = 8, n_universe: int = 20, p_keep=(0.
         np.fill_diagonal(M, False)
         lab = np.concatenate([ids, np.full(n_out, -1)]).astype(np.int64)
         perm = rng.permutation(n) if shuffle else np.arange(n)
-        graphs.append(Graph(M.astype(float), edge_features=E * M).permute(perm))
+        ix = np.ix_(perm, perm)         # relabel the arrays: one Graph validation, not two
+        graphs.append(Graph(M[ix].astype(float), edge_features=(E * M)[ix]))
         labels.append(lab[perm])
     p_param = low if low == high else (low, high)
     return SubgraphCollectionProblem(

@@ -7,6 +7,7 @@ import pytest
 from transync.cli import main
 from transync.experiments import REGISTRY, run_experiment
 from transync.experiments.cmu import METHODS, build, frame_gaps, load_sequence, trial
+from transync.experiments.subgraph import build as build_subgraph
 
 N_FRAMES, N_LANDMARKS = 8, 10
 
@@ -74,6 +75,22 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
     assert main(["experiment", "sync", "--quick", "--data", str(tmp_path)]) == 2
     assert "takes no --data" in capsys.readouterr().err
+
+
+def test_unmatchable_sequences_fail_before_any_trial(tmp_path, write_sequence, capsys):
+    """One landmark per frame, or a frame whose landmarks all coincide, failed every trial
+    (exit 1 after running them); now the build refuses it, naming the folder and the frame."""
+    one = write_sequence(tmp_path / "one", n_frames=4, n_landmarks=1)
+    assert main(["experiment", "cmu", "--quick", "--data", str(one),
+                 "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "1 landmark per frame" in err and str(one) in err
+    assert not (tmp_path / "out").exists()
+    flat = write_sequence(tmp_path / "flat", n_frames=4, n_landmarks=3, jitter=0.0)
+    (flat / "label" / "toy3").write_text("5.0 6.0\n" * 3)
+    for build_ in (build, build_subgraph):
+        with pytest.raises(ValueError, match=r"flat: all 3 landmarks of frame 2 \(label file number 3\) coincide"):
+            build_(quick=True, data=flat)
 
 
 def test_trial_spreads_frames(sequence):

@@ -230,6 +230,13 @@ def test_bad_sizes_keys_and_targets():
         synchronize_permutations({(0, 1): np.array([1, 0])}, weights={(0, 1): np.nan})
     with pytest.raises(TypeError, match="`threshold` must be a finite real number, got str"):
         synchronize_permutations({(0, 1): np.array([1, 0])}, method="matcheig", threshold="0.5")
+    with pytest.raises(ValueError, match=r"`weights` are 0 on all 2 observed pair\(s\)"):
+        synchronize_permutations({(0, 1): np.array([1, 0]), (1, 2): np.array([0, 1])},
+                                 weights={(0, 1): 0.0, (1, 2): 0})
+    for bad in (-0.1, 1.5):       # above 1 no cosine passes: an empty matching, not an answer
+        with pytest.raises(ValueError, match=r"`threshold` must lie in \[0, 1\]"):
+            synchronize_permutations({(0, 1): np.array([1, 0])}, method="matcheig",
+                                     threshold=bad)
 
 
 def test_universe_is_bounded_by_the_number_of_nodes():

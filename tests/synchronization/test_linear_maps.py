@@ -68,6 +68,23 @@ def test_weights_favour_good_pairs():
     assert err_w < 0.05 < err
 
 
+def test_dict_weights_equal_the_array_they_spell():
+    """A dict of weights, the same form as a dict of maps, reads like the (N, N) array: either
+    direction of a pair names it; an observed pair without an entry is refused by name."""
+    prob = make_noisy_linear_maps(6, 3, group="GL", noise=0.05, rng=1)
+    rng = np.random.default_rng(0)
+    w = rng.uniform(0.1, 2.0, (6, 6))
+    w = np.triu(w, 1) + np.triu(w, 1).T
+    as_dict = {(i, j): float(w[i, j]) for i in range(6) for j in range(i + 1, 6)}
+    a = synchronize_linear_maps(prob.observed, weights=w)
+    b = synchronize_linear_maps(prob.observed, weights=as_dict)
+    np.testing.assert_allclose(b.maps, a.maps, atol=1e-12)
+    assert not np.allclose(a.maps, synchronize_linear_maps(prob.observed).maps, atol=1e-6)
+    del as_dict[(2, 4)]
+    with pytest.raises(ValueError, match=r"`weights` has no entry for pair \(2, 4\)"):
+        synchronize_linear_maps(prob.observed, weights=as_dict)
+
+
 @pytest.mark.parametrize("group", ["GL", "SL", "SO"])
 def test_robust_rejects_outliers(group):
     prob = make_noisy_linear_maps(20, 3, group=group, noise=0.02, outlier_fraction=0.2,

@@ -47,20 +47,31 @@ def load_sequence(data=None):
     """The CMU-layout sequence of ``data`` (default: ``TRANSYNC_DATA``'s ``cmu-house``).
 
     Raises ``FileNotFoundError`` with one line naming the folder and ``TRANSYNC_DATA`` when
-    the folder (or its ``label/``) is missing; ``ValueError`` for malformed label files.
+    the folder (or its ``label/``) is missing; ``ValueError`` for malformed label files and
+    for a sequence the experiments cannot match (fewer than 2 landmarks per frame, or a frame
+    whose landmarks all coincide), before any trial runs.
     """
     from ..datasets import data_home, load_cmu_sequence
 
     try:
         folder = (data_home(subfolder="cmu-house") if data is None
                   else Path(data).expanduser())
-        return load_cmu_sequence(folder)
+        seq = load_cmu_sequence(folder)
     except (FileNotFoundError, NotADirectoryError) as exc:
         where = "the default CMU House folder" if data is None else f"the data folder {data}"
         raise FileNotFoundError(
             f"cannot read a CMU-layout sequence from {where} ({' '.join(str(exc).split())}); "
             "pass a folder in the CMU layout (`label/<name><N>` files; `--data PATH` on the "
             "command line) or set TRANSYNC_DATA to a folder holding `cmu-house`") from None
+    if seq.n_landmarks < 2:
+        raise ValueError(f"the sequence in {folder} has {seq.n_landmarks} landmark per frame; "
+                         "matching its frames needs at least 2")
+    flat = np.flatnonzero(np.all(seq.points == seq.points[:, :1], axis=(1, 2)))
+    if flat.size:       # no graph, no normalization: every trial drawing it would fail
+        f = int(seq.frames[flat[0]])
+        raise ValueError(f"the sequence in {folder}: all {seq.n_landmarks} landmarks of frame {f} "
+                         f"(label file number {f + 1}) coincide; matching needs distinct points")
+    return seq
 
 
 def draw_frames(data, config: dict, n: int, gap: int, rng: np.random.Generator):

@@ -40,7 +40,7 @@ from scipy.sparse.csgraph import connected_components
 from .._validation import MAX_ITER, check_array, check_bool, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning, DegenerateInputError
 from ..geometry import normalization_matrix, normalize_determinant
-from ._pairwise_input import check_mask, check_weight_magnitude, observations
+from ._pairwise_input import check_mask, check_weight_magnitude, observations, pair_weights
 
 __all__ = [
     "LinearMapSyncResult",
@@ -433,8 +433,9 @@ def synchronize_linear_maps(T, *, mask=None, weights=None, reference=0, group="G
         ``mask[j, i]``, for a dict as for an array (the same meaning in every synchronization
         function); an array is read in each direction whose entry is True, a direction left
         out is the inverse of the other. The diagonal is ignored.
-    weights : ndarray of shape (N, N), default=None
-        Non-negative confidence per observed pair (e.g. inlier counts); default all ones.
+    weights : ndarray of shape (N, N) or dict {(i, j): float}, default=None
+        Non-negative confidence per observed pair (e.g. inlier counts); default all ones. A
+        dict is read in either direction and needs an entry for every observed pair.
     reference : int, default=0
         Gauge: ``maps[reference]`` is the identity.
     group : {"GL", "SL", "SO"}, default="GL"
@@ -574,6 +575,11 @@ def _synchronize_linear_maps(T, *, name, mask, weights, reference, group, robust
 def _prepare_observations(T, obs, weights, group, *, mask_given, name="T"):
     """Weights, invertibility, SL(d) scaling and the missing directions (inverses)."""
     n, d = T.shape[0], T.shape[-1]
+    if isinstance(weights, Mapping):     # dict {(i, j): w}, read for every observed direction
+        ki, kj = np.nonzero(obs)
+        dense = np.zeros((n, n))
+        dense[ki, kj] = pair_weights(weights, ki, kj)
+        weights = dense
     if weights is not None:
         weights = check_array(weights, "weights", ndim=2)
         if weights.shape != (n, n):

@@ -223,7 +223,10 @@ def parse_pairwise(pairwise, *, mask=None, weights=None, sizes=None, soft: bool 
     if not raw:
         raise ValueError(f"`{name}` must contain at least one observed pair i != j")
     vals = _as_values(ki, kj, raw, soft, name)
-    ws = _pair_weights(weights, ki, kj)
+    ws = pair_weights(weights, ki, kj)
+    if not (ws > 0).any():          # weight 0 = not observed: every object would stand alone
+        raise ValueError(f"`weights` are 0 on all {ws.size} observed pair(s) of `{name}`, so no "
+                         "pair links two objects; give at least one pair a positive weight")
     n_obj = _count_objects(ki, kj, fixed, mask, name)
     sizes_out = _infer_sizes(ki, kj, vals, fixed, n_obj, name)
     _check_working_set(ki.size, sizes_out, soft, name)
@@ -375,7 +378,10 @@ def _as_value(value, label: str, soft: bool) -> tuple[np.ndarray, int | None]:
     return matrix_to_assignment(arr, name=label), arr.shape[1]
 
 
-def _pair_weights(weights, ki, kj) -> np.ndarray:
+def pair_weights(weights, ki, kj) -> np.ndarray:
+    """The weights of the observed pairs ``(ki[q], kj[q])``: all ones for None, else read from
+    an (N, N) array or a dict ``{(i, j): w}`` (either direction; an observed pair without an
+    entry is an error), checked finite and non-negative."""
     if weights is None:
         return np.ones(ki.size)
     if isinstance(weights, Mapping):

@@ -757,7 +757,8 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
         Non-negative confidence of each pair (default 1): ``weights[i, j]`` (or the dict's
         ``(i, j)`` entry, else its ``(j, i)`` one) for the observation given as ``(i, j)``.
         Only their ratios matter: multiplying every weight by one constant changes nothing
-        (the identity blocks of the block matrix carry the smallest positive weight).
+        (the identity blocks of the block matrix carry the smallest positive weight). A
+        weight of 0 leaves the pair out; at least one must be positive.
     sizes : (N,) int array, optional
         Object sizes when they cannot be read from the maps (default: assignment lengths,
         matrix shapes and the largest target).
@@ -768,8 +769,8 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
         Polar sweeps and relative tolerance of ``"orthogonal"``.
     eig_tol : float, default=1e-4
         Relative residual tolerance of the matrix-free eigensolver.
-    threshold : float, default=0.5
-        ``"matcheig"`` drops block entries below it.
+    threshold : float in [0, 1], default=0.5
+        ``"matcheig"`` drops block entries (cosines of the row-normalized embeddings) below it.
     refine : int, optional
         Maximum projected-power sweeps on the discrete objective after rounding. Default: 0 for
         ``"spectral"`` (plain Pachauri et al.) and ``max_iter`` for ``"orthogonal"``; only 0
@@ -864,6 +865,9 @@ def _check_options(*, method, solver, disconnected, max_iter, tol, eig_tol, thre
     check_choice(disconnected, "disconnected", ("separate", "raise"))
     max_iter = check_int(max_iter, "max_iter", minimum=1, maximum=MAX_ITER)
     threshold = check_real(threshold, "threshold")
+    if not 0.0 <= threshold <= 1.0:     # cosines of unit rows: above 1 nothing would match
+        raise ValueError(f"`threshold` must lie in [0, 1] (the cosine below which MatchEIG drops "
+                         f"a match), got {threshold!r}")
     if refine is None:
         n_refine = max_iter if method == "orthogonal" else 0
     else:

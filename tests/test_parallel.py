@@ -423,3 +423,35 @@ def test_an_executor_class_instead_of_an_instance_is_named():
         with pytest.raises(TypeError, match=r"`executor` must be an executor object, got the "
                                             r"class ThreadPoolExecutor: create one"):
             fn()
+
+
+class _WrongValueExecutor:
+    """A broken executor: ``submit`` returns a future of ``value``, whatever it was given."""
+
+    def __init__(self, value, concurrent=True):
+        self.value, self.concurrent = value, concurrent
+
+    def submit(self, fn, *args):
+        from concurrent.futures import Future
+
+        f = Future()
+        f.set_result(self.value)
+        return f if self.concurrent else _PlainFuture(f)
+
+
+class _PlainFuture:
+    def __init__(self, f):
+        self.f = f
+
+    def result(self, timeout=None):
+        return self.f.result(timeout)
+
+
+@pytest.mark.parametrize("value", ["garbage", (0,), ("0", [1]), (7, [1]), (-1, [1]), None])
+@pytest.mark.parametrize("concurrent", [True, False])
+def test_an_executor_that_returns_something_else_is_an_executor_error(value, concurrent):
+    """Futures completing with another value than the submitted function's raised "too many
+    values to unpack (expected 2)" (a ValueError that named nothing)."""
+    with pytest.raises(ExecutorError, match=r"_WrongValueExecutor returned .* for a chunk, not "
+                                            r"the \(index, result\) pair"):
+        map_chunks(_demo_chunk, [[0], [1]], executor=_WrongValueExecutor(value, concurrent))

@@ -76,7 +76,7 @@ import numpy as np
 
 from ._malloc import tune_worker_allocator
 from ._progress import progress_bar
-from ._validation import check_bool, check_int, check_positive
+from ._validation import check_bool, check_int, check_positive, short_repr
 from .exceptions import ExecutorError
 
 __all__ = ["DEFAULT_TIMEOUT", "MAX_TIMEOUT", "is_serial", "map_chunks", "split_chunks"]
@@ -510,7 +510,7 @@ def _collect_in_order(futs: list, chunks: list, executor, timeout: float, bar) -
 
 def _unwrap(f, executor, n: int, timeout: float):
     try:
-        return f.result(timeout=timeout)
+        out = f.result(timeout=timeout)
     except (TimeoutError, cf.TimeoutError):
         raise _stalled(executor, None, n, timeout) from None
     except BaseException as exc:
@@ -518,6 +518,13 @@ def _unwrap(f, executor, n: int, timeout: float):
             raise
         raise ExecutorError(f"{_label('futures', executor)} failed to run a chunk: "
                             f"{type(exc).__name__}: {exc}") from exc
+    if (not isinstance(out, tuple) or len(out) != 2 or not isinstance(out[0], int)
+            or not 0 <= out[0] < n):
+        # not what _run_chunk returns: the executor ran something else, or altered the result
+        raise ExecutorError(f"{_label('futures', executor)} returned {short_repr(out, 60)} for "
+                            f"a chunk, not the (index, result) pair of the submitted function; "
+                            f"does its submit(fn, *args) run fn(*args)?")
+    return out
 
 
 def _cancel(f) -> None:

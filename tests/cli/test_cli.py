@@ -287,6 +287,25 @@ def test_debug_shows_the_traceback_and_unexpected_errors_stay_one_line(bad_input
                    "with --debug for the traceback)\n")
 
 
+def test_error_notes_reach_the_one_line_message(bad_inputs, capsys, monkeypatch):
+    """Where an error happened (the pair of an affinity, the chunk of an executor) travels as an
+    exception note, which Python's traceback shows and str(exc) does not: the CLI printed the
+    message without it."""
+    import transync.matching
+
+    def boom(*args, **kwargs):
+        exc = ValueError("`g2` has none")
+        exc.add_note("while building the affinity of graphs[0] (g1) and\ngraphs[1] (g2)")
+        raise exc
+
+    monkeypatch.setattr(transync.matching, "match_graphs", boom)
+    p = str(bad_inputs / "p2.txt")
+    assert main(["match", p, p]) == 2
+    assert capsys.readouterr().err == (
+        "transync: error: `g2` has none (while building the affinity of graphs[0] (g1) and "
+        "graphs[1] (g2))\n")
+
+
 @pytest.mark.filterwarnings("default")
 def test_warnings_print_one_line_each(bad_inputs, capsys, monkeypatch):
     """A library warning during a command (a solver at its iteration budget) is one line on

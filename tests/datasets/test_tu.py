@@ -361,6 +361,23 @@ def test_inconsistent_files(tmp_path):
                         "graph)")
 
 
+def test_graphs_too_large_to_build_are_named_before_allocating(tmp_path, monkeypatch):
+    """A 2 MB indicator of one 10**6-node graph asked numpy for 7 TiB (a raw MemoryError); the
+    dense adjacency total is checked first. Here the limit is lowered to the toy's size."""
+    from transync.datasets import _tu
+
+    f = _write(tmp_path / "TOY")
+    total = sum(NODES.count(g) ** 2 for g in set(NODES))
+    monkeypatch.setattr(_tu, "_MAX_DENSE_ENTRIES", total)
+    assert len(load_tu(f).graphs) == 3
+    monkeypatch.setattr(_tu, "_MAX_DENSE_ENTRIES", total - 1)
+    big = max(set(NODES), key=NODES.count)
+    with pytest.raises(ValueError, match=re.escape(
+            f"{f / 'TOY_graph_indicator.txt'}: the graphs' dense adjacency matrices would hold "
+            f"{total:.3g} entries") + rf".*graph {big}, has {NODES.count(big)} nodes"):
+        load_tu(f)
+
+
 @pytest.mark.parametrize("kind, values, rows, against", [
     ("node_labels", NODE_LABELS[:-1], 8, "graph_indicator"),
     ("node_attributes", ["1, 2"] * 9, 8, "graph_indicator"),

@@ -233,6 +233,17 @@ def test_bad_sizes_keys_and_targets():
     with pytest.raises(ValueError, match=r"`weights` are 0 on all 2 observed pair\(s\)"):
         synchronize_permutations({(0, 1): np.array([1, 0]), (1, 2): np.array([0, 1])},
                                  weights={(0, 1): 0.0, (1, 2): 0})
+    P = {(0, 1): np.array([1, 0]), (1, 2): np.array([0, 1])}
+    W = {(0, 1): 1.0, (1, 2): 1.0}
+    for key, exc, match in [((0, 42), ValueError, r"key \(0, 42\) names object 42, but the "
+                                                   r"input has 3 objects"),
+                            ((-1, 0), ValueError, "non-negative object indices"),
+                            ((1, 1), ValueError, "self-pairs"),
+                            ("ab", TypeError, "keys must be \\(i, j\\) pairs"),
+                            ((0.5, 1), TypeError, "keys must be pairs of ints")]:
+        with pytest.raises(exc, match=match):     # a typo in a key was ignored
+            synchronize_permutations(P, weights={**W, key: 3.0})
+    assert synchronize_permutations(P, weights={**W, (0, 2): 3.0}).n_universe == 2   # unobserved
     for bad in (-0.1, 1.5):       # above 1 no cosine passes: an empty matching, not an answer
         with pytest.raises(ValueError, match=r"`threshold` must lie in \[0, 1\]"):
             synchronize_permutations({(0, 1): np.array([1, 0])}, method="matcheig",

@@ -80,6 +80,9 @@ def test_dict_weights_equal_the_array_they_spell():
     b = synchronize_linear_maps(prob.observed, weights=as_dict)
     np.testing.assert_allclose(b.maps, a.maps, atol=1e-12)
     assert not np.allclose(a.maps, synchronize_linear_maps(prob.observed).maps, atol=1e-6)
+    with pytest.raises(ValueError, match=r"`weights` key \(0, 6\) names object 6, but the input "
+                                         r"has 6 objects"):
+        synchronize_linear_maps(prob.observed, weights={**as_dict, (0, 6): 1.0})
     del as_dict[(2, 4)]
     with pytest.raises(ValueError, match=r"`weights` has no entry for pair \(2, 4\)"):
         synchronize_linear_maps(prob.observed, weights=as_dict)

@@ -177,6 +177,9 @@ def _one_line(exc: BaseException) -> str:
     from ..exceptions import TransyncError
 
     msg = " ".join(str(exc).split()) or type(exc).__name__
+    notes = [" ".join(str(n).split()) for n in getattr(exc, "__notes__", None) or []]
+    if notes:       # where it happened (a pair, a chunk): Python shows notes, str(exc) does not
+        msg = f"{msg} ({'; '.join(notes)})"
     if isinstance(exc, (CLIError, TransyncError, ValueError, TypeError)):
         return msg
     if isinstance(exc, OSError):

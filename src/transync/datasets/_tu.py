@@ -48,6 +48,9 @@ __all__ = ["TUDataset", "list_tu", "load_tu"]
 _REQUIRED = ("A", "graph_indicator", "graph_labels")
 _OPTIONAL = ("node_labels", "edge_labels", "node_attributes")
 _IGNORED = ("edge_attributes", "graph_attributes")
+#: Most entries, summed over graphs, of the dense adjacency matrices load_tu builds (8 GiB of
+#: float64; NCI1, the largest set of the thesis, needs 4.4 * 10**6)
+_MAX_DENSE_ENTRIES = 2**30
 _MAX_DIGITS = 15                  # integers up to 10**15 - 1 are parsed exactly (float64 sums)
 
 
@@ -516,6 +519,13 @@ def _check_indicator(indicator: np.ndarray, ind_lines: np.ndarray, n_graphs: int
         raise ValueError(f"{f_ind}: graph {int(empty[0]) + 1} has no nodes ({f_lab} has "
                          f"{n_graphs} graph labels; graph ids must be 1..{n_graphs}, each "
                          "listed for at least one node)")
+    entries = int(np.sum(counts.astype(np.float64) ** 2))
+    if entries > _MAX_DENSE_ENTRIES:     # a 2 MB indicator asked for 7 TiB (one 10**6-node graph)
+        big = int(np.argmax(counts))
+        raise ValueError(f"{f_ind}: the graphs' dense adjacency matrices would hold "
+                         f"{entries:.3g} entries ({8 * entries / 2**30:.3g} GiB; the largest, "
+                         f"graph {big + 1}, has {int(counts[big])} nodes), more than the "
+                         f"{_MAX_DENSE_ENTRIES:.3g} that load_tu builds")
     return counts
 
 

@@ -15,8 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._blas import blas_limit
-from .._validation import (as_generator, check_array, check_bool, check_choice, check_choices,
-                           check_index_pairs, check_int, check_positive)
+from .._validation import (as_generator, check_affinity_scale, check_array, check_bool,
+                           check_choice, check_choices, check_index_pairs, check_int,
+                           check_positive)
 from ..exceptions import ConvergenceWarning
 from ..permutations import MultiMatching, cycle_inconsistency_arrays
 from ..synchronization import (
@@ -730,7 +731,10 @@ def _solve_chunk(payload):
         from .. import matching
 
         fn = getattr(matching, solver)
-        results = [fn(aff.pair(p), **(options or {})) for p in range(len(aff))]
+        pair_affs = [aff.pair(p) for p in range(len(aff))]
+        # named as match_collection's argument here (the pairwise solvers call it `K`)
+        check_affinity_scale([a.max_column_sum() for a in pair_affs], "affinity")
+        results = [fn(a, **(options or {})) for a in pair_affs]
     assign = np.stack([r.assignment for r in results])
     n2 = aff.n2
     soft = np.zeros((len(aff), aff.n1, n2))

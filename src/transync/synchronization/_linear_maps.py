@@ -40,7 +40,8 @@ from scipy.sparse.csgraph import connected_components
 from .._validation import MAX_ITER, check_array, check_bool, check_choice, check_int, check_positive
 from ..exceptions import ConvergenceWarning, DegenerateInputError
 from ..geometry import normalization_matrix, normalize_determinant
-from ._pairwise_input import check_mask, check_weight_magnitude, observations, pair_weights
+from ._pairwise_input import (check_mask, check_weight_keys, check_weight_magnitude, observations,
+                              pair_weights)
 
 __all__ = [
     "LinearMapSyncResult",
@@ -576,6 +577,7 @@ def _prepare_observations(T, obs, weights, group, *, mask_given, name="T"):
     """Weights, invertibility, SL(d) scaling and the missing directions (inverses)."""
     n, d = T.shape[0], T.shape[-1]
     if isinstance(weights, Mapping):     # dict {(i, j): w}, read for every observed direction
+        check_weight_keys(weights, n)
         ki, kj = np.nonzero(obs)
         dense = np.zeros((n, n))
         dense[ki, kj] = pair_weights(weights, ki, kj)

@@ -228,6 +228,7 @@ def parse_pairwise(pairwise, *, mask=None, weights=None, sizes=None, soft: bool 
         raise ValueError(f"`weights` are 0 on all {ws.size} observed pair(s) of `{name}`, so no "
                          "pair links two objects; give at least one pair a positive weight")
     n_obj = _count_objects(ki, kj, fixed, mask, name)
+    check_weight_keys(weights, n_obj)
     sizes_out = _infer_sizes(ki, kj, vals, fixed, n_obj, name)
     _check_working_set(ki.size, sizes_out, soft, name)
     check_weight_magnitude(ws, int(sizes_out.max(initial=1)))
@@ -407,6 +408,22 @@ def pair_weights(weights, ki, kj) -> np.ndarray:
         raise ValueError(f"`weights` must be finite and >= 0, got {float(ws[q])} for pair "
                          f"{(int(ki[q]), int(kj[q]))}")
     return ws
+
+
+def check_weight_keys(weights, n_objects: int) -> None:
+    """Refuse a dict of weights with a key that names no pair of the ``n_objects`` objects
+    (not an ``(i, j)`` pair of ints, negative, ``i == j`` or an index ``>= n_objects``): a typo
+    in a key was ignored. Keys of pairs that are not observed are allowed (and unused)."""
+    if not isinstance(weights, Mapping):
+        return
+    for key in weights:
+        if not isinstance(key, tuple) or len(key) != 2:
+            raise TypeError(f"`weights` keys must be (i, j) pairs of object indices, got "
+                            f"{short_repr(key, 40)}")
+        i, j = _key(*key, "weights")
+        if max(i, j) >= n_objects:
+            raise ValueError(f"`weights` key {(i, j)} names object {max(i, j)}, but the input has "
+                             f"{n_objects} objects (indices 0..{n_objects - 1})")
 
 
 def check_weight_magnitude(ws: np.ndarray, per_pair: int) -> None:

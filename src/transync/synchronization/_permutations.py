@@ -335,6 +335,41 @@ def _consistent_parts(stk: StackedPairs) -> int | None:
     return None if np.isin(claimed, key).any() else int(n_comp)
 
 
+class _LeadingEigs:
+    """Leading eigenpairs of the synchronization matrix ``A`` (a stage helper of
+    :func:`_spectral_embedding`): dense ``eigh`` or the matrix-free block solver, which runs
+    its products in ``A``'s float32 on row blocks (threads, bit-identical) and its Ritz steps
+    in float64. Counts the products (one per dense solve) and keeps whether the last solve
+    converged."""
+
+    def __init__(self, A, use: str, tol: float, rng):
+        self.A, self.use, self.tol, self.rng = A, use, tol, rng
+        self.M = A.shape[0]
+        self.dense = A.toarray() if use == "dense" else None
+        self.op = None if use == "dense" else RowBlockProduct(A)
+        self.n_prod, self.converged = 0, True
+
+    def matmat(self, X):
+        return (self.op @ X.astype(self.A.dtype)).astype(np.float64)
+
+    def __call__(self, k_vals: int, k_vec: int, V0=None):
+        """``(values, vectors)``: the ``k_vals`` largest eigenvalues, descending, and the
+        eigenvectors of the ``k_vec`` largest; ``V0`` starts the matrix-free solver."""
+        if self.dense is not None:
+            w, U = sla.eigh(self.dense, subset_by_index=[self.M - max(k_vals, k_vec),
+                                                         self.M - 1])
+            self.n_prod += 1
+            return w[::-1], U[:, ::-1]
+        vals, U, n_p, _, self.converged = spec.synchronization_eigs(
+            self.matmat, self.M, k_vec, k_values=k_vals, tol=self.tol, V0=V0, rng=self.rng)
+        self.n_prod += n_p
+        return vals, U
+
+    def cluster_size(self, vals) -> int:
+        """How many leading eigenvalues equal the largest, up to the solver's accuracy."""
+        return int(np.count_nonzero(vals >= (1.0 - _CLUSTER[self.use]) * vals[0]))
+
+
 def _spectral_embedding(stk, d, solver, tol, rng, info, cluster=False):
     """Top eigenvectors of the normalized block matrix (and the universe size if ``d`` is None).
 
@@ -345,6 +380,11 @@ def _spectral_embedding(stk, d, solver, tol, rng, info, cluster=False):
     eigenvalue 1), the eigenvectors of the whole cluster are returned (more than ``d``
     columns): the first ``d`` of them would be an arbitrary cut of one eigenspace, whose
     rounding contradicted exact input.
+
+    Stages: build the operator; solve for the leading eigenpairs that ``d`` asks for;
+    estimate ``d`` when it is None (:func:`_estimate_universe_size`); widen to the whole
+    eigenvalue-1 cluster (:func:`_widen_to_cluster`); choose the columns to round
+    (:func:`_embedding_columns`).
     """
     M = int(stk.sizes.sum())
     n_max = int(stk.sizes.max())
@@ -358,97 +398,90 @@ def _spectral_embedding(stk, d, solver, tol, rng, info, cluster=False):
                           dtype=np.float64 if use == "dense" else np.float32)
     info["seconds_build"] = time.perf_counter() - t0
     info["operator_nnz"] = int(A.nnz)
-
-    Aop = None if use == "dense" else RowBlockProduct(A)   # row blocks on threads, bit-identical
-
-    def matmat(X):
-        return (Aop @ X.astype(A.dtype)).astype(np.float64)
     info["solver"] = use
     t0 = time.perf_counter()
-    n_prod = 0
-    converged = True
     if d is None and stk.is_full:
         d = n_max
         info["n_universe_rule"] = "full permutations: d = number of nodes"
-        k_vals = d
-    elif d is None:
-        k_vals = min(M, 2 * n_max + 10)
-    else:
-        k_vals = d
     given = d is not None and "n_universe_rule" not in info
-    cluster = cluster and not stk.is_full
+    k_vals = min(M, 2 * n_max + 10 if d is None else d)
     k_vec = min(d if d is not None else n_max, M)
-    k_vals = min(k_vals, M)
-    Ad = A.toarray() if use == "dense" else None
-
-    def _eigs(k_vals, k_vec, V0):
-        if use == "dense":
-            w, U = sla.eigh(Ad, subset_by_index=[M - max(k_vals, k_vec), M - 1])
-            return w[::-1], U[:, ::-1], 1, True
-        vals, U, n_p, _, ok = spec.synchronization_eigs(matmat, M, k_vec, k_values=k_vals,
-                                                        tol=tol, V0=V0, rng=rng)
-        return vals, U, n_p, ok
-
+    eigs = _LeadingEigs(A, use, tol, rng)
     V0 = None if use == "dense" else spec.reference_start(
         stk, spec.krylov_block(max(k_vals, k_vec), M), dobs, rng)
-    vals, U, n_prod, converged = _eigs(k_vals, k_vec, V0)
+    vals, U = eigs(k_vals, k_vec, V0)
     if d is None:
-        # Eigengap rule on the leading k_vals eigenvalues (k_vals = 2 n_max + 10 at first). If
-        # the largest gap is the last one computed, or the smallest computed eigenvalue is still
-        # above half the largest (we have not left the cluster of the d leading eigenvalues,
-        # which are all 1 for consistent input), the gap may lie further down: double k_vals (up
-        # to M) and look again.
-        while True:
-            d, rule = spec.estimate_universe(vals, n_max)
-            at_end = d >= vals.size - 1
-            still_high = vals[-1] > 0.5 * vals[0]
-            if not (at_end or still_high) or k_vals >= M:
-                break
-            k_vals = min(M, 2 * k_vals)
-            vals, U2, n2, converged = _eigs(k_vals, k_vec, U)
-            U = U2
-            n_prod += n2
-        if vals.size >= M and vals[-1] > 0.5 * vals[0]:
-            # the whole spectrum computed and no drop anywhere: every node is its own cluster
-            # (the maps observe no correspondence); the gap rule alone fell back to n_max and
-            # matched nodes that the input leaves unmatched
-            d = M
-            rule = ("no eigengap: the whole spectrum stays above half its largest value (no "
-                    "node corresponds to another): every node its own slot, d = total nodes")
-        info["n_universe_rule"] = rule
-        info["n_universe_estimate"] = d
-        info["n_universe_candidates"] = (n_max, int(vals.size - 1))
-        if d == vals.size - 1 and vals.size < M:
-            info["n_universe_warning"] = "estimate at the end of the computed spectrum"
-        if d > U.shape[1] and use != "dense":
-            _, U, n2, _, converged = spec.synchronization_eigs(matmat, M, min(d, M), tol=tol,
-                                                               V0=U, rng=rng)
-            n_prod += n2
-        elif d > U.shape[1]:
-            w, U = sla.eigh(Ad, subset_by_index=[M - min(d, M), M - 1])
-            U = U[:, ::-1]
-    def cluster_size(vals):
-        return int(np.count_nonzero(vals >= (1.0 - _CLUSTER[use]) * vals[0]))
-
+        d, vals, U, k_vals = _estimate_universe_size(eigs, vals, U, k_vals, k_vec, n_max, info)
     n_top = 0
-    n_comp = _consistent_parts(stk) if cluster and vals.size and vals[0] > 0 else None
+    n_comp = (_consistent_parts(stk) if cluster and not stk.is_full and vals.size
+              and vals[0] > 0 else None)
     if n_comp is not None:
-        n_top = cluster_size(vals)
-        if n_top >= vals.size and vals.size < M:
-            # every computed eigenvalue is in the cluster: eigenvalue 1 has one copy per
-            # connected component of the graph the observed matches draw on the nodes, so the
-            # cluster can go on only when there are more components (exact input: one per
-            # part of a universe node)
-            if n_comp > vals.size:
-                k_vals = min(M, n_comp + 1)
-                vals, U, n2, converged = _eigs(k_vals, k_vals, U if use != "dense" else None)
-                n_prod += n2
-                n_top = cluster_size(vals)
-        if d < n_top and U.shape[1] < n_top:
-            vals, U, n2, converged = _eigs(vals.size, n_top, U if use != "dense" else None)
-            n_prod += n2
+        vals, U, n_top, k_vals = _widen_to_cluster(eigs, vals, U, d, k_vals, n_comp)
     info["eigenvalues"] = np.asarray(vals[: max(k_vals, 1)])
     info["seconds_eigen"] = time.perf_counter() - t0
+    k = _embedding_columns(stk, U, vals, d, n_top, given, info)
+    return U[:, :k], d, eigs.n_prod, eigs.converged, A
+
+
+def _estimate_universe_size(eigs: _LeadingEigs, vals, U, k_vals: int, k_vec: int, n_max: int,
+                            info):
+    """``(d, vals, U, k_vals)``: the universe size from the eigengap rule, the spectrum widened
+    until the rule can trust its gap, and at least ``d`` eigenvectors."""
+    M = eigs.M
+    # Eigengap rule on the leading k_vals eigenvalues (k_vals = 2 n_max + 10 at first). If the
+    # largest gap is the last one computed, or the smallest computed eigenvalue is still above
+    # half the largest (we have not left the cluster of the d leading eigenvalues, which are
+    # all 1 for consistent input), the gap may lie further down: double k_vals (up to M) and
+    # look again.
+    while True:
+        d, rule = spec.estimate_universe(vals, n_max)
+        at_end = d >= vals.size - 1
+        still_high = vals[-1] > 0.5 * vals[0]
+        if not (at_end or still_high) or k_vals >= M:
+            break
+        k_vals = min(M, 2 * k_vals)
+        vals, U = eigs(k_vals, k_vec, U)
+    if vals.size >= M and vals[-1] > 0.5 * vals[0]:
+        # the whole spectrum computed and no drop anywhere: every node is its own cluster (the
+        # maps observe no correspondence); the gap rule alone fell back to n_max and matched
+        # nodes that the input leaves unmatched
+        d = M
+        rule = ("no eigengap: the whole spectrum stays above half its largest value (no "
+                "node corresponds to another): every node its own slot, d = total nodes")
+    info["n_universe_rule"] = rule
+    info["n_universe_estimate"] = d
+    info["n_universe_candidates"] = (n_max, int(vals.size - 1))
+    if d == vals.size - 1 and vals.size < M:
+        info["n_universe_warning"] = "estimate at the end of the computed spectrum"
+    if d > U.shape[1]:
+        _, U = eigs(min(d, M), min(d, M), U)
+    return d, vals, U, k_vals
+
+
+def _widen_to_cluster(eigs: _LeadingEigs, vals, U, d: int, k_vals: int, n_comp: int):
+    """``(vals, U, n_top, k_vals)`` with the eigenvectors of the whole eigenvalue-1 cluster
+    (``n_top`` leading eigenvalues equal to the largest) of exactly representable input, whose
+    match graph has ``n_comp`` connected components."""
+    n_top = eigs.cluster_size(vals)
+    if n_top >= vals.size and vals.size < eigs.M:
+        # every computed eigenvalue is in the cluster: eigenvalue 1 has one copy per connected
+        # component of the graph the observed matches draw on the nodes, so the cluster can go
+        # on only when there are more components (exact input: one per part of a universe
+        # node)
+        if n_comp > vals.size:
+            k_vals = min(eigs.M, n_comp + 1)
+            vals, U = eigs(k_vals, k_vals, U)
+            n_top = eigs.cluster_size(vals)
+    if d < n_top and U.shape[1] < n_top:
+        vals, U = eigs(vals.size, n_top, U)
+    return vals, U, n_top, k_vals
+
+
+def _embedding_columns(stk, U, vals, d: int, n_top: int, given: bool, info) -> int:
+    """How many leading columns of ``U`` to round: ``d`` less the null-space eigenvectors, or
+    fewer where the eigengap or the cluster agrees strictly more with the input, or the whole
+    eigenvalue-1 cluster (``n_top``) when it is wider than ``d``."""
+    M, n_max = int(stk.sizes.sum()), int(stk.sizes.max())
     k = min(d, M, U.shape[1])
     lead = np.asarray(vals[:k], dtype=float)
     if lead.size == k and k > 1 and lead[0] > 0:
@@ -466,7 +499,7 @@ def _spectral_embedding(stk, d, solver, tol, rng, info, cluster=False):
         k = min(n_top, U.shape[1])
     elif n_max <= n_top < k:
         k = _cluster_columns(stk, U, n_top, k, d, info)
-    return U[:, :k], d, n_prod, converged, A
+    return k
 
 
 def _cluster_columns(stk, U, n_top: int, k: int, d: int, info) -> int:

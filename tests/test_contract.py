@@ -481,11 +481,14 @@ def test_corner_errors(H_est, H_true, size):
 
 @CHEAP
 @given(st.one_of(float_arrays(st.integers(0, 5)), any_arrays(max_dims=1)),
-       st.sampled_from([(1.0, 3.0, 5.0), (), (-1.0,), (np.nan,), "x"]))
+       st.sampled_from([(1.0, 3.0, 5.0), (), (-1.0,), (np.nan,), "x", (1.0, 1.0000002),
+                        (3.0, 1.0, 3.0)]))
 def test_corner_accuracy(errors, thresholds):
     out = call(metrics.corner_accuracy, errors, thresholds)
     if out is REFUSED:
         return
+    # one key per distinct threshold: close ones printed alike and one was lost
+    check(len(out) == len(set(thresholds)), f"corner_accuracy: {len(out)} keys for {thresholds}")
     for k, v in out.items():
         if isinstance(v, (float, np.floating)):
             check(0 <= v <= 1 or np.isnan(v) and np.size(errors) == 0, f"{k} = {v}")
@@ -2813,6 +2816,7 @@ def test_load_images(items):
     out = call(hg.load_images, items)
     if out is REFUSED:
         return
+    check(len(items) > 0, "load_images([]): documented ValueError, returned []")
     check(len(out) == len(items), "load_images: one image per item")
     for im in out:
         check_finite_array(im, "load_images")

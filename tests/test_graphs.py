@@ -22,8 +22,10 @@ def test_from_points_delaunay_on_degenerate_sets():
     with a named error (scipy's QhullError never escapes)."""
     line = Graph.from_points(np.c_[np.arange(5.0), np.zeros(5)], edges="delaunay")
     assert line.n_edges >= 4
-    with pytest.raises(ValueError, match="`points` admit no Delaunay triangulation"):
-        Graph.from_points(np.ones((4, 2)), edges="delaunay")
+    for where in (1.0, 0.0, 1e-300):    # at the origin joggling "triangulated" them anyway
+        with pytest.raises(ValueError, match="`points` admit no Delaunay triangulation .*all at "
+                                             "one place"):
+            Graph.from_points(np.full((6, 2), where), edges="delaunay")
     assert Graph.from_points(np.ones((4, 2)), edges="full").n_edges == 6
 
 

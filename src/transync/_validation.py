@@ -113,6 +113,11 @@ def check_array(x, name: str, *, ndim: int | Sequence[int] | None = None, dtype=
                              f"{float(np.finfo(arr.dtype).max):.3g}), got {bad} entries beyond it "
                              f"(largest {float(np.abs(src).max()):.3g})")
         raise ValueError(f"`{name}` must be finite, got {bad} NaN or infinite entries")
+    if (finite and arr.dtype.kind == "b" and isinstance(src, np.ndarray)
+            and src.dtype.kind in "fc" and not np.all(np.isfinite(src))):
+        # a mask read from floats: NaN would become True
+        bad = int(np.size(src) - np.count_nonzero(np.isfinite(src)))
+        raise ValueError(f"`{name}` must be finite, got {bad} NaN or infinite entries")
     return arr
 
 

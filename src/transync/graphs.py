@@ -465,6 +465,9 @@ def _delaunay(P: np.ndarray) -> np.ndarray:
     """
     lo = P.min(axis=0)
     span = float((P.max(axis=0) - lo).max())
+    if span == 0:       # all at one place: joggling "triangulated" them at the origin only
+        raise ValueError(f"`points` admit no Delaunay triangulation ({P.shape[0]} points, all "
+                         f"at one place); use edges='full' or 'knn'")
     if span > 0 and np.isfinite(span):
         P = np.ldexp(P - lo, -int(np.frexp(span)[1]))     # exact; no 2**1024 overflow
     try:

@@ -335,6 +335,15 @@ def test_label_files_not_silently_skipped(tmp_path):
          "named `hotel<N>` without an extension; rename or remove it")
     seq = load_cmu_sequence(_sequence(tmp_path / "cam", name="cam2_", n_frames=3))
     assert seq.name == "cam2_" and seq.frames.tolist() == [0, 1, 2]
+    (tmp_path / "label" / "hotel6.txt").unlink()
+    (tmp_path / "label" / "hotel3").unlink()                 # frame 2 a folder, or a dead link
+    (tmp_path / "label" / "hotel3").mkdir()
+    _err(ValueError, tmp_path, f"{tmp_path / 'label' / 'hotel3'}: label file of frame 2 of "
+                               "'hotel' is a folder; expected a text file of `x y` rows")
+    (tmp_path / "label" / "hotel3").rmdir()
+    (tmp_path / "label" / "hotel3").symlink_to(tmp_path / "nowhere")
+    _err(ValueError, tmp_path, f"{tmp_path / 'label' / 'hotel3'}: label file of frame 2 of "
+                               "'hotel' is a broken link; expected a text file of `x y` rows")
 
 
 def test_png_size_beyond_the_format_and_bad_paths(tmp_path):

@@ -63,6 +63,11 @@ def test_noisy_map_generators_refuse_sizes_they_cannot_build(generator):
     if generator == "make_noisy_linear_maps":
         with pytest.raises(ValueError, match=r"`dim`=10+ would need"):
             make(3, dim=10**20)
+    # noise=1e300 overflowed into maps of infinite condition, refused by the synchronizers
+    with pytest.raises(ValueError, match=r"`noise` must be at most 1e\+100 .* got 1e\+300"):
+        make(4, noise=1e300)
+    prob = make(4, noise=1e100, rng=0)
+    assert np.isfinite(prob.observed[prob.mask]).all()
 
 
 @pytest.mark.parametrize("image_size, error, match", [

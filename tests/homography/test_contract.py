@@ -206,6 +206,25 @@ def test_warp_interpolation_must_be_an_opencv_flag():
     assert warp_to_reference(im, np.eye(3), (32, 32), interpolation=np.int64(0)).shape == (32, 32)
 
 
+def test_warps_do_not_depend_on_the_scale_of_the_homography():
+    """A homography is defined up to scale; OpenCV's inversion took 1e-40 * I or 1e300 * I for
+    singular and returned an all-black canvas (and mean_warped_image counted no view there).
+    At ordinary scales the power-of-two rescaling leaves the warp bit for bit as it was."""
+    import cv2
+
+    from transync.homography import mean_warped_image, warp_to_reference
+
+    rng = np.random.default_rng(0)
+    im = (rng.random((40, 50)) * 200 + 1).astype(np.float32)
+    H = np.array([[1.0, 0.02, 1.5], [-0.01, 0.98, -2.0], [1e-4, 0.0, 1.0]])
+    plain = warp_to_reference(im, H, (50, 40))
+    assert np.array_equal(plain, cv2.warpPerspective(im, H, (50, 40)))
+    for s in (1e-300, 1e-40, 1e40, 1e300):
+        np.testing.assert_allclose(warp_to_reference(im, H * s, (50, 40)), plain, atol=0.05)
+    _, count = mean_warped_image([im, im], np.stack([H, H * 1e300]), size=(50, 40))
+    assert count.max() == 2
+
+
 def test_pairwise_features_are_checked(small):
     """Hand-made features were only length-checked: float64 descriptors hit FLANN's cv2.error,
     fewer points than descriptors an IndexError."""

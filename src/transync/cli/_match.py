@@ -275,8 +275,8 @@ def _read_pairs(path: str) -> tuple[dict, list | None]:
         pairs[(i, j)] = np.asarray(a, dtype=np.int64)
     sizes = data.get("sizes")
     if sizes is not None and not (isinstance(sizes, list) and all(
-            isinstance(n, int) and not isinstance(n, bool) and 0 <= n < 2**62 for n in sizes)):
-        raise CLIError(f"{path}: \"sizes\" must be a list of node counts (integers >= 0), one "
+            isinstance(n, int) and not isinstance(n, bool) and 1 <= n < 2**62 for n in sizes)):
+        raise CLIError(f"{path}: \"sizes\" must be a list of node counts (integers >= 1), one "
                        f"per object, got {json.dumps(sizes)[:80]}")
     return pairs, sizes
 

@@ -357,6 +357,12 @@ def _label_files(folder: Path) -> tuple[str, dict[int, Path]]:
         if stem and not p.name.startswith("."):
             raise ValueError(f"{p}: looks like frame {int(stem[1])} of {name!r} but label files "
                              f"are named `{name}<N>` without an extension; rename or remove it")
+        frame = re.fullmatch(re.escape(name) + r"(\d+)", p.name, re.ASCII)
+        if frame and not p.is_file():       # skipped above: the frame would vanish silently
+            what = ("a folder" if p.is_dir() else "a broken link" if p.is_symlink()
+                    and not p.exists() else "not a regular file")
+            raise ValueError(f"{p}: label file of frame {int(frame[1]) - 1} of {name!r} is "
+                             f"{what}; expected a text file of `x y` rows")
     if 0 in by_number:
         raise ValueError(f"{by_number[0]}: frame numbers in the CMU layout start at 1 (file "
                          "`<name><N>` is frame N-1), got 0")

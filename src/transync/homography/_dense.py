@@ -9,7 +9,7 @@ import numpy as np
 
 from .._validation import (MAX_ITER, check_array, check_bool, check_homographies, check_int,
                            check_positive)
-from ..geometry import normalize_determinant, translation
+from ..geometry import normalize_determinant, rescale_homogeneous, translation
 from ._sparse import check_image, check_masks
 
 __all__ = ["mean_warped_image", "refine_homography_ecc", "warp_to_reference"]
@@ -213,11 +213,16 @@ def warp_to_reference(image, H, size, *, offset=(0, 0),
                          f"{interpolation!r}")
     if image.dtype not in (np.uint8, np.uint16, np.int16, np.float32, np.float64):
         image = image.astype(np.float64)           # the types OpenCV warps
-    return _warp(image, translation(*offset) @ H, size, int(interpolation))
+    return _warp(image, translation(*offset) @ rescale_homogeneous(H), size,
+                 int(interpolation))
 
 
 def _warp(image, H, size, interpolation=cv2.INTER_LINEAR) -> np.ndarray:
-    """``cv2.warpPerspective`` of checked arguments (a canvas of ``size`` = (w, h))."""
+    """``cv2.warpPerspective`` of checked arguments (a canvas of ``size`` = (w, h)), ``H``
+    scaled by a power of two (exact) to a largest entry in [0.5, 1): a homography is defined up
+    to scale, and OpenCV's own inversion took ``1e-40 * I`` (or ``1e300 * I``) for singular,
+    an all-black canvas."""
+    H = np.ldexp(H, -np.frexp(np.abs(H).max())[1])
     return cv2.warpPerspective(image, H, size, flags=interpolation,
                                borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
@@ -275,7 +280,7 @@ def mean_warped_image(images, homographies, *, size, masks=None, offset=(0, 0),
     N = len(imgs)
     if N < 1:
         raise ValueError("`images` must hold at least one image, got 0")
-    Hs = check_homographies(homographies, "homographies", ndim=3)
+    Hs = rescale_homogeneous(check_homographies(homographies, "homographies", ndim=3))
     if len(Hs) != N:
         raise ValueError(f"`homographies` must hold one homography per image ({N}), got "
                          f"{len(Hs)}")

@@ -187,6 +187,8 @@ def load_images(images) -> list:
     except TypeError:
         raise TypeError(f"`images` must be a list of images or paths, "
                         f"got {type(images).__name__}") from None
+    if not images:
+        raise ValueError("`images` must hold at least one image or path, got none")
     out = []
     for k, im in enumerate(images):
         if isinstance(im, (str, os.PathLike)):

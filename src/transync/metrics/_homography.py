@@ -125,7 +125,14 @@ def corner_accuracy(errors, thresholds=(1.0, 3.0, 5.0)) -> dict:
     ts = check_array(thresholds, "thresholds", ndim=1)
     if (ts < 0).any():
         raise ValueError(f"`thresholds` must be non-negative, got {ts.tolist()!r}")
-    return {f"acc@{t:g}px": float(np.mean(errors <= t)) for t in ts}
+    out, given = {}, {}
+    for t in ts.tolist():
+        key = f"acc@{t:g}px"
+        if given.setdefault(key, t) != t:       # close thresholds print alike: one was lost
+            raise ValueError(f"`thresholds` must give distinct keys: {given[key]!r} and {t!r} "
+                             f"both print as {key!r}")
+        out[key] = float(np.mean(errors <= t))
+    return out
 
 
 def pairwise_corner_error(H_est, H_true, *, image_size, min_overlap=0.05) -> np.ndarray:

@@ -53,8 +53,9 @@ def corner_error(H_est, H_true, *, image_size) -> np.ndarray:
     Returns
     -------
     ndarray of shape (N,) (or a float for single homographies)
-        ``inf`` where an estimate is not finite or singular, or a corner is sent to infinity by
-        one homography and not the other: a failed estimate counts as infinitely wrong.
+        ``inf`` where an estimate is not finite or singular, or a corner is sent to infinity
+        (by either homography, even by both: the distance is undefined there): a failed
+        estimate counts as infinitely wrong.
 
     Raises
     ------

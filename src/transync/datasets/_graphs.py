@@ -129,18 +129,21 @@ def _sym_mask(rng, n, p):
     return M | M.T
 
 
-#: largest ``deformation`` the generators take: noise this large carries no structure, and
-#: beyond it the attributes or points (and their sums and distances) could overflow float64
+#: largest noise level (``deformation``, ``noise``) the generators take: noise this large
+#: carries no structure, and beyond it the attributes, points or maps (and their sums and
+#: products) could overflow float64
 MAX_DEFORMATION = 1e100
 
 
-def check_deformation(deformation) -> float:
-    """``deformation`` as a float in ``[0, MAX_DEFORMATION]``; names it otherwise (1e308 was
-    refused later as "`edge_features` must be finite", or as a point magnitude)."""
-    sigma = check_positive(deformation, "deformation", allow_zero=True)
+def check_deformation(deformation, name: str = "deformation") -> float:
+    """``deformation`` (a noise level, the argument ``name``) as a float in ``[0,
+    MAX_DEFORMATION]``; names it otherwise (1e308 was refused later as "`edge_features` must be
+    finite", or as a point magnitude; the map generators' ``noise=1e300`` overflowed into maps
+    of infinite condition)."""
+    sigma = check_positive(deformation, name, allow_zero=True)
     if sigma > MAX_DEFORMATION:
-        raise ValueError(f"`deformation` must be at most {MAX_DEFORMATION:g} (noise this large "
-                         f"leaves no structure, and the attributes would overflow), got "
+        raise ValueError(f"`{name}` must be at most {MAX_DEFORMATION:g} (noise this large "
+                         f"leaves no structure, and the generated values would overflow), got "
                          f"{sigma:g}")
     return sigma
 

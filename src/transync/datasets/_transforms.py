@@ -14,7 +14,7 @@ import numpy as np
 from .._validation import (as_generator, check_choice, check_image_size, check_int,
                            check_positive, check_probability, int_magnitude, short_repr)
 from ..geometry import image_corners, normalize_determinant, transfer_points
-from ._graphs import _MAX_ENTRIES, MAX_DEFORMATION
+from ._graphs import _MAX_ENTRIES, check_deformation
 
 __all__ = ["TransformProblem", "make_noisy_homographies", "make_noisy_linear_maps"]
 
@@ -91,16 +91,6 @@ def _random_group_element(d, group, rng, spread=1.0):
     return A
 
 
-def _check_noise(noise) -> float:
-    """``noise`` in ``[0, MAX_DEFORMATION]``: above it the observed maps overflow or are
-    singular, which the synchronizers then refuse (as the graph generators' ``deformation``)."""
-    noise = check_positive(noise, "noise", allow_zero=True)
-    if noise > MAX_DEFORMATION:
-        raise ValueError(f"`noise` must be at most {MAX_DEFORMATION:g} (noise this large leaves "
-                         f"no structure, and the maps would overflow), got {noise:g}")
-    return noise
-
-
 def make_noisy_linear_maps(n_objects=10, dim=3, *, group="GL", noise=0.05, outlier_fraction=0.0,
                            density=1.0, rng=None) -> TransformProblem:
     """Random invertible maps with noisy, partly missing and partly corrupted pairwise observations.
@@ -142,7 +132,7 @@ def make_noisy_linear_maps(n_objects=10, dim=3, *, group="GL", noise=0.05, outli
     d = check_int(dim, "dim", minimum=1)
     _check_size(n, d, f"`n_objects`={short_repr(n, 30)} and `dim`={short_repr(d, 30)}")
     group = check_choice(group, "group", ("GL", "SL", "SO"))
-    noise = _check_noise(noise)
+    noise = check_deformation(noise, "noise")
     outlier_fraction = check_probability(outlier_fraction, "outlier_fraction")
     density = check_probability(density, "density")
     rng = as_generator(rng)
@@ -245,7 +235,7 @@ def make_noisy_homographies(n_views=10, *, image_size=(640, 480), noise=0.5, out
     _check_size(n, 3, f"`n_views`={short_repr(n, 30)} (3 x 3 homographies)")
     w, h = check_image_size(image_size, "image_size", minimum=2, maximum=2**20)
     max_angle = check_positive(max_angle, "max_angle", allow_zero=True)
-    noise = _check_noise(noise)
+    noise = check_deformation(noise, "noise")
     outlier_fraction = check_probability(outlier_fraction, "outlier_fraction")
     density = check_probability(density, "density")
     rng = as_generator(rng)

@@ -225,6 +225,25 @@ def test_warps_do_not_depend_on_the_scale_of_the_homography():
     assert count.max() == 2
 
 
+def test_masks_with_nan_are_refused():
+    """NaN cast to bool is True: float masks with NaN were read as valid pixels (every mask the
+    library reads goes through one conversion, check_array)."""
+    from transync.homography import mean_warped_image
+
+    rng = np.random.default_rng(0)
+    im = (rng.random((40, 50)) * 200 + 1).astype(np.float32)
+    bad = np.ones(im.shape)
+    bad[3, 4] = np.nan
+    with pytest.raises(ValueError, match=r"`masks\[1\]` must be finite, got 1 NaN or infinite"):
+        mean_warped_image([im, im], np.stack([np.eye(3)] * 2), size=(50, 40),
+                          masks=[np.ones(im.shape), bad])
+    with pytest.raises(ValueError, match=r"`mask` must be finite, got 1 NaN or infinite"):
+        refine_homography_ecc(im, im, np.eye(3), mask=bad)
+    _, count = mean_warped_image([im, im], np.stack([np.eye(3)] * 2), size=(50, 40),
+                                 masks=[np.ones(im.shape), np.where(np.isnan(bad), 0.0, 1.0)])
+    assert count.max() == 2 and count.min() == 1          # a 0.0 entry is a masked-out pixel
+
+
 def test_pairwise_features_are_checked(small):
     """Hand-made features were only length-checked: float64 descriptors hit FLANN's cv2.error,
     fewer points than descriptors an IndexError."""

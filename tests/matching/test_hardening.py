@@ -21,6 +21,7 @@ from transync.matching import (
     SeparableAffinity,
     SparseAffinity,
     gaussian_edge_affinity,
+    gaussian_edge_factors,
     gaussian_node_affinity,
     hungarian,
     match_graphs,
@@ -95,15 +96,24 @@ def test_huge_coordinates_refused_with_sigma2_hint(method):
         match_graphs(g1, g2, method=method)
 
 
-def test_sigma2_hint_for_attributes_whose_square_overflows():
-    """Edge weights ~1e300: building the hint (0.6 * scale**2) raised OverflowError instead of
-    the DegenerateInputError it was explaining."""
+def test_edge_attributes_whose_square_overflows_are_refused_by_name():
+    """Edge weights ~1e300: building the sigma2 hint (0.6 * scale**2) raised OverflowError; at
+    1e308 the separable expansion raised numpy's LinAlgError. Weights and edge features are
+    now held to the cap on edge lengths (1e150), before any affinity is built."""
     from transync import match_collection
 
     A = np.ones((3, 3)) - np.eye(3)
-    with pytest.raises(DegenerateInputError, match=r"too small for edge attributes .*Rescale "
-                                                   r"the data \(its squared scale is beyond"):
+    with pytest.raises(ValueError, match=r"adjacency weights of `g1` overflow .*rescale them"):
         match_collection([Graph(A * 1e300 * (k + 1)) for k in range(3)], progress=False)
+    for scale in (1e151, 1e308):
+        g = Graph(A * scale)
+        with pytest.raises(ValueError, match=r"adjacency weights of `g1` overflow"):
+            match_graphs(g, g)
+        h = Graph(A, edge_features=A * scale)
+        with pytest.raises(ValueError, match=r"edge_features of `graphs\[0\]` overflow"):
+            gaussian_edge_factors([h, h])
+    g = Graph(A * 1e140)                    # below the cap: matched
+    assert match_graphs(g, g, sigma2=1e280).objective > 0
 
 
 def test_suggested_sigma2_recovers_the_unit_scale_result():

@@ -338,8 +338,13 @@ def test_validation_errors(rng):
         ga(K, n1=4, n2=4, beta_rate=1 + 1e-9)                 # ~3e9 levels: refused, no hang
     # a huge beta_max over a tiny beta0: the ratio overflowed (raw OverflowError from int(inf))
     with pytest.raises(ValueError, match=r"`beta_rate`=1.075 anneals from beta0=1e-300 to "
-                                         r"beta_max=1e\+300 in 1.9\d+e\+04 levels"):
-        ga(K, n1=4, n2=4, beta0=1e-300, beta_max=1e300)
+                                         r"beta_max=1e\+100 in 1.27\d+e\+04 levels"):
+        ga(K, n1=4, n2=4, beta0=1e-300, beta_max=1e100)
+    # beta times the gradient overflowed beyond 1e100 (NaN iterate, an error naming `score`)
+    with pytest.raises(ValueError, match=r"`beta_max` must be <= 1e\+100 .* got 1e\+300"):
+        ga(K, n1=4, n2=4, beta_max=1e300, beta_rate=10.0)
+    with pytest.raises(ValueError, match=r"`max_inner` must be <= 1000000"):
+        ga(K, n1=4, n2=4, max_inner=10**12)                   # ran for minutes
     with pytest.raises(ValueError, match="`min_step` must be <="):
         pf(K, n1=4, n2=4, step=0.01, min_step=0.1)
     with pytest.raises(ValueError, match="`method` must be one of"):

@@ -329,7 +329,7 @@ def test_accuracy_names_a_truth_of_the_wrong_shape():
     ({"mode": "offline", "damping": 0.5}, ValueError,
      r"`damping` steers .*; solver='rrwm' with sync='birkhoff' and mode='offline' runs none"),
     ({"mode": "offline", "sync_every": 2}, ValueError, r"and mode='offline' runs none"),
-    ({"solver": "ga", "options": {"beta0": 1e-300, "beta_max": 1e300}}, ValueError,
+    ({"solver": "ga", "options": {"beta0": 1e-300, "beta_max": 1e100}}, ValueError,
      "`beta_rate`=1.075 anneals from beta0=1e-300"),
     ({"refine": "no"}, TypeError, "refine"),
     ({"options": {"maxiter": 3}}, TypeError, "`options` has unknown option.*'maxiter'"),

@@ -112,6 +112,17 @@ class Affinity(ABC):
     def shape(self) -> tuple[int, int]:
         return (self.n1, self.n2)
 
+    def _block(self, X) -> np.ndarray:
+        """``X`` as a real ``(n1, n2)`` float array (the products' argument check: shape and
+        dtype only, the solvers call them at every step)."""
+        X = np.asarray(X)
+        if X.dtype.kind not in "biuf":
+            raise TypeError(f"`X` must be a real array, got dtype {X.dtype}")
+        if X.shape != (self.n1, self.n2):
+            raise ValueError(f"`X` must have shape (n1, n2) = ({self.n1}, {self.n2}), got "
+                             f"{X.shape}")
+        return X.astype(float, copy=False)
+
     def score(self, X) -> float:
         """QAP objective ``vec(X)^T K vec(X)`` of a finite ``(n1, n2)`` matrix ``X``.
 
@@ -203,10 +214,10 @@ class _MatrixAffinity(Affinity):
         self.n1, self.n2 = n1, n2
 
     def matvec(self, X):
-        return _unvec(self.K @ _vec(X), self.n1, self.n2)
+        return _unvec(self.K @ _vec(self._block(X)), self.n1, self.n2)
 
     def rmatvec(self, X):
-        return _unvec(self.K.T @ _vec(X), self.n1, self.n2)
+        return _unvec(self.K.T @ _vec(self._block(X)), self.n1, self.n2)
 
     def _conflict_mask(self):
         n1, n2 = self.n1, self.n2
@@ -229,6 +240,11 @@ class DenseAffinity(_MatrixAffinity):
         Sizes of the two graphs.
     name : str, default="K"
         The argument name used in error messages.
+
+    Notes
+    -----
+    A float64 ``K`` is kept as given, not copied (as NumPy and SciPy keep their operands): the
+    checks above hold for it as it was at construction, so do not modify it afterwards.
 
     Raises
     ------
@@ -279,6 +295,11 @@ class SparseAffinity(_MatrixAffinity):
         Sizes of the two graphs.
     name : str, default="K"
         The argument name used in error messages.
+
+    Notes
+    -----
+    A float64 ``K`` is kept as given, not copied (as NumPy and SciPy keep their operands): the
+    checks above hold for it as it was at construction, so do not modify it afterwards.
 
     Raises
     ------
@@ -405,7 +426,7 @@ class FactorizedAffinity(Affinity):
 
     def _product(self, X, end: int, S1, S2T):
         """``K vec(X)`` (``end=1``: gather at edge heads, scatter to tails) or ``K^T vec(X)``."""
-        X = np.asarray(X, dtype=float)
+        X = self._block(X)
         W = self.edge * X[np.ix_(self.edges1[:, end], self.edges2[:, end])]
         Y = np.asarray((S1 @ W) @ S2T) if W.size else np.zeros((self.n1, self.n2))
         if self.node is not None:
@@ -500,13 +521,22 @@ class SeparableAffinity(Affinity):
         self._Fcat = np.ascontiguousarray(self.F.transpose(1, 0, 2).reshape(self.n1, R * self.n1))
         self._transposed = None  # factors of K^T, built on the first rmatvec
         self._symmetric = None   # `symmetric`, computed on first use
+        # K's entries are not formed; a row sum or diagonal entry below zero by more than the
+        # expansion's error (and rounding) proves negative ones, which the solvers cannot take
+        slack = (self.max_error + 1e-12 * bound) * self.n1 * self.n2
+        low = min(float(self.matvec(np.ones((self.n1, self.n2))).min()),
+                  float(self.diag().min()) * self.n1 * self.n2)
+        if low < -slack:
+            raise ValueError(f"`F`, `G` give a K with negative entries (a row sum or diagonal "
+                             f"entry of {low:.3g}, beyond the expansion's error bound "
+                             f"max_error={self.max_error:g}); an affinity is non-negative")
 
     @property
     def rank(self) -> int:
         return self.F.shape[0]
 
     def _product(self, X, Fcat, Gcat):
-        X = np.asarray(X, dtype=float)
+        X = self._block(X)
         R, n1, n2 = self.F.shape[0], self.n1, self.n2
         Z = (X @ Gcat).reshape(n1, R, n2).transpose(1, 0, 2).reshape(R * n1, n2)
         Y = Fcat @ Z
@@ -577,7 +607,8 @@ class _CheckedAffinity(Affinity):
 
     def __init__(self, inner: Affinity, name: str):
         self._inner, self._arg = inner, name
-        self.n1, self.n2 = int(inner.n1), int(inner.n2)
+        self.n1 = check_int(getattr(inner, "n1", None), f"{name}.n1", minimum=1)
+        self.n2 = check_int(getattr(inner, "n2", None), f"{name}.n2", minimum=1)
 
     def __getattr__(self, attr):             # the user's own attributes (not found above)
         if attr == "_inner":                 # not yet set (unpickling): no recursion
@@ -591,6 +622,8 @@ class _CheckedAffinity(Affinity):
         where = f"`{self._arg}`.{method}() (a {type(self._inner).__name__})"
         if value is None:
             raise TypeError(f"{where} must return a float array of shape {shape}, got None")
+        if np.iscomplexobj(value):
+            raise TypeError(f"{where} must return a real array, got a complex one")
         try:
             arr = np.asarray(value, dtype=float)
         except (TypeError, ValueError):
@@ -743,6 +776,10 @@ def gaussian_node_affinity(g1: Graph, g2: Graph, *, sigma2: float = 1.0,
         what = "node_features" if attribute == "features" else "points"
         raise ValueError(f"`g1.{what}` and `g2.{what}` must have the same width, got "
                          f"{f1.shape[1]} and {f2.shape[1]}")
+    if f1.shape[1] == 0:                    # every node alike: a node affinity of all ones
+        what = "node_features" if attribute == "features" else "points"
+        raise ValueError(f"`g1.{what}` and `g2.{what}` have no columns (shape "
+                         f"{f1.shape}): there is nothing to compare nodes by")
     # d2 / sigma2 on features scaled by a power of two: points at 1e200 squared to inf before
     top = max(float(np.abs(f1).max(initial=0.0)), float(np.abs(f2).max(initial=0.0)))
     e = int(np.frexp(top)[1]) if top > 0 else 0
@@ -799,13 +836,18 @@ def _count_close(x_sorted: np.ndarray, y: np.ndarray, radius: float) -> int:
 
 
 def _edge_attributes(g: Graph, attribute: str, name: str) -> list[np.ndarray]:
-    if attribute == "weight":
-        return [g.adjacency]
-    if attribute == "features":
-        if g.edge_features is None:
+    if attribute in ("weight", "features"):
+        if attribute == "features" and g.edge_features is None:
             raise ValueError(f"attribute='features' needs graphs with `edge_features`; `{name}` "
                              "has none")
-        return [g.edge_features]
+        E, what = ((g.adjacency, "adjacency weights") if attribute == "weight"
+                   else (g.edge_features, "edge_features"))
+        top = float(np.abs(E).max())
+        if top > _MAX_LENGTH:
+            raise ValueError(f"the {what} of `{name}` overflow when their differences are "
+                             f"squared (up to {top:.3g}, at most {_MAX_LENGTH:g} taken); rescale "
+                             "them")
+        return [E]
     if g.points is None:
         raise ValueError(f"attribute={attribute!r} needs graphs with `points`; `{name}` has none "
                          "(use attribute='weight' or 'features')")
@@ -961,7 +1003,13 @@ def prefers_separable(n1, n2, m1, m2):
     >>> prefers_separable([20, 20], [6, 2], [380, 380], [30, 2]).tolist()
     [True, False]
     """
-    n1, n2, m1, m2 = (np.asarray(v, dtype=np.int64) for v in (n1, n2, m1, m2))
+    counts = []
+    for name, v in (("n1", n1), ("n2", n2), ("m1", m1), ("m2", m2)):
+        v = check_int_array(v, name, what="counts of nodes or edges")
+        if v.size and v.min() < 0:
+            raise ValueError(f"`{name}` must be >= 0, got {v.min()}")
+        counts.append(v.astype(float))  # products in float: no int64 wrap-around
+    n1, n2, m1, m2 = counts
     return n1 * n1 * n2 + n1 * n2 * n2 < m1 * m2
 
 

@@ -153,6 +153,11 @@ def match_graphs(g1: Graph, g2: Graph, *, method: str = "rrwm", affinity=None,
     if affinity is not None:
         aff = as_affinity(affinity, n1=n1, n2=n2, name="affinity")
         if method in _LINEAR and node_affinity is None:
+            if not aff.diag().any():    # an edge-only affinity: nothing for them to rank
+                raise ValueError(f"method={method!r} scores nodes by the diagonal of `affinity` "
+                                 "(its unary term), and this one's diagonal is all zero (an "
+                                 "edge-only affinity): pass `node_affinity`, or use a "
+                                 "quadratic method")
             return solver(aff, **options)
         if method not in _LINEAR:        # named as given here (the solvers call it `K`)
             check_affinity_scale(aff.max_column_sum(), "affinity")

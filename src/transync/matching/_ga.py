@@ -56,12 +56,38 @@ def default_beta_max(n1: int, n2: int) -> float:
     >>> default_beta_max(8, 8), default_beta_max(30, 24)
     (10.0, 30.0)
     """
+    n1 = check_int(n1, "n1", minimum=1, maximum=MAX_NODES)
+    n2 = check_int(n2, "n2", minimum=1, maximum=MAX_NODES)
     return max(_DEFAULTS["beta_max"], float(max(n1, n2)))
 
 
 #: most annealing levels a schedule may take (the default schedule takes 43 up to 10 nodes,
 #: 106 at 1000): a ``beta_rate`` barely above 1 would otherwise run for days
 MAX_LEVELS = 10_000
+
+
+#: largest ``beta_max`` and ``beta_rate``: ``beta`` times the scaled gradient (at most
+#: ``max(n1, n2)``) must stay far from float64's overflow
+MAX_BETA = 1e100
+#: largest graph size :func:`default_beta_max` takes (far beyond what fits in memory)
+MAX_NODES = 10**12
+
+
+def _check_schedule(beta0, beta_max, beta_rate) -> tuple[float, float, float]:
+    """The annealing schedule's three numbers, checked: ``0 < beta0 <= beta_max <= MAX_BETA``,
+    ``1 < beta_rate <= MAX_BETA``."""
+    beta0 = check_positive(beta0, "beta0")
+    beta_max = check_positive(beta_max, "beta_max")
+    beta_rate = check_positive(beta_rate, "beta_rate")
+    if beta_rate <= 1:
+        raise ValueError(f"`beta_rate` must be > 1, got {beta_rate!r}")
+    for name, value in (("beta_max", beta_max), ("beta_rate", beta_rate)):
+        if value > MAX_BETA:
+            raise ValueError(f"`{name}` must be <= {MAX_BETA:g} (beta times the gradient would "
+                             f"overflow), got {value!r}")
+    if beta_max < beta0:
+        raise ValueError(f"`beta_max` must be >= beta0={beta0!r}, got {beta_max!r}")
+    return beta0, beta_max, beta_rate
 
 
 def annealing_levels(beta0: float, beta_max: float, beta_rate: float) -> int:
@@ -71,6 +97,7 @@ def annealing_levels(beta0: float, beta_max: float, beta_rate: float) -> int:
     >>> annealing_levels(0.5, 10.0, 1.075)
     43
     """
+    beta0, beta_max, beta_rate = _check_schedule(beta0, beta_max, beta_rate)
     # logs taken apart: the ratio of a huge beta_max and a tiny beta0 overflows to inf
     span = (np.log(beta_max) - np.log(beta0)) / np.log(beta_rate)
     levels = int(np.ceil(span)) + 1 if span <= MAX_LEVELS else MAX_LEVELS + 1
@@ -136,18 +163,12 @@ class GAStepper(_BaseStepper):
         aff = as_affinity(affinity, n1=n1, n2=n2)
         sinkhorn_max_iter, sinkhorn_tol = _sinkhorn_defaults(aff.n1, aff.n2, sinkhorn_max_iter,
                                                              sinkhorn_tol)
-        self.beta0 = check_positive(beta0, "beta0")
         if beta_max is None:
             beta_max = default_beta_max(aff.n1, aff.n2)
-        self.beta_max = check_positive(beta_max, "beta_max")
-        self.beta_rate = check_positive(beta_rate, "beta_rate")
-        if self.beta_rate <= 1:
-            raise ValueError(f"`beta_rate` must be > 1, got {self.beta_rate!r}")
-        if self.beta_max < self.beta0:
-            raise ValueError(f"`beta_max` must be >= beta0={self.beta0!r}, got {self.beta_max!r}")
+        self.beta0, self.beta_max, self.beta_rate = _check_schedule(beta0, beta_max, beta_rate)
         levels = annealing_levels(self.beta0, self.beta_max, self.beta_rate)
         super().__init__(aff, max_iter=levels)
-        self.max_inner = check_int(max_inner, "max_inner", minimum=1)
+        self.max_inner = check_int(max_inner, "max_inner", minimum=1, maximum=MAX_ITER)
         self.inner_tol = check_positive(inner_tol, "inner_tol")
         self.sinkhorn_max_iter = check_int(sinkhorn_max_iter, "sinkhorn_max_iter", minimum=1,
                                            maximum=MAX_ITER)

@@ -102,13 +102,11 @@ class RRWMStepper(_BaseStepper):
     ----------
     affinity : Affinity or array_like/sparse of shape (n1 n2, n1 n2)
         The affinity ``K``.
-    *args
-        ``n1``, ``n2`` and the options of :func:`rrwm`, positionally.
     variant : {"original", "pygmtools"}, optional
         Which published implementation to follow (default ``"original"``), as in :func:`rrwm`.
     **kwargs
         ``n1``, ``n2`` and the options of :func:`rrwm` (``c``, ``amplification``, ``max_iter``,
-        ``tol``, ``sinkhorn_tol``, ``sinkhorn_max_iter``, ``warm_start``).
+        ``tol``, ``sinkhorn_tol``, ``sinkhorn_max_iter``, ``warm_start``), by keyword only.
 
     Raises
     ------
@@ -182,7 +180,11 @@ class RRWMStepper(_BaseStepper):
 
     def set_iterate(self, X) -> None:
         X = self._check_iterate(X)
-        total = X.sum()
+        with np.errstate(over="ignore"):
+            total = X.sum()
+        if not np.isfinite(total):                 # any scale will do: bring a huge one down
+            X = X / X.max()
+            total = X.sum()
         if total <= 0:
             raise ValueError("`X` must have a positive sum")
         self._X = X

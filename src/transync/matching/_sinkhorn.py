@@ -44,6 +44,7 @@ from scipy.special import logsumexp
 
 from .._validation import (MAX_AFFINITY_SCALE, MAX_ITER, MIN_AFFINITY_SCALE, check_array,
                            check_choice, check_int, check_int_array, check_positive)
+from ..exceptions import DegenerateInputError
 
 __all__ = ["SinkhornBatchOutput", "SinkhornOutput", "sinkhorn_augmented_batch", "sinkhorn_batch",
            "sinkhorn_normalize"]
@@ -433,6 +434,9 @@ def sinkhorn_batch(A, *, slack: str = "mass", domain: str = "scaling", tol: floa
         ``A`` not a non-empty 3-d stack (negative, non-finite, with an all-zero row or column
         or with entries so large that a row or column sum overflows, in the scaling domain), unknown ``slack`` or ``domain``, bad counts or tolerances, a
         ``warm_start`` of the wrong shape, not positive and finite, or given in the log domain.
+    DegenerateInputError
+        Scaling domain: the scalings overflowed (entries of ``A`` spanning too many orders of
+        magnitude within a matrix; the log domain takes such kernels).
 
     Examples
     --------
@@ -472,6 +476,9 @@ def sinkhorn_batch(A, *, slack: str = "mass", domain: str = "scaling", tol: floa
                              f"{(A.shape[0], max(A.shape[1:]))}, got {warm_start.shape}")
         if not np.all(np.isfinite(warm_start) & (warm_start > 0)):
             raise ValueError("`warm_start` must be positive and finite")
+        # a scaling's overall size is free (u absorbs it): bring huge or tiny ones near 1 by a
+        # power of two, which leaves every later iterate bit for bit as it was
+        warm_start = np.ldexp(warm_start, -np.frexp(warm_start.max(1, keepdims=True))[1])
     if domain == "log":
         outs = [sinkhorn_normalize(a, domain="log", slack=slack, tol=tol, max_iter=max_iter,
                                    half_sweeps=half_sweeps, check_every=check_every) for a in A]
@@ -479,8 +486,17 @@ def sinkhorn_batch(A, *, slack: str = "mass", domain: str = "scaling", tol: floa
                                    np.array([o.n_sweeps for o in outs]),
                                    np.array([o.converged for o in outs]), None)
     _check_kernels(A, "A", "pass log-kernels with domain='log'", stats=stats)
-    return _batch_slack(A, slack=slack, tol=tol, max_iter=max_iter, half_sweeps=half_sweeps,
-                        check_every=check_every, v0=warm_start)
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore", under="ignore"):
+        out = _batch_slack(A, slack=slack, tol=tol, max_iter=max_iter, half_sweeps=half_sweeps,
+                           check_every=check_every, v0=warm_start)
+        bad = np.flatnonzero(~np.isfinite(out.X.sum((1, 2))))
+    if bad.size:                # one pass over X: a few per cent of the sweeps' cost
+        what = "`A` or of `warm_start`" if warm_start is not None else "`A`"
+        raise DegenerateInputError(
+            f"Sinkhorn's scalings overflowed on {bad.size} of {len(A)} matrices (first: "
+            f"{bad[0]}): the entries of {what} span too many orders of magnitude for the "
+            "scaling domain; pass log-kernels with domain='log'")
+    return out
 
 
 def sinkhorn_augmented_batch(M, *, tol: float, max_iter: int, which=None) -> None:

@@ -760,3 +760,31 @@ def test_homography_report_says_why_rounds_did_not_converge():
     assert _unconverged_note(res) == (" (the corners still moved 0.25 px in round 2, above the "
                                       "tolerance of 0.1 px; --max-iter allows more rounds)")
     assert _unconverged_note(types.SimpleNamespace(converged=True, info=res.info)) == ""
+
+
+def test_sigterm_is_an_interrupt_with_its_resume_hint(monkeypatch, capsys, tmp_path):
+    """SIGTERM (a scheduler's stop, `timeout`) killed the CLI silently with status 143, leaving
+    the store's journal and lock file; it is now handled as Ctrl-C."""
+    import signal
+
+    import transync.experiments
+
+    def stopped(*args, **kwargs):
+        signal.raise_signal(signal.SIGTERM)
+        raise AssertionError("SIGTERM did not interrupt")       # pragma: no cover
+
+    before = signal.getsignal(signal.SIGTERM)
+    monkeypatch.setattr(transync.experiments, "run_experiment", stopped)
+    assert main(["demo", "--experiments", "sync", "--out", str(tmp_path / "demo")]) == 130
+    err = capsys.readouterr().err
+    assert err.startswith("transync: interrupted by SIGTERM; no trial had finished, so none is "
+                          "stored")
+    assert signal.getsignal(signal.SIGTERM) is before          # restored after the command
+
+
+def test_an_empty_experiment_name_is_unknown(capsys):
+    """`transync experiment ""` listed the experiments and exited 0."""
+    assert main(["experiment", ""]) == 2
+    assert "unknown experiment ''; choose from" in capsys.readouterr().err
+    assert main(["experiment", "cmu", "--data", ""]) == 2          # read the current folder
+    assert "--data: got an empty path" in capsys.readouterr().err

@@ -388,3 +388,49 @@ def test_a_finish_hook_that_returns_no_paths_is_named(tmp_path):
                                         r"files it wrote .* got None \(the trials are stored\)"):
         run_experiment(exp, tmp_path, progress=False)
     assert len(run_experiment(exp, tmp_path, progress=False, plot=False).records) == 1
+
+
+def test_the_folder_stays_locked_while_the_outputs_are_written(tmp_path):
+    """The lock was released before the summary, plot and finish files were written: a second
+    run on the same folder was admitted meanwhile and the last writer's summary won."""
+    from transync.exceptions import ExperimentStoreError
+
+    refused = []
+
+    def finish(records, summary, out_dir):
+        with pytest.raises(ExperimentStoreError, match="another run .* is using the output"):
+            run_experiment(_experiment(trials=1), out_dir, progress=False, seed=1)
+        refused.append(True)
+        return []
+
+    base = _experiment(trials=1)
+    exp = Experiment(name=base.name, trial=base.trial, trials=1, sweeps=base.sweeps,
+                     finish=finish)
+    rep = run_experiment(exp, tmp_path, progress=False)
+    assert refused == [True] and rep.n_new == 6
+    assert not (tmp_path / "results.sqlite.lock").exists()
+    assert run_experiment(_experiment(trials=1), tmp_path, progress=False, seed=1).n_new == 6
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="no FIFOs here")
+def test_a_fifo_in_the_output_folder_is_refused_before_any_trial(tmp_path):
+    """A FIFO named summary.csv made the run block for ever after every trial was computed."""
+    import os
+
+    from transync.exceptions import ExperimentStoreError
+
+    os.mkfifo(tmp_path / "summary.csv")
+    with pytest.raises(ExperimentStoreError, match=r"holds summary\.csv, which is neither a "
+                                                   r"file nor a folder"):
+        run_experiment(_experiment(trials=1), tmp_path, progress=False)
+    assert not (tmp_path / "results.sqlite").exists()
+
+
+def test_more_trials_than_a_run_can_plan_are_refused_at_once(tmp_path):
+    """10**6 trials per configuration were accepted for any number of configurations: planning
+    176 configurations took minutes and more memory than the machine has, printing nothing."""
+    with pytest.raises(ValueError, match=r"`trials`=200000 for the 6 configurations of "
+                                         r"experiment 't' is 1200000 trials, more than 1000000 "
+                                         r"in one run: ask for at most 166666 trials"):
+        run_experiment(_experiment(), tmp_path / "out", trials=200_000, progress=False)
+    assert not (tmp_path / "out").exists()

@@ -6,7 +6,7 @@ its public names and writes plain files (JSON, CSV, PNG) that other tools can re
 libraries (OpenCV, matplotlib) are imported only inside the commands that need them.
 
 Every error prints one line, ``transync: error: ...``, on stderr and exits with status 2
-(``--debug`` prints the traceback before it); Ctrl-C exits with status 130.
+(``--debug`` prints the traceback before it); Ctrl-C, SIGTERM and SIGHUP exit with status 130.
 
 >>> build_parser().parse_args(["sync", "pairs.json", "--method", "spectral"]).command
 'sync'
@@ -33,8 +33,8 @@ Run `transync COMMAND --help` for a command's options (each shows its default)."
 _EPILOG = """\
 exit status: 0 success; 1 finished, but some trials failed (experiment, demo: rerun to retry)
 or no data folder was found (datasets); 2 an error (one line on stderr: `transync: error: ...`;
---debug also prints the traceback); 130 interrupted (Ctrl-C; stored experiment trials are kept,
-rerun to resume).
+--debug also prints the traceback); 130 interrupted (Ctrl-C, SIGTERM or SIGHUP; stored experiment
+trials are kept, rerun to resume).
 Warnings (e.g. a solver stopped at its iteration budget) print one line each on stderr:
 `transync: warning: ...`."""
 
@@ -127,8 +127,8 @@ def main(argv: list[str] | None = None) -> int:
     -------
     int
         The exit status: 0 on success, 1 when the output pipe was closed, 2 for an error
-        (reported as one line on standard error), 130 when interrupted. Usage errors exit with
-        status 2 through ``argparse`` (``SystemExit``).
+        (reported as one line on standard error), 130 when interrupted (Ctrl-C, SIGTERM,
+        SIGHUP). Usage errors exit with status 2 through ``argparse`` (``SystemExit``).
 
     Examples
     --------
@@ -140,11 +140,12 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv
     argv = [a for a in argv if a != "--debug"]
-    parser = build_parser()
-    args = parser.parse_args(argv)          # usage errors: argparse prints them, exits 2
-    args.debug = debug
+    args = None
     try:
-        with warnings.catch_warnings():
+        with _terminate_as_interrupt(), warnings.catch_warnings():
+            # building the parser imports the subcommands: a Ctrl-C there is an interrupt too
+            args = build_parser().parse_args(argv)   # usage errors: argparse prints, exits 2
+            args.debug = debug
             if not debug:                   # one line each, as the errors
                 warnings.showwarning = _show_warning
             return int(args.func(args) or 0)
@@ -154,18 +155,45 @@ def main(argv: list[str] | None = None) -> int:
         with contextlib.suppress(OSError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 1
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         if debug:
             traceback.print_exc()
         hint = getattr(args, "interrupt_hint", None)
         hint = hint() if callable(hint) else hint      # what is on disk now
-        print("transync: interrupted" + (f"; {hint}" if hint else ""), file=sys.stderr)
+        by = f" by {exc.args[0]}" if exc.args and isinstance(exc.args[0], str) else ""
+        print(f"transync: interrupted{by}" + (f"; {hint}" if hint else ""), file=sys.stderr)
         return 130
     except Exception as exc:  # noqa: BLE001 - the one place that turns errors into one line
         if debug:
             traceback.print_exc()
         print(f"transync: error: {_one_line(exc)}", file=sys.stderr)
         return 2
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt():
+    """SIGTERM (and SIGHUP) handled as Ctrl-C while a command runs: the experiment runner
+    stops its workers, closes its store and the interrupt is reported with its resume hint
+    (a plain SIGTERM left the store's journal and lock file behind and said nothing)."""
+    import signal
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    previous = {}
+    for name in ("SIGTERM", "SIGHUP"):
+        sig = getattr(signal, name, None)
+        if sig is None:
+            continue
+        try:
+            previous[sig] = signal.signal(sig, interrupt)
+        except (ValueError, OSError):      # not the main thread: leave the signals alone
+            pass
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:

@@ -51,13 +51,15 @@ def _cmd_experiment(args) -> int:
     from ..experiments import run_experiment
 
     registry = _registry()
-    if args.list or not args.name:
+    if args.list or args.name is None:
         for name in sorted(registry):
             mod = importlib.import_module(registry[name])
             doc = (mod.__doc__ or "").strip().splitlines()
             print(f"{name:14s} {doc[0] if doc else ''}")
         return 0
     _check_names([args.name], "experiment")
+    if args.data is not None and not str(args.data).strip():
+        raise CLIError("--data: got an empty path (it would read the current folder)")
     out = check_output_folder(args.out if args.out is not None
                               else f"results/{args.name}{'-quick' if args.quick else ''}")
     sets = [s for s in args.sets.split(",") if s.strip()] if args.sets else None
@@ -123,13 +125,19 @@ def _resume_hint(out: Path) -> str:
     return said + "run the same command again to start over"
 
 
+def _demo_hint(out: Path, names) -> str:
+    """What an interrupted demo left in ``out`` (one store per experiment)."""
+    if any(_stored_trials(out / name / "results.sqlite") for name in names):
+        return f"finished trials are saved under {out}; run the same command again to resume"
+    return "no trial had finished, so none is stored; run the same command again to start over"
+
+
 def _cmd_demo(args) -> int:
     from ..experiments import run_experiment
 
     _check_names(args.experiments, "experiment")
     out = check_output_folder(args.out)
-    args.interrupt_hint = (f"finished trials are saved under {out}; run the same command again "
-                           "to resume")
+    args.interrupt_hint = functools.partial(_demo_hint, out, args.experiments)
     t0 = time.perf_counter()
     lines = ["# transync demo", "",
              "Quick versions of the experiments on generated data (offline). Each folder holds "

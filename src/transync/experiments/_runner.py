@@ -710,7 +710,8 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
     out_dir : str or path-like
         Folder for ``results.sqlite``, ``summary.csv``, ``summary.md`` and ``<name>.png``.
     trials : int, optional
-        Trials per configuration, 1 to 10**6 (default: ``experiment.trials``).
+        Trials per configuration, 1 to 10**6 (default: ``experiment.trials``), and at most
+        10**6 over all configurations of the run.
     workers : int, default=1
         Processes, 1 to 256 (never more than the trials to run); 1 runs in this process.
     seed : int, default=0
@@ -738,8 +739,9 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
         A worker process died (a signal, ``os._exit``, the out-of-memory killer); the message
         names the trials it took with it. Every finished trial is stored.
     ExperimentStoreError
-        ``out_dir`` cannot be created or written, another run holds it, or its
-        ``results.sqlite`` is corrupted (reported with a salvage hint, never overwritten).
+        ``out_dir`` cannot be created or written, another run holds it, it holds a FIFO, socket
+        or device, or its ``results.sqlite`` is corrupted (reported with a salvage hint, never
+        overwritten).
     KeyboardInterrupt
         Re-raised after the pool is stopped and the store closed; every finished trial is
         stored and rerunning resumes.
@@ -763,6 +765,13 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
     out = check_path(out_dir, "out_dir")
     n_trials = check_int(trials if trials is not None else experiment.trials, "trials", minimum=1,
                          maximum=MAX_TRIALS)
+    configs = sum(len(sw.values) * len(sw.methods) for sw in experiment.sweeps)
+    if configs * n_trials > MAX_TRIALS:
+        # planning alone took minutes and tens of GB at 10**6 trials of 176 configurations
+        raise ValueError(f"`trials`={n_trials} for the {configs} configurations of experiment "
+                         f"{experiment.name!r} is {configs * n_trials} trials, more than "
+                         f"{MAX_TRIALS} in one run: ask for at most "
+                         f"{max(MAX_TRIALS // configs, 1)} trials")
     workers = check_int(workers, "workers", minimum=1, maximum=MAX_WORKERS)
     seed = check_int(seed, "seed")
     progress = check_bool(progress, "progress")
@@ -779,9 +788,11 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
     remove_folder = False
     try:
         # Clean-up happens only while this run holds the lock: a run refused because another
-        # holds the folder never touches that run's files.
+        # holds the folder never touches that run's files. The lock covers the summary, plot
+        # and `finish` files too: a second run waits for none of them half-written.
         with _FolderLock(out):
             try:
+                _refuse_special_files(out)
                 store = ExperimentStore(out / "results.sqlite")
                 try:
                     todo, keys, n_other = _plan(experiment, store, n_trials, seed)
@@ -793,10 +804,18 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
                 # a run that created the folder and stored nothing leaves no folder behind
                 remove_folder = created and _remove_store_if_empty(out)
                 raise
+            summary, figure, extra = _write_outputs(experiment, records, out, plot)
     finally:
         if remove_folder:  # after the lock file is gone; fails harmlessly if a newcomer is in
             with contextlib.suppress(OSError):
                 out.rmdir()
+    return ExperimentReport(experiment.name, records, summary, len(todo), n_failed, out, figure,
+                            time.perf_counter() - t_start, extra, n_other)
+
+
+def _write_outputs(experiment: Experiment, records: list[dict], out: Path, plot: bool):
+    """The summary files, the figure and ``experiment.finish``'s files: ``(summary, figure,
+    extra files)``."""
     summary = summarize(experiment, records)
     _write_summary(summary, out)
     figure = None
@@ -814,8 +833,24 @@ def run_experiment(experiment: Experiment, out_dir, *, trials: int | None = None
                                 f"wrote (a list, possibly empty), got {short_repr(written, 60)}"
                                 " (the trials are stored)")
             extra = tuple(Path(p) for p in paths)
-    return ExperimentReport(experiment.name, records, summary, len(todo), n_failed, out, figure,
-                            time.perf_counter() - t_start, extra, n_other)
+    return summary, figure, extra
+
+
+def _refuse_special_files(out: Path) -> None:
+    """Refuse an output folder holding a FIFO, socket or device where a run writes its files
+    (writing a summary into a FIFO blocked for ever, after every trial was computed)."""
+    import stat
+
+    for entry in out.iterdir():
+        try:
+            mode = entry.stat().st_mode            # follows links: what a write would open
+        except OSError:
+            continue                               # broken link: a write replaces it
+        if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+            raise ExperimentStoreError(
+                f"the output folder {out} holds {entry.name}, which is neither a file nor a "
+                "folder (a FIFO, socket or device): a run could block writing into it; remove "
+                "it or choose another output folder")
 
 
 def _remove_store_if_empty(out: Path) -> bool:

@@ -421,6 +421,8 @@ def _run_joblib(fn, chunks: list, n_jobs: int, timeout: float, bar) -> list:
                           "pip install 'transync[distributed]' (or joblib)") from exc
     n = len(chunks)
     n_jobs = min(_n_workers("joblib", n_jobs), n)      # one per CPU and per chunk at most
+    if n_jobs == 1:     # joblib would run it here anyway (sequential backend), warning that
+        return _run_serial(fn, chunks, bar)            # it ignores `timeout`
     kwargs = dict(n_jobs=n_jobs, backend="loky", timeout=timeout, batch_size=1)
     try:
         parallel = Parallel(return_as="generator_unordered", **kwargs)

@@ -999,7 +999,11 @@ class MultiMatching:
         return np.where(hit, nodes[at] if keys.size else UNMATCHED, UNMATCHED)
 
     def pairwise(self, i: int, j: int) -> np.ndarray:
-        """Assignment from object ``i`` to object ``j`` (``-1`` = no partner in ``j``)."""
+        """Assignment from object ``i`` to object ``j`` (``-1`` = no partner in ``j``).
+
+        The rows of ``X_i X_j^T``: ``pairwise(g, g)`` sends each placed node to itself and an
+        unplaced one to -1 (the diagonal blocks of :meth:`to_matrix` are identities by
+        convention, unplaced nodes included)."""
         i, j = self._object(i, "i"), self._object(j, "j")
         return self._lookup(np.int64(j), self._padded[i, : self._sizes[i]])
 

@@ -448,7 +448,10 @@ class _Oracle:
         labels = labels.copy()
         C = labels.shape[0]
         inv = _inverse(labels, d, n)[:, :, :d]            # node in slot, n (zero row) if none
-        eps = 1e-12 * (np.abs(wG).max(initial=0.0) * self.col_base.size + 1.0)
+        # relative to the scores' scale: an absolute floor outweighed the scores of small
+        # weights (uniform weights of 1e-12 froze the sweeps), and only ratios of weights count
+        scale = np.abs(wG).max(initial=0.0) * self.col_base.size
+        eps = 1e-12 * scale if scale > 0 else np.finfo(float).tiny
         dirty = np.broadcast_to(np.diff(self.ptr) > 0, (C, self.N)).copy()
         for _ in range(self.sweeps):
             if not dirty.any():
@@ -812,7 +815,8 @@ def _choose_universe(n_universe, full, X, w, pairs, sizes, info) -> int:
 def _estimate_universe_soft(X, w, pairs, sizes):
     """Eigengap of the degree-normalized soft block matrix (identity diagonal blocks of the
     smallest positive pair weight, as in the permutation synchronization's block matrix, so
-    that scaling every weight changes nothing)."""
+    that scaling every weight changes nothing); on an incomplete view graph, the universe of
+    the rounded maps (:func:`_view_graph_universe_soft`)."""
     n_max = int(sizes.max())
     off = np.concatenate([[0], np.cumsum(sizes)])
     M = int(off[-1])
@@ -820,6 +824,11 @@ def _estimate_universe_soft(X, w, pairs, sizes):
         raise ValueError(f"estimating the universe of {M} nodes in all needs a dense {M} x {M} "
                          f"eigenproblem (at most {MAX_DENSE_UNIVERSE_NODES} nodes); pass "
                          "`n_universe`")
+    N = sizes.size
+    observed = {(min(i, j), max(i, j))
+                for (i, j), wq in zip(pairs.tolist(), w) if wq > 0 and i != j}
+    if N > 2 and len(observed) < N * (N - 1) // 2:
+        return _view_graph_universe_soft(X, w, pairs, sizes)
     w = spec.relative_weights(np.asarray(w, dtype=float))
     B = spec.identity_weight(w) * np.eye(M)
     for q, (i, j) in enumerate(pairs):
@@ -836,6 +845,32 @@ def _estimate_universe_soft(X, w, pairs, sizes):
         if not (d >= vals.size - 1 or vals[-1] > 0.5 * vals[0]) or k >= M:
             return d, rule, vals
         k = min(M, 2 * k)
+
+
+def _view_graph_universe_soft(X, w, pairs, sizes):
+    """Universe size of soft matches observed on an incomplete view graph.
+
+    There a universe node's eigenvalues are those of the normalized adjacency of the objects
+    holding it, spread below 1, and the eigengap lies far too low: eight 6-node objects matched
+    in a chain, exactly, gave 24. The soft blocks are rounded (an entry above 1/2 is the row's
+    only one above 1/2 in its column too, so the maps are injective) and
+    :func:`~transync.synchronization.synchronize_permutations` estimates their universe with
+    its rule for incomplete view graphs."""
+    from ._permutations import synchronize_permutations
+
+    maps = {}
+    for q, (i, j) in enumerate(pairs.tolist()):
+        blk = X[q][: sizes[i], : sizes[j]]
+        maps[(i, j)] = (np.where(blk.max(1) > 0.5, blk.argmax(1), -1) if blk.size
+                        else np.full(int(sizes[i]), -1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        res = synchronize_permutations(
+            maps, weights={key: float(wq) for key, wq in zip(maps, w)}, sizes=sizes,
+            disconnected="separate")
+    rule = ("incomplete view graph: universe of the maps rounded at 1/2, by "
+            f"synchronize_permutations ({res.info.get('n_universe_rule', 'equal sizes')})")
+    return int(res.n_universe), rule, np.asarray(res.info.get("eigenvalues", np.empty(0)))
 
 
 class _FrankWolfe:

@@ -861,9 +861,11 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
     info["components"] = comps
     labels, d_total, n_iter, converged, comp_info, embeddings = _synchronize_components(
         stk, comps, n_universe, opts, gen)
+    dropped: tuple = ()
     if min_score is not None:
         scores = _node_scores(stk, labels, d_total)
-        labels = [np.where(sc >= opts["min_score"], lab, -1) for lab, sc in zip(labels, scores)]
+        dropped = tuple(sc < opts["min_score"] for sc in scores)
+        labels = [np.where(drop, -1, lab) for lab, drop in zip(labels, dropped)]
         info["node_scores"] = tuple(scores)
         info["n_unplaced"] = int(sum(int((lab < 0).sum()) for lab in labels))
     matching = MultiMatching(tuple(labels), d_total)
@@ -881,7 +883,7 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
     objective = agree
     rounding = None
     if method == "matcheig":
-        rounding = _block_rounding(stk, comps, embeddings, opts["threshold"])
+        rounding = _block_rounding(stk, comps, embeddings, opts["threshold"], dropped)
         objective = _observed_objective(stk, rounding, info)
     info["seconds_total"] = time.perf_counter() - t_start
     return PermutationSyncResult(matching=matching, objective=float(objective),
@@ -1032,8 +1034,9 @@ def _stack_embeddings(stk, comps, comp_info, embeddings, d_total) -> np.ndarray:
     return out
 
 
-def _block_rounding(stk, comps, embeddings, threshold) -> BlockRounding:
-    """MatchEIG's block-wise rounding as plain (picklable) data."""
+def _block_rounding(stk, comps, embeddings, threshold, dropped=()) -> BlockRounding:
+    """MatchEIG's block-wise rounding as plain (picklable) data; ``dropped``: per object, the
+    nodes ``min_score`` left unplaced (they get no partner in the rounded maps either)."""
     component = np.zeros(stk.n_objects, dtype=np.int64)
     local = np.zeros(stk.n_objects, dtype=np.int64)
     normalized, offsets = [], []
@@ -1045,7 +1048,7 @@ def _block_rounding(stk, comps, embeddings, threshold) -> BlockRounding:
                           V / np.maximum(np.linalg.norm(V, axis=1, keepdims=True), 1e-300))
     return BlockRounding(embeddings=tuple(normalized), offsets=tuple(offsets),
                          component=component, local=local, sizes=stk.sizes.copy(),
-                         threshold=float(threshold))
+                         threshold=float(threshold), dropped=tuple(dropped))
 
 
 def _observed_objective(stk, rounding: BlockRounding, info: dict) -> float:

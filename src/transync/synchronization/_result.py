@@ -45,7 +45,8 @@ class BlockRounding:
     Plain data (picklable): ``embeddings[c]`` holds the row-normalized eigenvectors of connected
     component ``c`` (``None`` for a single object), ``component[g]`` / ``local[g]`` place object
     ``g`` in its component, ``offsets[c]`` are the row offsets of the component's objects.
-    Matches scoring below ``threshold`` are dropped.
+    Matches scoring below ``threshold`` are dropped, and so are the nodes of ``dropped[g]``
+    (those ``min_score`` left unplaced; empty without it).
     """
 
     embeddings: tuple
@@ -54,18 +55,26 @@ class BlockRounding:
     local: np.ndarray
     sizes: np.ndarray
     threshold: float
+    dropped: tuple = ()
 
     def __call__(self, i: int, j: int) -> np.ndarray:
-        if i == j:                          # every node is its own partner (as in to_matrix)
-            return np.arange(int(self.sizes[i]), dtype=np.int64)
+        if i == j:      # every node is its own partner (as in to_matrix), unless min_score
+            out = np.arange(int(self.sizes[i]), dtype=np.int64)   # left it unplaced (as in
+            if self.dropped:                                       # MultiMatching.pairwise)
+                out[self.dropped[i]] = -1
+            return out
         ci, cj = int(self.component[i]), int(self.component[j])
         V = self.embeddings[ci]
         if ci != cj or V is None:
             return np.full(int(self.sizes[i]), -1, dtype=np.int64)
         off = self.offsets[ci]
         li, lj = int(self.local[i]), int(self.local[j])
-        return solve_lap(V[off[li]:off[li + 1]] @ V[off[lj]:off[lj + 1]].T,
-                         min_score=self.threshold)
+        out = solve_lap(V[off[li]:off[li + 1]] @ V[off[lj]:off[lj + 1]].T,
+                        min_score=self.threshold)
+        if self.dropped:
+            out[self.dropped[i]] = -1
+            out[(out >= 0) & self.dropped[j][np.maximum(out, 0)]] = -1
+        return out
 
 
 @dataclass(frozen=True)

@@ -162,6 +162,20 @@ def check_square(x: np.ndarray, name: str) -> int:
     return x.shape[0]
 
 
+def nearly_equal(X: np.ndarray, Y: np.ndarray) -> bool:
+    """Equal up to rounding, relative to ``X``'s scale: ``numpy.allclose`` with ``rtol=1e-5``
+    and an absolute tolerance of ``1e-8`` times ``max |X|`` (its default absolute 1e-8 took any
+    two arrays of tiny entries as equal: a directed 3-cycle of weights ~1e-9 as symmetric).
+    The one symmetry-up-to-rounding test of the package.
+
+    >>> A = np.array([[0.0, 4e-9], [1e-9, 0.0]])
+    >>> bool(np.allclose(A, A.T)), nearly_equal(A, A.T)
+    (True, False)
+    """
+    scale = float(np.abs(X).max()) if X.size else 0.0
+    return bool(np.allclose(X, Y, rtol=1e-5, atol=1e-8 * scale))
+
+
 def check_nonnegative(x: np.ndarray, name: str) -> np.ndarray:
     if x.size and np.min(x) < 0:
         raise ValueError(f"`{name}` must be non-negative, got minimum {float(np.min(x)):.6g}")

@@ -31,6 +31,7 @@ from ._validation import (
     check_int,
     check_int_array,
     check_shape,
+    nearly_equal,
 )
 
 __all__ = ["Graph", "canonical_node_order"]
@@ -102,7 +103,7 @@ class Graph:
         if np.min(A) < 0:
             raise ValueError(f"`adjacency` weights must be non-negative, got minimum {A.min():.6g}")
         if not self.directed and not np.array_equal(A, A.T):
-            if not _nearly_equal(A, A.T):
+            if not nearly_equal(A, A.T):
                 raise ValueError("`adjacency` must be symmetric for an undirected graph "
                                  "(pass directed=True otherwise)")
             A = np.where(A == A.T, A, 0.5 * A + 0.5 * A.T)    # rounding noise: exactly symmetric
@@ -121,7 +122,7 @@ class Graph:
         if self.edge_features is not None:
             E = check_array(self.edge_features, "edge_features", ndim=2)
             check_shape(E, (n, n), "edge_features")
-            if not self.directed and not _nearly_equal(E[A != 0], E.T[A != 0]):
+            if not self.directed and not nearly_equal(E[A != 0], E.T[A != 0]):
                 raise ValueError("`edge_features` must be symmetric on the edges of an undirected "
                                  "graph")
             object.__setattr__(self, "edge_features", _owned(E, self.edge_features))
@@ -418,13 +419,6 @@ def _refine_colors(color: np.ndarray, sides, code: np.ndarray, n_codes: int,
         if new.max(initial=-1) == color.max(initial=-1):      # no class split: stable
             return new.astype(np.int64)
         color = new.astype(np.int64)
-
-
-def _nearly_equal(X: np.ndarray, Y: np.ndarray) -> bool:
-    """Equal up to rounding, relative to the arrays' scale (``numpy.allclose``'s absolute
-    tolerance 1e-8 would take any two arrays of tiny entries as equal)."""
-    scale = float(np.abs(X).max()) if X.size else 0.0
-    return bool(np.allclose(X, Y, rtol=1e-5, atol=1e-8 * scale))
 
 
 def _owned(arr: np.ndarray, given) -> np.ndarray:

@@ -479,3 +479,20 @@ def test_baselines_refuse_pairs_by_name(fn):
     """`pairs=` in the options passed on was a duplicate keyword (a raw TypeError)."""
     with pytest.raises(TypeError, match=r"takes no `pairs`: the baseline matches"):
         fn([np.zeros((32, 32), np.uint8)] * 2, pairs=[(0, 1)])
+
+
+@pytest.mark.parametrize("images, got", [(3, "int 3"), (None, "NoneType"), ("a.png", "str")])
+def test_every_image_list_taker_names_images(images, got):
+    """images=3 raised a bare "'int' object is not iterable" from evaluate_alignment and
+    mean_warped_image; the three image-list takers now share one check."""
+    from transync.homography import evaluate_alignment, mean_warped_image, segment_plane
+
+    H = np.tile(np.eye(3), (2, 1, 1))
+    calls = [lambda: evaluate_alignment(images, H, H, masks_true=None),
+             lambda: mean_warped_image(images, H, size=(8, 8)),
+             lambda: segment_plane(images, H)]
+    for call in calls:
+        with pytest.raises(TypeError, match=rf"`images` must be a list of .*got {got}"):
+            call()
+    with pytest.raises(TypeError, match="got one 2-D array"):
+        mean_warped_image(np.zeros((8, 8)), H, size=(8, 8))

@@ -223,3 +223,16 @@ def test_rng_is_checked_whatever_the_size():
                     (default_sigma2, [X[0]]), (default_sigma2, list(X))):
         with pytest.raises(TypeError, match="`rng` must be None, an int or"):
             fn(arg, rng="x")
+
+
+def test_tiny_weights_do_not_pass_for_symmetric():
+    """numpy.allclose's absolute 1e-8 tolerance took a 3x asymmetric adjacency of weights ~1e-9
+    for symmetric (Graph refused the same matrix): the symmetry test is relative now."""
+    from transync.kernels import heat_kernel_signature
+
+    A = np.array([[0.0, 1e-9, 0.0], [3e-9, 0.0, 1e-9], [0.0, 1e-9, 0.0]])
+    for scale in (1.0, 1e9):
+        with pytest.raises(ValueError, match="must be symmetric"):
+            heat_kernel_signature(A * scale, [1.0])
+    S = np.array([[0.0, 1e-9, 0.0], [1e-9 * (1 + 1e-12), 0.0, 1e-9], [0.0, 1e-9, 0.0]])
+    assert np.isfinite(heat_kernel_signature(S, [1.0])).all()     # rounding noise: accepted

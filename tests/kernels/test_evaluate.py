@@ -295,3 +295,17 @@ def test_exact_ties_go_to_the_first_kernel(monkeypatch):
     q, C = ev._select_C(K, y, np.array([1.0]), 3, np.random.default_rng(0))
     assert q == 0
     assert 64 / 104 + 64 / 103 + 58 / 103 != 64 / 104 + 65 / 103 + 57 / 103   # the trap
+
+
+def test_repeated_cv_leaves_numpys_global_random_state_alone():
+    """Every SVC fit drew its libsvm seed from NumPy's global generator (random_state=None),
+    moving the caller's random stream; the accuracies never depended on it."""
+    rng = np.random.default_rng(3)
+    K = _gram(rng, 30)
+    y = np.repeat([0, 1], 15)
+    np.random.seed(0)
+    expected = np.random.random()
+    np.random.seed(0)
+    res = repeated_cv(K, y, n_splits=3, n_repeats=2, C_grid=[1.0, 10.0])
+    assert np.random.random() == expected
+    assert res.accuracies.shape == (2, 3)

@@ -72,8 +72,9 @@ from .._validation import check_int
 from ._plot import pyplot
 from ._runner import Experiment, Sweep
 
-__all__ = ["DATASETS", "KERNELS", "GramEntry", "PreparedSet", "build", "compute_gram",
-           "finish", "fingerprint", "kernel_params", "prepare", "resolve_sets", "trial"]
+__all__ = ["DATASETS", "KERNELS", "PSD_TOL", "GramEntry", "PreparedSet", "build",
+           "compute_gram", "finish", "fingerprint", "kernel_params", "prepare", "prune",
+           "resolve_sets", "trial"]
 
 #: the data sets of Tables 4.2 / 4.3, in table order
 DATASETS = ("MUTAG", "PTC_MR", "ENZYMES", "NCI1", "PPI")

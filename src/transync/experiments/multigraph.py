@@ -49,6 +49,7 @@ from ..exceptions import ConvergenceWarning
 from ..matching import gaussian_edge_affinity
 from ..multigraph import PairAffinities, match_collection
 from ._runner import Experiment, Sweep
+from .pairwise import _complete
 
 #: method name -> keyword arguments of :func:`transync.match_collection`
 METHODS = {
@@ -122,16 +123,6 @@ def collection_metrics(res, problem, affinity, seconds: float) -> dict:
         "sync_seconds": float(timings.get("sync", 0.0)),
         "converged": float(res.converged),
     }
-
-
-def _complete(truth: np.ndarray, n2: int) -> np.ndarray:
-    """Ground truth with outliers matched among themselves (any injective completion)."""
-    out = np.array(truth, dtype=np.int64)
-    free = np.setdiff1d(np.arange(n2), out[out >= 0])
-    rows = np.flatnonzero(out < 0)
-    k = min(rows.size, free.size)
-    out[rows[:k]] = free[:k]
-    return out
 
 
 def trial(config: dict, rng: np.random.Generator) -> dict:

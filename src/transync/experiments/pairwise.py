@@ -51,10 +51,11 @@ def trial(config: dict, rng: np.random.Generator) -> dict:
 
 
 def _complete(truth: np.ndarray, n2: int) -> np.ndarray:
-    """Ground truth with outliers matched among themselves (any injective completion)."""
-    out = truth.copy()
-    free = np.setdiff1d(np.arange(n2), truth[truth >= 0])
-    rows = np.flatnonzero(truth < 0)
+    """Ground truth with outliers matched among themselves (any injective completion; the
+    pairwise and multigraph experiments' objective is normalized by its score)."""
+    out = np.array(truth, dtype=np.int64)
+    free = np.setdiff1d(np.arange(n2), out[out >= 0])
+    rows = np.flatnonzero(out < 0)
     k = min(rows.size, free.size)
     out[rows[:k]] = free[:k]
     return out

@@ -10,7 +10,7 @@ import numpy as np
 from .._validation import (MAX_ITER, check_array, check_bool, check_homographies, check_int,
                            check_positive)
 from ..geometry import normalize_determinant, rescale_homogeneous, translation
-from ._sparse import check_image, check_masks
+from ._sparse import check_image, check_image_list, check_masks
 
 __all__ = ["mean_warped_image", "refine_homography_ecc", "warp_to_reference"]
 
@@ -269,14 +269,9 @@ def mean_warped_image(images, homographies, *, size, masks=None, offset=(0, 0),
     >>> int(count.max()), bool(np.allclose(mean[10:-10, 10:-10], base[10:-10, 10:-10], atol=1e-4))
     (2, True)
     """
-    if isinstance(images, np.ndarray) and images.ndim == 2:
-        raise TypeError("`images` must be a list of (h, w) grey images, got one 2-D array")
-    if images is None or isinstance(images, (str, bytes)):
-        raise TypeError(f"`images` must be a list of (h, w) grey images, got "
-                        f"{type(images).__name__}")
     imgs = [check_image(im, f"images[{k}]", min_size=1, grey=True,
                         float32=True).astype(np.float32)
-            for k, im in enumerate(images)]
+            for k, im in enumerate(check_image_list(images, "(h, w) grey images"))]
     N = len(imgs)
     if N < 1:
         raise ValueError("`images` must hold at least one image, got 0")

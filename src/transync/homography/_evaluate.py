@@ -12,8 +12,8 @@ from ._dense import mean_warped_image
 from ..metrics import brenner_focus, corner_error, pairwise_corner_error, segmentation_scores
 from .._validation import (check_array, check_bool, check_homographies, check_int,
                            invertible_homographies)
-from ._sparse import (check_image, check_masks, estimate_pairwise_homographies, load_images,
-                      to_gray)
+from ._sparse import (check_image, check_image_list, check_masks,
+                      estimate_pairwise_homographies, load_images, to_gray)
 
 __all__ = ["chained_homographies", "evaluate_alignment", "to_reference_homographies"]
 
@@ -207,10 +207,8 @@ def evaluate_alignment(images, H_est, H_true, *, masks_true, reference=0, masks_
     >>> r["mean_error"], r["acc_1px"], round(r["brenner_ratio"], 3)
     (0.0, 1.0, 1.0)
     """
-    if images is None or isinstance(images, (str, bytes)) or (
-            isinstance(images, np.ndarray) and images.ndim == 2):
-        raise TypeError(f"`images` must be a list of images, got {type(images).__name__}")
-    gray = [to_gray(check_image(im, f"images[{k}]", min_size=1)) for k, im in enumerate(images)]
+    gray = [to_gray(check_image(im, f"images[{k}]", min_size=1))
+            for k, im in enumerate(check_image_list(images))]
     n = len(gray)
     if n < 2:
         raise ValueError(f"`images` must hold at least 2 images (the reference and a view), "

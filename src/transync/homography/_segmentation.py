@@ -19,7 +19,7 @@ import numpy as np
 from .._validation import (as_generator, check_array, check_homographies, check_int,
                            check_positive, check_probability)
 from ..geometry import translation
-from ._sparse import check_image, margin_canvas, to_gray
+from ._sparse import check_image, check_image_list, margin_canvas, to_gray
 
 __all__ = ["PlaneSegmentation", "segment_plane", "segment_plane_evidence"]
 
@@ -116,10 +116,7 @@ MAX_SMOOTH = 100.0
 
 def _check_inputs(images, homographies, reference, window, margin, smooth, min_views,
                   threshold):
-    if isinstance(images, np.ndarray) and images.ndim == 2:
-        raise TypeError("`images` must be a list of (h, w) grey images, got one 2-D array")
-    if images is None or isinstance(images, (str, bytes)) or not hasattr(images, "__len__"):
-        raise TypeError(f"`images` must be a list of images, got {type(images).__name__}")
+    images = check_image_list(images)
     # the intensity rule of the whole pipeline: grey levels 0..255 as to_gray makes them (the
     # ZNCC regularizer and the texture feature assume that scale; floats x 1e30 overflowed)
     imgs = [to_gray(check_image(im, f"images[{k}]", min_size=8)).astype(np.float32)

@@ -92,6 +92,20 @@ _MIN_SIZE = 16
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
+def check_image_list(images, what: str = "images") -> list:
+    """``images`` as a list, refused (``TypeError`` naming ``images``) when it is one 2-D array,
+    a path, ``None`` or not iterable; ``what`` says what its entries must be."""
+    if isinstance(images, np.ndarray) and images.ndim == 2:
+        raise TypeError(f"`images` must be a list of {what}, got one 2-D array")
+    if images is None or isinstance(images, (str, bytes, os.PathLike)):
+        raise TypeError(f"`images` must be a list of {what}, got {type(images).__name__}")
+    try:
+        return list(images)
+    except TypeError:                    # images=3 gave "'int' object is not iterable"
+        raise TypeError(f"`images` must be a list of {what}, got "
+                        f"{type(images).__name__} {images!r}") from None
+
+
 def check_image(image, name: str, *, min_size: int = _MIN_SIZE, grey: bool = False,
                 float32: bool = False) -> np.ndarray:
     """One image array: (H, W) or (H, W, C) with C in (1, 3, 4) (``grey``: (H, W) only), real

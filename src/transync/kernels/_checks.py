@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .._validation import check_array, check_nonnegative, check_positive
+from .._validation import check_array, check_nonnegative, check_positive, nearly_equal
 from .._validation import check_int_array as _check_int_array
 from ..graphs import Graph
 
@@ -132,8 +132,8 @@ def check_adjacency(graph, name: str, *, n: int | None = None,
         The required node count (``n >= 1``); default any ``n >= 1``.
     edges_only : bool, default=False
         Only the edge pattern (``!= 0``) must be symmetric (the caller uses nothing else);
-        otherwise the weights must be, up to rounding (``numpy.allclose``), and an array that
-        is symmetric only up to rounding comes back symmetrized.
+        otherwise the weights must be, up to rounding (relative to the largest weight), and an
+        array that is symmetric only up to rounding comes back symmetrized.
 
     Returns
     -------
@@ -155,7 +155,7 @@ def check_adjacency(graph, name: str, *, n: int | None = None,
     check_nonnegative(A, name)
     E = A != 0
     if not (np.array_equal(E, E.T) if edges_only else np.array_equal(A, A.T)):
-        if edges_only or not np.allclose(A, A.T):
+        if edges_only or not nearly_equal(A, A.T):
             raise ValueError(f"`{name}` must be symmetric (an undirected graph), got an "
                              f"asymmetric matrix of shape {A.shape}")
         A = 0.5 * (A + A.T)

@@ -296,7 +296,9 @@ def _fit_correct(K: np.ndarray, y: np.ndarray, train: np.ndarray, test: np.ndarr
     """Number of ``test`` samples an SVM trained on ``train`` classifies right."""
     from sklearn.svm import SVC
 
-    clf = SVC(kernel="precomputed", C=C)
+    # a fixed seed: libsvm uses it only for probability estimates (off here), and without it
+    # every fit drew one from NumPy's global generator, moving the user's random stream
+    clf = SVC(kernel="precomputed", C=C, random_state=0)
     clf.fit(K[np.ix_(train, train)], y[train])
     return int(np.count_nonzero(clf.predict(K[np.ix_(test, train)]) == y[test]))
 

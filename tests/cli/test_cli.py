@@ -788,3 +788,32 @@ def test_an_empty_experiment_name_is_unknown(capsys):
     assert "unknown experiment ''; choose from" in capsys.readouterr().err
     assert main(["experiment", "cmu", "--data", ""]) == 2          # read the current folder
     assert "--data: got an empty path" in capsys.readouterr().err
+
+
+def test_json_outputs_are_checked_first_and_written_whole(tmp_path, capsys, monkeypatch):
+    """--out was written in place (a full disk or a signal left a truncated JSON and destroyed
+    the previous one), checked only after the computation, and could be an input (overwritten:
+    the rerun failed). A MemoryError was called a bug."""
+    import transync.synchronization
+
+    data = tmp_path / "pairs.json"
+    data.write_text(json.dumps({"pairs": [[0, 1, [1, 0]], [1, 2, [0, 1]], [0, 2, [1, 0]]]}))
+    assert main(["sync", str(data), "--out", str(data)]) == 2
+    assert "is also an input of the command" in capsys.readouterr().err
+    assert json.loads(data.read_text())["pairs"][0] == [0, 1, [1, 0]]        # untouched
+    assert main(["sync", str(tmp_path / "missing.json"), "--out",
+                 str(tmp_path / "no" / "out.json")]) == 2                     # before reading
+    assert "the folder" in capsys.readouterr().err
+    out = tmp_path / "out.json"
+    out.write_text('{"old": "complete"}\n')
+    assert main(["sync", str(data), "--out", str(out)]) == 0
+    assert json.loads(out.read_text())["labels"] == [[0, 1], [1, 0], [1, 0]]
+    assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp")] == []
+
+    def no_memory(*args, **kwargs):
+        raise MemoryError()
+
+    monkeypatch.setattr(transync.synchronization, "synchronize_permutations", no_memory)
+    assert main(["sync", str(data)]) == 2
+    err = capsys.readouterr().err
+    assert "out of memory: the input is too large" in err and "please report" not in err

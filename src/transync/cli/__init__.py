@@ -141,6 +141,9 @@ def main(argv: list[str] | None = None) -> int:
     debug = "--debug" in argv
     argv = [a for a in argv if a != "--debug"]
     args = None
+    for stream in (sys.stdout, sys.stderr):   # a cp1252 console cannot print the reports' λ:
+        with contextlib.suppress(AttributeError, ValueError):   # escaped, not an error after
+            stream.reconfigure(errors="backslashreplace")       # every file was written
     try:
         with _terminate_as_interrupt(), warnings.catch_warnings():
             # building the parser imports the subcommands: a Ctrl-C there is an interrupt too
@@ -210,6 +213,10 @@ def _one_line(exc: BaseException) -> str:
         msg = f"{msg} ({'; '.join(notes)})"
     if isinstance(exc, (CLIError, TransyncError, ValueError, TypeError)):
         return msg
+    if isinstance(exc, MemoryError):    # an input too large for this machine, not a bug
+        return ("out of memory: the input is too large for this machine's memory (a dense "
+                f"array could not be allocated{': ' + msg if msg != 'MemoryError' else ''}); "
+                "use fewer or smaller inputs")
     if isinstance(exc, OSError):
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         return f"{where}{exc.strerror or msg}"

@@ -108,12 +108,41 @@ def positive_float(text: str) -> float:
     return value
 
 
+def check_output_file(out: str | None, inputs=()) -> None:
+    """Refuse, before any computation, an ``--out`` file that cannot be written: an existing
+    folder or non-file, a missing or non-writable parent folder, or one of the command's
+    ``inputs`` (it would be overwritten: a rerun then failed). ``None``: printed instead."""
+    if out is None:
+        return
+    path = Path(out)
+    if str(out) == "":
+        raise CLIError("--out: got an empty path (omit --out to print the result)")
+    if path.exists() and not path.is_file():
+        raise CLIError(f"--out {out} exists and is not a file")
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise CLIError(f"cannot write {out}: the folder {parent} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise CLIError(f"cannot write {out}: the folder {parent} is not writable")
+    for name in inputs:
+        if path.exists() and Path(name).exists() and path.samefile(name):
+            raise CLIError(f"--out {out} is also an input of the command; choose another file")
+
+
 def emit(payload: dict, out: str | None) -> int:
-    """Write ``payload`` as JSON to ``out``, or print it."""
+    """Write ``payload`` as JSON to ``out`` (complete or not at all: a temporary file in the
+    same folder, renamed into place), or print it."""
     text = json.dumps(payload, indent=2)
     if out:
+        path = Path(out)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
         try:
-            Path(out).write_text(text + "\n")
+            try:
+                tmp.write_text(text + "\n")
+                os.replace(tmp, path)
+            finally:
+                with contextlib.suppress(OSError):
+                    tmp.unlink()
         except OSError as exc:
             raise CLIError(f"cannot write {out}: {exc.strerror or exc}") from exc
         print(f"wrote {out}")

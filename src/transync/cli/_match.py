@@ -7,7 +7,8 @@ import json
 import math
 from pathlib import Path
 
-from ._common import CLIError, cli_message, emit, positive_float, positive_int, seed_int
+from ._common import (CLIError, check_output_file, cli_message, emit, positive_float,
+                      positive_int, seed_int)
 
 __all__ = ["add_parsers", "read_points"]
 
@@ -124,6 +125,7 @@ def _cmd_match(args) -> int:
     from ..graphs import Graph
     from ..matching import gaussian_edge_affinity, match_graphs
 
+    check_output_file(args.out, [args.points1, args.points2])
     P1, P2 = read_points(args.points1), read_points(args.points2)
     if P1.shape[1] != P2.shape[1]:
         raise CLIError(f"the point sets have different dimensions: {args.points1} has "
@@ -177,6 +179,7 @@ def _cmd_collection(args) -> int:
 
     if len(args.points) < 2:
         raise CLIError(f"need at least 2 point sets to match, got {len(args.points)}")
+    check_output_file(args.out, args.points)
     sets = [read_points(p) for p in args.points]
     dims = {P.shape[1] for P in sets}
     if len(dims) > 1:
@@ -286,6 +289,7 @@ def _cmd_sync(args) -> int:
 
     from ..synchronization import synchronize_permutations
 
+    check_output_file(args.out, [args.pairwise])
     pairs, sizes = _read_pairs(args.pairwise)
     try:
         res = synchronize_permutations(pairs, method=args.method, n_universe=args.n_universe,

@@ -58,9 +58,11 @@ class BlockRounding:
     dropped: tuple = ()
 
     def __call__(self, i: int, j: int) -> np.ndarray:
-        if i == j:      # every node is its own partner (as in to_matrix), unless min_score
-            out = np.arange(int(self.sizes[i]), dtype=np.int64)   # left it unplaced (as in
-            if self.dropped:                                       # MultiMatching.pairwise)
+        if i == j:
+            # every node is its own partner (as in to_matrix), unless min_score left it
+            # unplaced (as in MultiMatching.pairwise)
+            out = np.arange(int(self.sizes[i]), dtype=np.int64)
+            if self.dropped:
                 out[self.dropped[i]] = -1
             return out
         ci, cj = int(self.component[i]), int(self.component[j])

@@ -33,12 +33,13 @@ def _planted(n=6, seed=0):
     return g1, g1.permute(perm), perm
 
 
-@pytest.mark.parametrize("scale", [1.0, 1e150, 1e200, 1.7e308])
+@pytest.mark.parametrize("scale", [1e-310, 1e-200, 1.0, 1e150, 1e200, 1.7e308])
 @pytest.mark.parametrize("stepper", [SMStepper, RRWMStepper])
 def test_a_huge_iterate_is_rescaled_not_collapsed(stepper, scale):
     """SM and RRWM take an iterate of any scale. At 1e200 SM's ||K x|| overflowed: the iterate
-    became 0, converged=True, eigenvalue NaN and an arbitrary assignment; RRWM's sum overflowed
-    with a RuntimeWarning at 1.7e308."""
+    became 0, converged=True, eigenvalue NaN and an arbitrary assignment (at 1e-200 it
+    underflowed, with the same result); RRWM's sum overflowed with a RuntimeWarning at
+    1.7e308."""
     g1, g2, perm = _planted()
     st = stepper(gaussian_edge_affinity(g1, g2))
     with warnings.catch_warnings():

@@ -180,11 +180,7 @@ class RRWMStepper(_BaseStepper):
 
     def set_iterate(self, X) -> None:
         X = self._check_iterate(X)
-        with np.errstate(over="ignore"):
-            total = X.sum()
-        if not np.isfinite(total):                 # any scale will do: bring a huge one down
-            X = X / X.max()
-            total = X.sum()
+        total = X.sum()
         if total <= 0:
             raise ValueError("`X` must have a positive sum")
         self._X = X

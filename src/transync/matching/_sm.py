@@ -27,11 +27,6 @@ __all__ = ["SMStepper", "sm"]
 _DEFAULTS = {"max_iter": 100, "tol": 1e-5}
 
 
-#: entries above this in :meth:`SMStepper.set_iterate` are brought to a unit vector first (the
-#: power iteration is scale-free; at 1e200 ``||K x||`` overflowed and the iterate became 0)
-_MAX_ITERATE = 1e100
-
-
 class SMStepper(_BaseStepper):
     """Step-wise spectral matching: one power iteration per :meth:`step`.
 
@@ -72,13 +67,6 @@ class SMStepper(_BaseStepper):
         # x^T K x only sees the symmetric part: the eigenvector of (K + K^T) / 2 is the maximizer
         # (aff itself when symmetric, and unless its scale would overflow)
         self._K = _moderate(_symmetric(aff))
-
-    def set_iterate(self, X) -> None:
-        super().set_iterate(X)
-        top = self._X.max() if self._X.size else 0.0
-        if top > _MAX_ITERATE:          # any scale will do: a huge one overflowed ||K x||
-            self._X /= top
-            self._X /= np.linalg.norm(self._X)
 
     def step(self) -> bool:
         if self.done:

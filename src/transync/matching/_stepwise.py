@@ -34,6 +34,7 @@ import numpy as np
 from .._blas import blas_limit
 from .._validation import check_affinity_scale, check_array, check_nonnegative
 from ..exceptions import ConvergenceWarning
+from ..geometry import rescale_homogeneous
 from ..permutations import assignment_to_matrix, solve_lap
 from ._affinity import Affinity, SeparableAffinity
 from ._result import MatchingResult
@@ -141,6 +142,12 @@ class _BaseStepper:
             # overflowed at 1e200 * I (RRWM and SM rescale their iterate: any scale will do)
             raise ValueError(f"`{name}` must have entries in [0, 1] ({self.method}'s iterate is a "
                              f"relaxed assignment), got maximum {float(X.max()):.6g}")
+        if not self.unit_iterate:
+            # RRWM and SM rescale their iterate, so any scale will do; a huge or tiny one is
+            # brought to a largest entry in [0.5, 1) by a power of two (exact; entries within
+            # [2**-100, 2**100] stay as given): at 1e200 SM's ||K x|| overflowed and its iterate
+            # became 0, at 1e-200 it underflowed; RRWM's sum overflowed at 1.7e308
+            return rescale_homogeneous(X)
         return np.array(X, dtype=float)
 
     def set_iterate(self, X) -> None:

@@ -521,15 +521,17 @@ class SeparableAffinity(Affinity):
         self._Fcat = np.ascontiguousarray(self.F.transpose(1, 0, 2).reshape(self.n1, R * self.n1))
         self._transposed = None  # factors of K^T, built on the first rmatvec
         self._symmetric = None   # `symmetric`, computed on first use
-        # K's entries are not formed; a row sum or diagonal entry below zero by more than the
-        # expansion's error (and rounding) proves negative ones, which the solvers cannot take
-        slack = (self.max_error + 1e-12 * bound) * self.n1 * self.n2
-        low = min(float(self.matvec(np.ones((self.n1, self.n2))).min()),
-                  float(self.diag().min()) * self.n1 * self.n2)
-        if low < -slack:
-            raise ValueError(f"`F`, `G` give a K with negative entries (a row sum or diagonal "
-                             f"entry of {low:.3g}, beyond the expansion's error bound "
-                             f"max_error={self.max_error:g}); an affinity is non-negative")
+        # K's entries are not formed; a diagonal entry, or a row sum of n1 n2 entries, below
+        # zero by more than the expansion's error (and rounding) per entry proves negative
+        # ones, which the solvers cannot take
+        tol = self.max_error + 1e-12 * bound
+        row_sum = float(self.matvec(np.ones((self.n1, self.n2))).min())
+        diagonal = float(self.diag().min())
+        if diagonal < -tol or row_sum < -tol * self.n1 * self.n2:
+            raise ValueError(f"`F`, `G` give a K with negative entries (smallest diagonal "
+                             f"entry {diagonal:.3g}, smallest row sum {row_sum:.3g}, beyond the "
+                             f"expansion's error bound max_error={self.max_error:g}); an "
+                             "affinity is non-negative")
 
     @property
     def rank(self) -> int:

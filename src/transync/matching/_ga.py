@@ -97,7 +97,11 @@ def annealing_levels(beta0: float, beta_max: float, beta_rate: float) -> int:
     >>> annealing_levels(0.5, 10.0, 1.075)
     43
     """
-    beta0, beta_max, beta_rate = _check_schedule(beta0, beta_max, beta_rate)
+    return _levels(*_check_schedule(beta0, beta_max, beta_rate))
+
+
+def _levels(beta0: float, beta_max: float, beta_rate: float) -> int:
+    """:func:`annealing_levels` of a schedule already checked by :func:`_check_schedule`."""
     # logs taken apart: the ratio of a huge beta_max and a tiny beta0 overflows to inf
     span = (np.log(beta_max) - np.log(beta0)) / np.log(beta_rate)
     levels = int(np.ceil(span)) + 1 if span <= MAX_LEVELS else MAX_LEVELS + 1
@@ -166,7 +170,7 @@ class GAStepper(_BaseStepper):
         if beta_max is None:
             beta_max = default_beta_max(aff.n1, aff.n2)
         self.beta0, self.beta_max, self.beta_rate = _check_schedule(beta0, beta_max, beta_rate)
-        levels = annealing_levels(self.beta0, self.beta_max, self.beta_rate)
+        levels = _levels(self.beta0, self.beta_max, self.beta_rate)
         super().__init__(aff, max_iter=levels)
         self.max_inner = check_int(max_inner, "max_inner", minimum=1, maximum=MAX_ITER)
         self.inner_tol = check_positive(inner_tol, "inner_tol")

@@ -831,10 +831,9 @@ def _estimate_universe_soft(X, w, pairs, sizes):
         raise ValueError(f"estimating the universe of {M} nodes in all needs a dense {M} x {M} "
                          f"eigenproblem (at most {MAX_DENSE_UNIVERSE_NODES} nodes); pass "
                          "`n_universe`")
-    N = sizes.size
-    observed = {(min(i, j), max(i, j))
-                for (i, j), wq in zip(pairs.tolist(), w) if wq > 0 and i != j}
-    if N > 2 and len(observed) < N * (N - 1) // 2:
+    from ._permutations import _complete_view
+
+    if not _complete_view(pairs, w, sizes.size):
         return _view_graph_universe_soft(X, w, pairs, sizes)
     w = spec.relative_weights(np.asarray(w, dtype=float))
     B = spec.identity_weight(w) * np.eye(M)

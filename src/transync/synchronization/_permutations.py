@@ -945,12 +945,13 @@ def _observation_components(stk: StackedPairs, disconnected: str) -> list[np.nda
     return comps
 
 
-def _complete_view(stk: StackedPairs) -> bool:
-    """Whether every two objects have an observed pair (of positive weight)."""
-    pos = stk.pairs[stk.weights > 0]
+def _complete_view(pairs: np.ndarray, weights: np.ndarray, n_objects: int) -> bool:
+    """Whether the ``(P, 2)`` observed ``pairs`` of positive ``weights`` join every two of the
+    ``n_objects`` objects (in either direction)."""
+    pos = np.asarray(pairs)[np.asarray(weights) > 0]
     pos = pos[pos[:, 0] != pos[:, 1]]
     n_pairs = np.unique(np.sort(pos, axis=1), axis=0).shape[0] if pos.size else 0
-    return n_pairs == stk.n_objects * (stk.n_objects - 1) // 2
+    return n_pairs == n_objects * (n_objects - 1) // 2
 
 
 def _view_graph_universe(stk, opts, gen, info) -> int:
@@ -1001,7 +1002,8 @@ def _synchronize_components(stk, comps, n_universe, opts, gen):
             continue
         sub = _subset(stk, objs)
         spectrum = None
-        if d_req is None and not sub.is_full and not _complete_view(sub):
+        if (d_req is None and not sub.is_full
+                and not _complete_view(sub.pairs, sub.weights, sub.n_objects)):
             d_req = _view_graph_universe(sub, opts, gen, cinfo)
             spectrum = cinfo["eigenvalues"]
         if opts["method"] == "orthogonal":

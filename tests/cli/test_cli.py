@@ -1,6 +1,7 @@
 import argparse
 import json
 import re
+import os
 import subprocess
 import sys
 import types
@@ -155,7 +156,14 @@ def bad_inputs(tmp_path):
     (tmp_path / "deep.json").write_text('{"pairs": ' + "[" * 5000 + "]" * 5000 + "}")
     (tmp_path / "afile").write_text("")
     (tmp_path / "huge.txt").write_text("1e308 1e308\n-1e308 -1e308\n0 0\n")
+    (tmp_path / "gap.csv").write_text("0, 0\n1,,0\n")
+    (tmp_path / "tail.csv").write_text("0;0\n1;0;\n")
+    if hasattr(os, "mkfifo"):
+        os.mkfifo(tmp_path / "fifo")
     return tmp_path
+
+
+_needs_fifo = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no named pipes here")
 
 
 @pytest.mark.parametrize("argv, expected", [
@@ -179,6 +187,16 @@ def bad_inputs(tmp_path):
     (["match", "{d}/ragged.txt", "{d}/p2.txt"],
      r"ragged\.txt, line 4: expected 2 coordinates \(as on line 1\), got 3"),
     (["match", "{d}/nan.txt", "{d}/p2.txt"], r"nan\.txt, line 2: coordinates must be finite"),
+    # an empty field was skipped: "1,,0" read as the point (1, 0)
+    (["match", "{d}/gap.csv", "{d}/p2.txt"], r"gap\.csv, line 2: empty field in '1,,0'"),
+    (["match", "{d}/tail.csv", "{d}/p2.txt"], r"tail\.csv, line 2: empty field in '1;0;'"),
+    # a named pipe was reported as a missing file (sync, homography)
+    pytest.param(["match", "{d}/fifo", "{d}/p2.txt"], r"fifo is not a regular file",
+                 marks=_needs_fifo),
+    pytest.param(["sync", "{d}/fifo"], r"fifo is not a regular file \(a pipe, socket or "
+                 r"device\); expected a JSON file", marks=_needs_fifo),
+    pytest.param(["homography", "{d}/fifo", "{d}/img.png", "--out", "{d}/h"],
+                 r"fifo is not a regular file .*; expected an image file", marks=_needs_fifo),
     (["match", "{d}/img.png", "{d}/p2.txt"], r"img\.png: not a text file of points"),
     (["match", "{d}/vec.npy", "{d}/p2.txt"], r"vec\.npy: expected an array of shape"),
     (["match", "{d}/one.txt", "{d}/p2.txt"], r"need at least 2 points in each set"),
@@ -463,7 +481,7 @@ def test_cli_homography_failures_leave_no_output_folder(tmp_path, capsys):
     assert main(["homography", paths[0], str(tmp_path / "notes.txt"), "--out", str(out)]) == 2
     assert "notes.txt: not an image format OpenCV can read" in capsys.readouterr().err
     assert main(["homography", paths[0], str(tmp_path / "gone.png"), "--out", str(out)]) == 2
-    assert "no such image file" in capsys.readouterr().err
+    assert "no such file: " in capsys.readouterr().err
     assert main(["homography", str(tmp_path), paths[0], "--out", str(out)]) == 2
     assert "a folder, not an image file" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:                  # argparse's own exit

@@ -65,6 +65,27 @@ def test_kernel_command_writes_gram_and_report(toy, tmp_path, capsys):
     assert "±" not in md and "one 3-fold stratified CV: no spread between repetitions" in md
 
 
+def test_a_failed_write_leaves_an_earlier_runs_files_unmixed(toy, tmp_path, capsys):
+    # the three files were written one after another into the folder: a failure after the
+    # first left this run's gram.npz beside an earlier run's report.json
+    out = tmp_path / "out"
+    assert main(["kernel", str(toy), "--out", str(out), *FAST]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    (out / "report.md").unlink()
+    (out / "report.md").mkdir()                    # the last file cannot be replaced
+    capsys.readouterr()
+    assert main(["kernel", str(toy), "--out", str(out), *FAST, "--kernel", "gaussian"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "report.md: it exists and is not a file" in err, err
+    assert sorted(p.name for p in out.iterdir()) == ["gram.npz", "report.json", "report.md"]
+    for name in ("gram.npz", "report.json"):       # the earlier run's, unchanged
+        assert (out / name).read_bytes() == before[name]
+    (out / "report.md").rmdir()
+    assert main(["kernel", str(toy), "--out", str(out), *FAST, "--kernel", "gaussian"]) == 0
+    assert json.loads((out / "report.json").read_text())["params"]["kernel"] == "gaussian"
+    assert sorted(p.name for p in out.iterdir()) == ["gram.npz", "report.json", "report.md"]
+
+
 def test_dataset_by_name_in_the_data_home(toy, tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("TRANSYNC_DATA", str(tmp_path))
     out = tmp_path / "by-name"

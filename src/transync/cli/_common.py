@@ -7,6 +7,7 @@ import contextlib
 import json
 import os
 import shutil
+import tempfile
 from pathlib import Path
 
 __all__ = ["CLIError", "emit", "int_at_least", "new_output_folder", "positive_int"]
@@ -108,6 +109,30 @@ def positive_float(text: str) -> float:
     return value
 
 
+def input_file(path, expected: str) -> Path:
+    """``path`` as a Path when it is a regular file; else a :class:`CLIError` that says what it
+    is instead: missing, a folder, or another kind of file (a pipe, socket or device, which
+    the readers cannot seek in). ``expected`` completes "expected ...".
+
+    Examples
+    --------
+    >>> from transync.cli._common import input_file
+    >>> input_file("/nonexistent/p.csv", "a text/CSV or .npy file of points")
+    Traceback (most recent call last):
+    ...
+    transync.cli._common.CLIError: no such file: /nonexistent/p.csv
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise CLIError(f"{path} is a folder; expected {expected}")
+    if not p.exists():
+        raise CLIError(f"no such file: {path}")
+    if not p.is_file():
+        raise CLIError(f"{path} is not a regular file (a pipe, socket or device); expected "
+                       f"{expected}")
+    return p
+
+
 def check_output_file(out: str | None, inputs=()) -> None:
     """Refuse, before any computation, an ``--out`` file that cannot be written: an existing
     folder or non-file, a missing or non-writable parent folder, or one of the command's
@@ -173,20 +198,57 @@ def check_output_folder(path) -> Path:
 
 @contextlib.contextmanager
 def new_output_folder(path):
-    """Create ``path`` for writing; on failure remove it again if this call created it.
+    """Create ``path`` and write a command's files into it, all of them or none.
 
-    Yields the folder as a :class:`~pathlib.Path`. A folder that already existed is left in
-    place (only the files written into it stay behind).
+    Yields a hidden staging folder inside ``path`` to write into. When the block finishes,
+    every file in it is moved to the same name under ``path`` (replacing an earlier run's
+    file); when the block fails, the staging folder is removed, so a folder that already
+    existed keeps an earlier run's files unmixed with this run's, and a folder this call
+    created is removed again.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from transync.cli._common import new_output_folder
+    >>> out = Path(tempfile.mkdtemp()) / "run"
+    >>> with new_output_folder(out) as stage:
+    ...     _ = (stage / "a.txt").write_text("new")
+    >>> sorted(p.name for p in out.iterdir()), (out / "a.txt").read_text()
+    (['a.txt'], 'new')
+    >>> try:
+    ...     with new_output_folder(out) as stage:
+    ...         _ = (stage / "a.txt").write_text("half")
+    ...         raise OSError("disk full")
+    ... except OSError:
+    ...     pass
+    >>> sorted(p.name for p in out.iterdir()), (out / "a.txt").read_text()
+    (['a.txt'], 'new')
     """
     out = check_output_folder(path)
     created = not out.exists()
     try:
         out.mkdir(parents=True, exist_ok=True)
+        stage = Path(tempfile.mkdtemp(prefix=".transync-staging-", dir=out))
     except OSError as exc:
         raise CLIError(f"cannot create the output folder {out}: {exc.strerror or exc}") from exc
     try:
-        yield out
+        yield stage
+        files = [src for src in sorted(stage.rglob("*")) if src.is_file()]
+        for src in files:               # refused before any file moves: nothing mixed
+            dst = out / src.relative_to(stage)
+            if dst.exists() and not dst.is_file():
+                raise CLIError(f"cannot write {dst}: it exists and is not a file")
+        try:
+            for src in files:
+                dst = out / src.relative_to(stage)
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(src, dst)
+        except OSError as exc:
+            raise CLIError(f"cannot write into {out}: {exc.strerror or exc}") from exc
     except BaseException:
         if created:
             shutil.rmtree(out, ignore_errors=True)
         raise
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)

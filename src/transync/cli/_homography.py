@@ -9,8 +9,8 @@ import re
 import time
 from pathlib import Path
 
-from ._common import (CLIError, check_output_folder, int_at_least, new_output_folder,
-                      positive_float, positive_int, seed_int)
+from ._common import (CLIError, check_output_folder, input_file, int_at_least,
+                      new_output_folder, positive_float, positive_int, seed_int)
 
 __all__ = ["add_parser"]
 
@@ -27,12 +27,10 @@ def _check_images(paths) -> None:
     if len(paths) < 2:
         raise CLIError(f"need at least 2 images, got {len(paths)}")
     for path in paths:
-        p = Path(path)
-        if p.is_dir():
+        if Path(path).is_dir():
             raise CLIError(f"{path}: a folder, not an image file (list the images, e.g. "
                            f"{path}/*.png)")
-        if not p.is_file():
-            raise CLIError(f"no such image file: {path}")
+        p = input_file(path, "an image file")
         if not cv2.haveImageReader(str(p)):
             raise CLIError(f"{path}: not an image format OpenCV can read")
 
@@ -116,21 +114,26 @@ def _cmd_homography(args) -> int:
         "seconds": seconds,
         "history": res.info["history"],
     }
-    with new_output_folder(args.out) as out:
-        lines = _write_outputs(out, res, payload, args, names, seconds)
+    # an earlier run's masks of images this run lacks: removed once this run's files are in
+    stale = _stale_masks(Path(args.out) / "masks", len(res.masks))
+    with new_output_folder(args.out) as stage:
+        lines = _write_outputs(stage, res, payload, args, names, seconds, stale)
+    out = Path(args.out)
+    for path in stale:
+        path.unlink(missing_ok=True)
     print("\n".join(lines[:7] + [line for line in lines if line.startswith("- removed")]))
     print(f"written to {out}")
     return 0
 
 
-def _write_outputs(out: Path, res, payload: dict, args, names, seconds) -> list[str]:
+def _write_outputs(out: Path, res, payload: dict, args, names, seconds,
+                   stale: list[Path]) -> list[str]:
     import numpy as np
 
     (out / "homographies.json").write_text(json.dumps(payload, indent=2, default=float))
     (out / "masks").mkdir(exist_ok=True)
     for k, m in enumerate(res.masks):
         _imwrite(out / "masks" / f"mask_{k:03d}.png", m.astype(np.uint8) * 255)
-    stale = _stale_masks(out / "masks", len(res.masks))   # removed once all else is written
     mean = np.nan_to_num(res.mean_image)
     _imwrite(out / "mean_warped.png", np.clip(np.round(mean), 0, 255).astype(np.uint8))
     sync = res.info["sync"]
@@ -169,8 +172,6 @@ def _write_outputs(out: Path, res, payload: dict, args, names, seconds) -> list[
                      f"(images beyond this run's {len(res.masks)}): "
                      f"{', '.join(p.name for p in stale[:5])}{' ...' if len(stale) > 5 else ''}")
     (out / "report.md").write_text("\n".join(lines) + "\n")
-    for path in stale:                  # an earlier run's masks of images this run lacks
-        path.unlink()
     return lines
 
 
@@ -188,6 +189,8 @@ def _stale_masks(folder: Path, n_images: int) -> list[Path]:
     """The ``mask_NNN.png`` files in ``folder`` (this command's own names) of image numbers
     ``>= n_images``: left by an earlier run on more images into the same ``--out``."""
     stale = []
+    if not folder.is_dir():
+        return stale
     for path in folder.iterdir():
         m = re.fullmatch(r"mask_([0-9]{3,})\.png", path.name)
         if (m and path.name == f"mask_{int(m.group(1)):03d}.png"     # a name this writes

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import time
+from pathlib import Path
 
 from ._common import (CLIError, check_output_folder, cli_message, int_at_least,
                       new_output_folder, positive_int, seed_int)
@@ -100,14 +101,14 @@ def _cmd_kernel(args) -> int:
                 "tolerance": PSD_TOL},
         "seconds": {"gram": fit_seconds, "cv": cv_seconds},
     }
-    with new_output_folder(args.out) as out:
-        np.savez(out / "gram.npz", K=K, y=y, kept=np.asarray(keep),
+    with new_output_folder(args.out) as stage:      # all three files or none
+        np.savez(stage / "gram.npz", K=K, y=y, kept=np.asarray(keep),
                  params=np.str_(json.dumps(params)))
-        (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+        (stage / "report.json").write_text(json.dumps(report, indent=2) + "\n")
         lines = _markdown(report)
-        (out / "report.md").write_text("\n".join(lines) + "\n")
+        (stage / "report.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines[2:9]))
-    print(f"written to {out}")
+    print(f"written to {Path(args.out)}")
     return 0
 
 

@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
-from ._common import (CLIError, check_output_file, cli_message, emit, positive_float,
-                      positive_int, seed_int)
+from ._common import (CLIError, check_output_file, cli_message, emit, input_file,
+                      positive_float, positive_int, seed_int)
 
 __all__ = ["add_parsers", "read_points"]
 
@@ -37,11 +38,7 @@ def read_points(path):
     """
     import numpy as np
 
-    p = Path(path)
-    if not p.exists():
-        raise CLIError(f"no such file: {path}")
-    if not p.is_file():
-        raise CLIError(f"{path} is not a file")
+    p = input_file(path, "a text/CSV or .npy file of points")
     if p.suffix.lower() == ".npy":
         try:
             pts = np.load(p, allow_pickle=False)
@@ -82,7 +79,15 @@ def _read_text_points(p: Path):
         s = line.strip()
         if not s or s.startswith("#"):
             continue
-        fields = [f for f in s.replace(",", " ").replace(";", " ").split()]
+        # commas or semicolons separate fields (white space around them allowed), else white
+        # space; an empty field ("1,,2", "1,2,") is refused, not skipped
+        if "," in s or ";" in s:
+            fields = [f.strip() for f in re.split(r"[,;]", s)]
+            if "" in fields:
+                raise CLIError(f"{p}, line {lineno}: empty field in {s[:60]!r} (two separators "
+                               "in a row, or one at the start or end)")
+        else:
+            fields = s.split()
         try:
             row = [float(f) for f in fields]
         except ValueError:
@@ -234,11 +239,7 @@ def _read_pairs(path: str) -> tuple[dict, list | None]:
     ``"sizes"``."""
     import numpy as np
 
-    p = Path(path)
-    if p.is_dir():
-        raise CLIError(f"{path} is a folder; expected a JSON file {{\"pairs\": ...}}")
-    if not p.is_file():
-        raise CLIError(f"no such file: {path}")
+    p = input_file(path, "a JSON file {\"pairs\": ...}")
     try:
         data = json.loads(p.read_text(encoding="utf-8-sig"))    # a byte-order mark is allowed
     except UnicodeDecodeError:

@@ -147,8 +147,20 @@ def test_frame_number_zero(tmp_path):
 def test_bad_row_names_file_and_line(tmp_path, line, message):
     _sequence(tmp_path, n_frames=3)
     bad = tmp_path / "label" / "hotel2"
-    (bad).write_text(_rows(BASE[:4]) + "\n" + line + "\n" + _rows(BASE[4:]))
-    _err(ValueError, tmp_path, f"{bad}, line 6: {message}")
+    (bad).write_text(_rows(BASE[:4]) + line + "\n" + _rows(BASE[4:]))
+    _err(ValueError, tmp_path, f"{bad}, line 5: {message}")
+
+
+def test_a_blank_line_among_the_rows_is_named(tmp_path):
+    # it was skipped: every later landmark moved up one, and the error (if any) said only that
+    # the frame had 29 landmarks, without a line
+    _sequence(tmp_path, n_frames=3)
+    bad = tmp_path / "label" / "hotel2"
+    bad.write_text(_rows(BASE[:4]) + "  \n" + _rows(BASE[5:]))
+    _err(ValueError, tmp_path, f"{bad}, line 5: a blank line among the landmark rows (blank "
+                               "lines may only follow the last row)")
+    bad.write_text(_rows(BASE) + "\n  \n\n")           # after the last row: ignored
+    assert load_cmu_sequence(tmp_path).points.shape[0] == 3
 
 
 def test_empty_file(tmp_path):

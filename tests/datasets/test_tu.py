@@ -126,9 +126,9 @@ def test_planted_round_trip_one_or_both_directions(tmp_path, rng):
 
 def test_whitespace_tolerance(tmp_path):
     folder = _write(tmp_path / "W",
-                    A="\r\n1,2\r\n\t2 ,\t3 \r\n\r\n  1 3\r\n6,7\r\n7, 8",        # no final newline
-                    edge_labels="0\n1\n\n2\n3\n1",
-                    graph_indicator=" 1\n1 \n1\n1\n\n2\n3\n3\n3\n\n\n",
+                    A="1,2\r\n\t2 ,\t3 \r\n  1 3\r\n6,7\r\n7, 8",        # no final newline
+                    edge_labels="0\n1\n2\n3\n1\n \n",
+                    graph_indicator=" 1\n1 \n1\n1\n2\n3\n3\n3\n\n\t\n",
                     node_attributes="".join(f"{a}\t{b}\n" for a, b in ATTRS))
     ds = load_tu(folder)
     ref = load_tu(_write(tmp_path / "R"))
@@ -136,6 +136,23 @@ def test_whitespace_tolerance(tmp_path):
         np.testing.assert_array_equal(g.adjacency, h.adjacency)
         np.testing.assert_allclose(g.node_features, h.node_features, atol=1e-6)
         np.testing.assert_array_equal(g.edge_features, h.edge_features)
+
+
+@pytest.mark.parametrize("kind, text, line", [
+    ("graph_indicator", "1\n1\n1\n1\n\n2\n3\n3\n3\n", 5),
+    ("graph_labels", "-1\n\n1\n1\n", 2),
+    ("A", "\n" + _lines(A_LINES), 1),
+    ("node_attributes", "0.5, -1\n \n" + "".join(f"{a}, {b}\n" for a, b in ATTRS[1:]), 2),
+])
+def test_a_blank_line_among_the_data_lines_is_named(tmp_path, kind, text, line):
+    # blank lines were skipped: every later line moved up one, and the error (if any) named
+    # another file's line (a blank line 20 of MUTAG's graph indicator: "MUTAG_A.txt, line 93")
+    folder = _write(tmp_path / "B", **{kind: text})
+    path = folder / f"TOY_{kind}.txt"
+    with pytest.raises(ValueError, match=re.escape(f"{path}, line {line}: expected ") + r".*"
+                       + re.escape("found a blank line among the data lines (blank lines may "
+                                   "only follow the last one)")):
+        load_tu(folder)
 
 
 def test_lone_carriage_returns_end_lines(tmp_path):
@@ -155,7 +172,7 @@ def test_lone_carriage_returns_end_lines(tmp_path):
         np.testing.assert_array_equal(g.node_labels, h.node_labels)
         np.testing.assert_allclose(g.node_features, h.node_features, atol=1e-6)
         np.testing.assert_array_equal(g.edge_features, h.edge_features)
-    folder = _write(tmp_path / "B", A="1, 2\r2, 1\r\n\r3, x\r")
+    folder = _write(tmp_path / "B", A="1, 2\r2, 1\r\n2, 3\r3, x\r")
     with pytest.raises(ValueError, match=r"TOY_A.txt, line 4: .*got '3, x'"):
         load_tu(folder)
 
@@ -302,7 +319,7 @@ def test_missing_folder_and_files(tmp_path):
 
 @pytest.mark.parametrize("kind, text, line, message", [
     ("A", "1, 2\n2, x\n", 2, "expected one edge `i, j` (integers), got '2, x'"),
-    ("A", "1, 2\n\n1, 2, 3\n", 3, "expected one edge `i, j` (2 fields), found 3, got '1, 2, 3'"),
+    ("A", "1, 2\n2, 1\n1, 2, 3\n", 3, "expected one edge `i, j` (2 fields), found 3, got '1, 2, 3'"),
     ("A", "1, 2\n7\n", 2, "expected one edge `i, j` (2 fields), found 1, got '7'"),
     ("A", "1,,2\n", 1, "expected one edge `i, j` (empty field), got '1,,2'"),
     ("A", "1, 2\n, 1, 2\n", 2, "expected one edge `i, j` (empty field), got ', 1, 2'"),

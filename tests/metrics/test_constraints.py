@@ -195,6 +195,60 @@ def test_sampled_estimate_is_close_to_exhaustive():
     assert samp.capacity == full.capacity
 
 
+def test_sampled_estimate_on_an_incomplete_view_graph_is_close_to_exhaustive():
+    # the triples of an incomplete view graph are listed in chunks and drawn in two passes
+    rng = np.random.default_rng(6)
+    c = make_subgraph_collection(n_graphs=12, n_universe=12, p_keep=(0.6, 1.0), rng=4)
+    soft = {k: v for k, v in _noisy_soft(c, 0.6, rng).items() if (k[0] + k[1]) % 4}
+    full = constraint_violations(soft, sizes=c.sizes)
+    samp = constraint_violations(soft, sizes=c.sizes, max_triples=20_000, rng=1)
+    assert full.info["transitivity_mode"] == "exhaustive"
+    assert samp.info["transitivity_mode"] == "sampled"
+    assert samp.info["n_object_triples"] == full.info["n_object_triples"] > 0
+    assert samp.transitivity.n_constraints == full.transitivity.n_constraints
+    p = full.transitivity.cvr
+    assert 0.01 < p < 0.5
+    assert abs(samp.transitivity.cvr - p) < 4 * np.sqrt(p * (1 - p) / 20_000)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_absolute_partial_permutations_in_closed_form_equal_the_listed_triples(seed):
+    # a MultiMatching (or 0/1 maps) is counted from its slot counts, not its O(N^3) triples:
+    # every statistic equals the exact evaluation of its pairwise maps, triple by triple
+    rng = np.random.default_rng(seed)
+    N, d = int(rng.integers(3, 9)), int(rng.integers(1, 7))
+    labels = []
+    for _ in range(N):
+        n = int(rng.integers(0, d + 2))
+        lab = np.full(n, -1)
+        k = min(n, d)
+        lab[rng.permutation(n)[:k]] = np.where(rng.random(k) < 0.7, rng.permutation(d)[:k], -1)
+        labels.append(lab)
+    m = MultiMatching(labels, n_universe=d)
+    ref = constraint_violations(m.pairwise_dict(), sizes=m.sizes)
+    for X in (m, [_to_matrix(lab, d) for lab in labels]):
+        r = constraint_violations(X)
+        assert r.transitivity == ref.transitivity
+        assert r.info["n_object_triples"] == ref.info["n_object_triples"] == N * (N - 1) * (N - 2) // 2
+        assert r.info["n_pairs"] == N * (N - 1) // 2
+
+
+def test_many_objects_are_not_listed_triple_by_triple():
+    # N = 2000 objects: 4e9 object triples, which were listed in one array (6 GB at N = 800)
+    N = 2000
+    r = constraint_violations(MultiMatching([np.array([0])] * N))
+    n_tri = N * (N - 1) * (N - 2) // 2
+    assert r.info["n_object_triples"] == n_tri and r.transitivity.n_constraints == n_tri
+    # g = 1 + 1 - 1 on every constraint: none violated, |g| = 1
+    assert r.transitivity.cvr == 0.0 and r.transitivity.magnitude == float(n_tri)
+    # soft absolute maps above max_triples: only the sample is drawn, not every triple listed
+    s = constraint_violations([np.full((1, 1), 0.5)] * 500, max_triples=1000, rng=0)
+    assert s.info["transitivity_mode"] == "sampled" and s.transitivity.n_evaluated == 1000
+    assert s.info["n_object_triples"] == 500 * 499 * 498 // 2
+    # g = 0.25 + 0.25 - 0.25 on every constraint: none violated, |g| = 0.25
+    assert s.transitivity.n_violated == 0 and s.transitivity.magnitude == 250.0
+
+
 def test_runs_at_n32_n40(rng):
     """Issue #11: N = 32, n = 40 in seconds (soft input is sampled, discrete input is exact)."""
     c = make_subgraph_collection(n_graphs=32, n_universe=40, p_keep=1.0, rng=0)

@@ -112,3 +112,24 @@ def test_corner_error_of_identical_maps_is_zero_or_refused():
     for big in (1e308 * np.eye(3), 1e297 * H):
         assert corner_error(big, H, image_size=(640, 480)) < 1e-9
         assert corner_error(H, big, image_size=(1e12, 1e12)) < 1e-3
+
+
+@pytest.mark.parametrize("size", [(640, 480), (10, 10), (11, 11)])
+def test_pairwise_corner_error_counts_identical_views_as_full_overlap(size):
+    # the overlap was divided by (w, h) for a polygon spanning (w - 1, h - 1): identical views
+    # overlapped by (w - 1)(h - 1) / (w h) < 1 and were dropped at min_overlap=1
+    from transync.metrics import pairwise_corner_error
+
+    S = np.stack([np.eye(3)] * 2)
+    np.testing.assert_array_equal(
+        pairwise_corner_error(S, S, image_size=size, min_overlap=1.0), [0.0, 0.0])
+
+
+def test_pairwise_corner_error_overlap_is_the_shared_fraction_of_the_view():
+    from transync.metrics import pairwise_corner_error
+
+    # view 1 shifted by 5 of the 10 pixels between the corners of an 11 x 11 view: half shared
+    shift = np.array([[1.0, 0, 5], [0, 1, 0], [0, 0, 1]])
+    H = np.stack([np.eye(3), shift])
+    assert pairwise_corner_error(H, H, image_size=(11, 11), min_overlap=0.5).size == 2
+    assert pairwise_corner_error(H, H, image_size=(11, 11), min_overlap=0.51).size == 0

@@ -289,11 +289,15 @@ def _read_label_file(path: Path) -> np.ndarray:
         text = path.read_text(encoding="utf-8-sig")          # a byte-order mark is allowed
     except UnicodeDecodeError:
         raise ValueError(f"{path}: not a text file (expected rows `x y`)") from None
-    rows = []
+    rows, blank = [], None
     for lineno, line in enumerate(text_lines(text), start=1):
         fields = line.split(None)
         if not fields:
+            blank = blank or lineno
             continue
+        if blank is not None:       # skipped, it shifted every later landmark's number
+            raise ValueError(f"{path}, line {blank}: a blank line among the landmark rows "
+                             "(blank lines may only follow the last row)")
         if len(fields) != 2:
             raise ValueError(f"{path}, line {lineno}: expected 2 columns `x y`, got "
                              f"{len(fields)}: {line.strip()!r:.60}")

@@ -152,6 +152,8 @@ def _read_matrix_xml(path) -> np.ndarray:
             raise ValueError(f"`{path}`, field <{node.tag}><{name}>: missing or empty")
         fields[name] = child.text.strip()
     try:
+        if not all(t.isascii() and t.isdigit() for t in (fields["rows"], fields["cols"])):
+            raise ValueError
         rows, cols = int(fields["rows"]), int(fields["cols"])
     except ValueError:
         raise ValueError(f"`{path}`, fields <rows>/<cols>: expected integers, got "
@@ -159,11 +161,12 @@ def _read_matrix_xml(path) -> np.ndarray:
     if (rows, cols) != (3, 3):
         raise ValueError(f"`{path}`, fields <rows>/<cols>: expected a 3x3 matrix, "
                          f"got {rows}x{cols}")
-    try:
-        values = [float(t) for t in fields["data"].split()]
-    except ValueError:
-        raise ValueError(f"`{path}`, field <data>: expected 9 numbers, "
-                         f"got {fields['data']!r:.80}") from None
+    tokens = fields["data"].split()
+    bad = next((t for t in tokens if not is_number(t)), None)   # strict, as the text reader:
+    if bad is not None:                                         # float() read `1_0` as 10
+        raise ValueError(f"`{path}`, field <data>: expected 9 numbers, got {bad!r:.40} in "
+                         f"{fields['data']!r:.80}")
+    values = [float(t) for t in tokens]
     if len(values) != 9:
         raise ValueError(f"`{path}`, field <data>: expected 9 numbers, got {len(values)}")
     return _check_homography(np.array(values).reshape(3, 3), f"`{path}`, field <data>")

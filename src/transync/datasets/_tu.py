@@ -15,15 +15,16 @@ A data set ``DS`` is a folder of comma-separated text files
 one scalar per edge, taken by the edge labels); :meth:`TUDataset.summary` lists them under
 ``ignored_files`` when present.
 
-Reading is lenient about layout: fields may be separated by commas and/or blanks, blank lines are
-skipped, Windows line ends are accepted, and an undirected edge given in one direction only is
+Reading is lenient about layout: fields may be separated by commas and/or blanks, blank lines
+after the last data line are ignored, Windows line ends are accepted, and an undirected edge given in one direction only is
 symmetrized. Self-loops (``i, i``) are dropped (a :class:`Graph` has a zero diagonal) and counted
 in :meth:`TUDataset.summary`; the sets shipped in the data home have none. Nodes that appear in no
 edge (isolated nodes, and one-node graphs) are kept.
 
 Every error on malformed input names the file, and the line for a bad line (``FileNotFoundError``
 for a missing folder or file): a line without the expected fields, a number that does not parse,
-a node id out of range, an edge joining two graphs, a decreasing or non-contiguous graph
+a blank line among the data lines (a lost value: skipping it shifted every later line, and
+the error, if any, named another file), a node id out of range, an edge joining two graphs, a decreasing or non-contiguous graph
 indicator, files whose line counts disagree, and an undirected edge whose two directions carry
 different labels.
 """
@@ -250,7 +251,8 @@ def _bad_byte(path: Path, data: bytes, b: np.ndarray, at: int, what: str) -> Val
 def _read_table(path: Path, *, columns: int | None, kind: str, what: str):
     """Parse a TU text file into ``(values (rows, k), line numbers (rows,))``, vectorized.
 
-    Fields are separated by commas and/or blanks; blank lines are skipped. ``columns=None``
+    Fields are separated by commas and/or blanks; blank lines after the last data line are
+    ignored, one before it is an error (the line of a lost value). ``columns=None``
     takes the field count of the first data line for every line. ``kind`` is ``"int"`` or
     ``"float"`` (finite). ``what`` names the expected content in messages.
     """
@@ -286,6 +288,10 @@ def _read_table(path: Path, *, columns: int | None, kind: str, what: str):
     rows = np.flatnonzero(per_line)
     if rows.size == 0:
         return np.zeros((0, columns or 0), np.int64 if kind == "int" else float), rows
+    if rows[-1] + 1 > rows.size:            # a blank line before the last data line
+        gap = int(np.flatnonzero(per_line[:rows[-1]] == 0)[0]) + 1
+        raise _bad_line(path, data, gap, f"expected {what}, found a blank line among the data "
+                                         "lines (blank lines may only follow the last one)")
     if columns is None:             # the common field count (a bad first line is the one blamed)
         counts, freq = np.unique(per_line[rows], return_counts=True)
         k = int(counts[np.argmax(freq)])

@@ -26,12 +26,17 @@ Discrete blocks that are partial permutations (assignments, a
 column) are evaluated *exactly*, every node triple of every object triple, in ``O(n)`` per
 object triple: a violated transitivity constraint is a node ``u`` with ``X_ij X_jk`` sending it to
 a node ``w`` that ``X_ik`` does not, and the sums of ``|g|`` follow from counts of matched nodes.
+Absolute maps that are partial permutations (a MultiMatching) violate no transitivity constraint
+by construction; their counts follow in closed form from how many objects hold each universe
+slot, in ``O(sum n_i)`` whatever the number of objects.
 Any other input (soft matrices, 0/1 matrices with a row or a column of several ones) is evaluated
 on every node triple when there are at most ``max_triples`` transitivity constraints; above that,
 ``max_triples`` node triples ``((i, u), (j, v), (k, w))`` are drawn uniformly at random with
 replacement among all transitivity constraints (an object triple with probability proportional
 to ``n_i n_j n_k``, then the three nodes uniformly), and the three ratios are estimated on them
-(``sampled=True``; counts then refer to the sample). Capacity is always exhaustive.
+(``sampled=True``; counts then refer to the sample). On a complete view graph (absolute maps)
+the object triples are drawn without listing them; otherwise they are listed a chunk at a
+time. Capacity is always exhaustive.
 """
 
 from __future__ import annotations
@@ -48,6 +53,7 @@ from ..permutations import MAX_NODES, MultiMatching, check_assignment, pair_rows
 __all__ = ["ConstraintStats", "ConstraintViolations", "constraint_violations"]
 
 _CHUNK = 4_000_000          # entries of a (t, n, n, n) work array in the exhaustive soft path
+_TRIPLE_CHUNK = 1_000_000   # object triples listed at a time
 
 
 @dataclass(frozen=True)
@@ -154,6 +160,15 @@ class _Pairs:
     fwd: np.ndarray | None         # (Q, n_max) map i -> j, -1 unmatched / padding
     bwd: np.ndarray | None         # (Q, n_max) map j -> i
     dense: np.ndarray | None       # (Q, n_max, n_max) float block i -> j, zero padded
+
+
+@dataclass
+class _Labels:
+    """Absolute maps that are partial permutations: each object's node -> slot (-1: none)."""
+
+    sizes: np.ndarray              # (N,) int64
+    labels: list                   # N arrays (n_i,), every slot at most once per object
+    n_universe: int
 
 
 MAX_OBJECTS = 10**7      # largest object index + 1 (one size per object is kept)
@@ -310,10 +325,7 @@ def _parse_absolute(X, tol: float) -> tuple[_Pairs, ConstraintStats]:
         d = m.n_universe
         placed = int(sum(int((lab >= 0).sum()) for lab in m.labels))
         cap = ConstraintStats(len(sizes) * d, len(sizes) * d, 0, 0.0, float(placed))
-        pairs = np.column_stack(np.triu_indices(len(sizes), 1)).astype(np.int64)
-        fwd = m.pairwise_array(pairs)                      # (Q, max size), -1 padded
-        bwd = m.pairwise_array(pairs[:, ::-1])
-        return _Pairs(sizes, pairs, fwd, bwd, None), cap
+        return _Labels(sizes, [np.asarray(lab) for lab in m.labels], d), cap
     mats = []
     for g, M in enumerate(X):
         M = _soft_block(M, f"X[{g}]")
@@ -328,6 +340,9 @@ def _parse_absolute(X, tol: float) -> tuple[_Pairs, ConstraintStats]:
     sizes = np.array([M.shape[0] for M in mats], dtype=np.int64)
     cols = np.stack([M.sum(0) for M in mats])                        # (N, d)
     cap = _stats_from_values(cols, tol)
+    if all(_is_partial_permutation(M) for M in mats):   # labels: no pairwise block needed
+        labels = [np.where(M.any(1), M.argmax(1), -1) for M in mats]
+        return _Labels(sizes, labels, d), cap
     n_max = int(sizes.max())
     _check_work(N * (N - 1) // 2 * n_max * n_max, "pairwise blocks X_i X_j^T")
     stack = np.zeros((N, n_max, d))
@@ -375,8 +390,9 @@ def _pairwise_capacity(p: _Pairs, tol: float) -> ConstraintStats:
                            s1.violation + s2.violation, s1.magnitude + s2.magnitude)
 
 
-def _object_triples(p: _Pairs) -> np.ndarray:
-    """``(T, 3)`` triples ``(i, j, k)``, ``i < k``, ``j`` not in ``{i, k}``, all pairs present.
+def _triple_chunks(p: _Pairs):
+    """``(t, 3)`` triples ``(i, j, k)``, ``i < k``, ``j`` not in ``{i, k}``, all pairs present,
+    in chunks of about :data:`_TRIPLE_CHUNK` (all of them in one array took 6 GB at N = 800).
 
     Built over the objects that appear in a pair only (renumbered in order, then mapped back):
     a single key ``(0, 3000)`` made a 3001-object O(N^3) loop.
@@ -388,7 +404,7 @@ def _object_triples(p: _Pairs) -> np.ndarray:
     have = np.zeros((m, m), dtype=bool)
     have[local[:, 0], local[:, 1]] = True
     have |= have.T
-    out = []
+    out, count = [], 0
     for i in range(m):
         # j, k with have[i, j], have[j, k], have[i, k], k > i
         nb = np.flatnonzero(have[i])
@@ -399,7 +415,67 @@ def _object_triples(p: _Pairs) -> np.ndarray:
         j, k = np.nonzero(jk)
         if j.size:
             out.append(np.column_stack([np.full(j.size, i), nb[j], nb_k[k]]))
-    return ids[np.concatenate(out)] if out else np.zeros((0, 3), dtype=np.int64)
+            count += j.size
+        if count >= _TRIPLE_CHUNK:
+            yield ids[np.concatenate(out)]
+            out, count = [], 0
+    if out:
+        yield ids[np.concatenate(out)]
+
+
+def _complete_triples(p: _Pairs) -> tuple[np.ndarray, int] | None:
+    """The objects of ``p`` and their number of object triples when every pair of them is
+    present (absolute maps; a complete dict), else None."""
+    ids = np.unique(p.pairs)
+    m = ids.shape[0]
+    if p.pairs.shape[0] != m * (m - 1) // 2:
+        return None
+    return ids, 3 * (m * (m - 1) * (m - 2) // 6)
+
+
+def _triple_weights(p: _Pairs, tri: np.ndarray) -> np.ndarray:
+    """``n_i n_j n_k`` of every triple: its number of node triples (transitivity constraints)."""
+    sz = p.sizes.astype(np.int64)
+    return sz[tri[:, 0]] * sz[tri[:, 1]] * sz[tri[:, 2]]
+
+
+def _elementary3(sizes: np.ndarray) -> int:
+    """``sum_{a < b < c} n_a n_b n_c`` exactly (Newton's identities on Python integers)."""
+    values, counts = np.unique(sizes, return_counts=True)
+    p1 = p2 = p3 = 0
+    for v, c in zip(values.tolist(), counts.tolist()):
+        p1, p2, p3 = p1 + c * v, p2 + c * v**2, p3 + c * v**3
+    return (p1**3 - 3 * p1 * p2 + 2 * p3) // 6
+
+
+def _transitivity_labels(lab: _Labels) -> tuple[ConstraintStats, int, int]:
+    """Transitivity of absolute partial permutations, in closed form, O(sum n_i): no constraint
+    is violated (``X_ij X_jk`` sends a node to the node of the same slot, as ``X_ik`` does),
+    and the counts and ``sum |g|`` follow from how many objects hold each slot (``c_l``).
+
+    Over the triples ``(i, j, k)``, ``i < k``, ``j`` not in ``{i, k}`` (each unordered triple
+    three times), ``sum |g| = sum nnz(A) n_k + nnz(B) n_i + nnz(C) n_j - 2 |L_i & L_j & L_k|``
+    with ``nnz(X_xy) = |L_x & L_y|``; summed, ``3 sum_{x < y} |L_x & L_y| (P - n_x - n_y)
+    - 6 sum_l C(c_l, 3)``, ``P = sum n``. Returns the statistics, the number of object pairs
+    and of object triples.
+    """
+    sizes = lab.sizes.astype(np.int64)
+    N = sizes.shape[0]
+    held = [np.asarray(x)[np.asarray(x) >= 0] for x in lab.labels]
+    owner = np.repeat(np.arange(N), [h.size for h in held])
+    slots = np.concatenate(held) if held else np.zeros(0, np.int64)
+    c = np.bincount(slots.astype(np.int64), minlength=lab.n_universe).astype(np.int64)
+    # r_x = sum over x's placed nodes of (objects sharing its slot - 1) = sum_y!=x |L_x & L_y|
+    r = np.bincount(owner, weights=(c[slots] - 1).astype(np.float64), minlength=N)
+    r = np.rint(r).astype(np.int64)
+    P = int(sizes.sum())
+    shared = sum(int(v) * (int(v) - 1) for v in c[c > 1].tolist())   # sum_x!=y |L_x & L_y|
+    pair_sum = (P * shared - 2 * sum(int(a) * int(b) for a, b in zip(sizes, r) if b)) // 2
+    triple_sum = sum(int(v) * (int(v) - 1) * (int(v) - 2) // 6 for v in c[c > 2].tolist())
+    n_tot = 3 * _elementary3(sizes)
+    mag = 3 * pair_sum - 6 * triple_sum
+    return (ConstraintStats(n_tot, n_tot, 0, 0.0, float(mag)), N * (N - 1) // 2,
+            3 * (N * (N - 1) * (N - 2) // 6))
 
 
 def _pair_index(p: _Pairs):
@@ -481,19 +557,54 @@ def _entries(flat: np.ndarray, pid, n: int, a, c, x, y) -> np.ndarray:
     return flat.take((pid(a, c) * n + np.where(fw, x, y)) * n + np.where(fw, y, x))
 
 
-def _transitivity_sampled(p: _Pairs, tri: np.ndarray, weights: np.ndarray, total: int,
-                          m: int, tol: float, rng) -> ConstraintStats:
-    """``m`` node triples drawn uniformly (with replacement) among all transitivity constraints."""
+def _draw_complete(sizes: np.ndarray, ids: np.ndarray, m: int, rng) -> np.ndarray | None:
+    """``m`` object triples ``(i, j, k)`` (``i < k``) of a complete set of objects ``ids``, each
+    with probability ``n_i n_j n_k / total``, without listing them: three objects drawn
+    independently with probability ``n / sum n``, redrawn unless distinct (each triple is two
+    ordered draws). None when fewer than 1 draw in 1000 would be distinct (one object holding
+    nearly every node): the triples are then listed."""
+    n = sizes[ids].astype(np.float64)
+    P = n.sum()
+    if P == 0 or 6.0 * _elementary3(sizes[ids]) < 1e-3 * P**3:
+        return None
+    prob = n / P
+    out, have = [], 0
+    while have < m:
+        k = min(2 * (m - have) + 1000, 1_000_000)
+        x, y, z = (ids[rng.choice(ids.size, k, p=prob)] for _ in range(3))
+        ok = (x != y) & (y != z) & (x != z)
+        out.append(np.column_stack([np.minimum(x, z), y, np.maximum(x, z)])[ok])
+        have += int(ok.sum())
+    return np.concatenate(out)[:m]
+
+
+def _draw_listed(p: _Pairs, m: int, rng) -> tuple[np.ndarray, int]:
+    """``m`` object triples drawn with probability ``n_i n_j n_k / total`` from the listed
+    triples, two passes over the chunks (memory of one chunk), and their count."""
+    totals, count = [], 0
+    for tri in _triple_chunks(p):
+        totals.append(int(_triple_weights(p, tri).sum()))
+        count += tri.shape[0]
+    per_chunk = rng.multinomial(m, np.array(totals, np.float64) / sum(totals))
+    out = []
+    for tri, k in zip(_triple_chunks(p), per_chunk):
+        if k:
+            w = _triple_weights(p, tri).astype(np.float64)
+            out.append(np.repeat(tri, rng.multinomial(k, w / w.sum()), axis=0))
+    return np.concatenate(out), count
+
+
+def _transitivity_sampled(p: _Pairs, drawn: np.ndarray, total: int, tol: float,
+                          rng) -> ConstraintStats:
+    """The constraints of one node triple per drawn object triple (nodes uniform): the triples
+    are drawn so that every transitivity constraint is equally likely (with replacement)."""
     pid = _pair_index(p)
     flat = p.dense.ravel()
     n = p.dense.shape[1]
-    # object triple t is drawn with probability n_i n_j n_k / total, then its nodes uniformly
-    counts = rng.multinomial(m, weights / weights.sum())
-    which = np.repeat(np.arange(tri.shape[0]), counts)
     n_bad = 0
     viol = mag = 0.0
-    for s in range(0, m, 500_000):
-        i, j, k = tri[which[s:s + 500_000]].T
+    for s in range(0, drawn.shape[0], 500_000):
+        i, j, k = drawn[s:s + 500_000].T
         u = rng.integers(0, p.sizes[i])
         v = rng.integers(0, p.sizes[j])
         w = rng.integers(0, p.sizes[k])
@@ -504,7 +615,43 @@ def _transitivity_sampled(p: _Pairs, tri: np.ndarray, weights: np.ndarray, total
         n_bad += int(np.count_nonzero(bad))
         viol += float(excess[bad].sum())
         mag += float(np.abs(G).sum())
-    return ConstraintStats(int(total), int(m), n_bad, viol, mag, sampled=True)
+    return ConstraintStats(int(total), int(drawn.shape[0]), n_bad, viol, mag, sampled=True)
+
+
+def _summed(parts) -> ConstraintStats:
+    """One :class:`ConstraintStats` of chunks' exhaustive statistics."""
+    parts = list(parts)
+    return ConstraintStats(sum(t.n_constraints for t in parts), sum(t.n_evaluated for t in parts),
+                           sum(t.n_violated for t in parts), sum(t.violation for t in parts),
+                           sum(t.magnitude for t in parts))
+
+
+def _transitivity(p: _Pairs, max_triples: int, tol: float, rng):
+    """Transitivity statistics, the mode used and the number of object triples."""
+    complete = _complete_triples(p)
+    if complete is not None:
+        ids, n_tri = complete
+        total = 3 * _elementary3(p.sizes[ids])
+    else:
+        n_tri = total = None
+    if p.dense is None:
+        parts = [_transitivity_exact(p, tri) for tri in _triple_chunks(p)]
+        stats = _summed(parts)
+        return stats, "exact", n_tri if n_tri is not None else _count_triples(p)
+    if total is None:
+        total = sum(int(_triple_weights(p, tri).sum()) for tri in _triple_chunks(p))
+    if total <= max_triples:
+        parts = [_transitivity_dense(p, tri, tol) for tri in _triple_chunks(p)]
+        return _summed(parts), "exhaustive", n_tri if n_tri is not None else _count_triples(p)
+    rng = as_generator(rng)
+    drawn = None if complete is None else _draw_complete(p.sizes, complete[0], max_triples, rng)
+    if drawn is None:
+        drawn, n_tri = _draw_listed(p, max_triples, rng)
+    return _transitivity_sampled(p, drawn, total, tol, rng), "sampled", n_tri
+
+
+def _count_triples(p: _Pairs) -> int:
+    return sum(tri.shape[0] for tri in _triple_chunks(p))
 
 
 def constraint_violations(X, *, sizes=None, max_triples: int = 1_000_000, tol: float = 1e-9,
@@ -590,17 +737,12 @@ def constraint_violations(X, *, sizes=None, max_triples: int = 1_000_000, tol: f
     else:
         raise TypeError("`X` must be a dict {(i, j): assignment or matrix}, a MultiMatching or "
                         f"a sequence of (n_i, d) maps, got {type(X).__name__}")
-    tri = _object_triples(p)
-    weights = (p.sizes[tri[:, 0]] * p.sizes[tri[:, 1]] * p.sizes[tri[:, 2]]).astype(np.int64)
-    total = int(weights.sum())
-    if p.dense is None:
-        trans, mode = _transitivity_exact(p, tri), "exact"
-    elif total <= max_triples:
-        trans, mode = _transitivity_dense(p, tri, tol), "exhaustive"
+    if isinstance(p, _Labels):
+        trans, n_pairs, n_tri = _transitivity_labels(p)
+        mode = "exact"
     else:
-        trans = _transitivity_sampled(p, tri, weights, total, max_triples, tol,
-                                      as_generator(rng))
-        mode = "sampled"
-    info = {"input": kind, "transitivity_mode": mode, "n_pairs": int(p.pairs.shape[0]),
-            "n_object_triples": int(tri.shape[0])}
+        trans, mode, n_tri = _transitivity(p, max_triples, tol, rng)
+        n_pairs = int(p.pairs.shape[0])
+    info = {"input": kind, "transitivity_mode": mode, "n_pairs": n_pairs,
+            "n_object_triples": int(n_tri)}
     return ConstraintViolations(cap, trans, info)

@@ -189,9 +189,11 @@ def pairwise_corner_error(H_est, H_true, *, image_size, min_overlap=0.05) -> np.
                 inv_e[k] = np.linalg.inv(Hk)
     out = []
     for i in range(n):
-        # the overlap in units of view i's size (its area is 1): OpenCV's float32 never
-        # overflows on the corners, whatever the pixel scale
-        unit = np.asarray(sizes[i], dtype=float)
+        # the overlap in units of view i's corner-to-corner extent (w - 1, h - 1), so that its
+        # own polygon has area 1 exactly (the size (w, h) gave (w - 1)(h - 1) / (w h) < 1: a
+        # view identical to i failed min_overlap=1); OpenCV's float32 never overflows on the
+        # corners, whatever the pixel scale
+        unit = np.maximum(np.asarray(sizes[i], dtype=float) - 1.0, 1.0)
         ci = (_corners(sizes[i]) / unit).astype(np.float32)
         for j in range(n):
             if i == j:

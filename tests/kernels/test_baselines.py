@@ -120,8 +120,8 @@ def test_hks_oa_is_indefinite_on_a_synthetic_set_and_mean_kernel_is_psd():
     """Four one-node/two-node graphs whose optimal bijections disagree (Vert 2008)."""
     F = [np.array([[2.0], [0.0]]), np.array([[0.0]]), np.array([[2.0]]), np.array([[1.0]])]
     assert min_eigenvalue_ratio(hks_oa_kernel(F, sigma2=2.0)) < -1e-2
-    for kind in ("linear", "rbf"):
-        assert min_eigenvalue_ratio(hks_mean_kernel(F, kernel=kind, gamma=0.5)) >= -1e-12
+    for kw in ({"kernel": "linear"}, {"kernel": "rbf", "gamma": 0.5}):
+        assert min_eigenvalue_ratio(hks_mean_kernel(F, **kw)) >= -1e-12
 
 
 def test_hks_mean_kernel_matches_definition_and_is_invariant():
@@ -161,6 +161,10 @@ def test_hks_kernel_validation():
         hks_mean_kernel(np.ones((2, 3)))
     with pytest.raises(ValueError, match=r"features\[0\].*finite"):
         hks_mean_kernel([np.full((2, 3), np.nan)])
+    # gamma was ignored silently by the linear kernel
+    with pytest.raises(ValueError, match=r"`gamma` applies to kernel='rbf' only, got gamma=1.0"):
+        hks_mean_kernel(F, kernel="linear", gamma=1.0)
+    assert hks_mean_kernel(F, kernel="rbf", gamma=1.0).shape == (2, 2)
 
 
 @pytest.mark.dataset("tu")
@@ -253,6 +257,13 @@ def test_grakel_validation_and_missing_dependency(monkeypatch):
         grakel_kernel(graphs, "rw", lamda=1.5)
     with pytest.raises(ValueError, match=r"node_labels\[0\]"):
         grakel_kernel(graphs, "wl", node_labels=[np.zeros(2, int)] * 3)
+    # n_jobs=0 reached joblib ("n_jobs == 0 in Parallel has no meaning"), -5 passed silently
+    with pytest.raises(ValueError, match=r"`n_jobs` must be a positive number of jobs or -1"):
+        grakel_kernel(graphs, "rw", n_jobs=0)
+    with pytest.raises(ValueError, match=r"`n_jobs` must be >= -1, got -5"):
+        grakel_kernel(graphs, "wl", n_jobs=-5)
+    # GraKeL's shortest path has no parallel code and warned (an error under this suite)
+    assert grakel_kernel(graphs, "sp", n_jobs=2).shape == (len(graphs), len(graphs))
     monkeypatch.setitem(sys.modules, "grakel", None)
     with pytest.raises(ImportError, match=r"transync\[bench\]"):
         grakel_kernel(graphs, "wl")

@@ -31,6 +31,7 @@ from transync.kernels import (
     min_eigenvalue_ratio,
     nearest_graphs,
     place_graphs,
+    synchronize_alignments,
     view_graph,
 )
 
@@ -363,6 +364,27 @@ def test_universe_can_be_larger(rng):
     tak = TransitiveAssignmentKernel(matcher="node", n_universe=9).fit(graphs)
     assert tak.n_universe_ == 9 and tak.labels_.shape == (9, 9) and tak.aligned_.shape[1] == 9
     assert tak.transform([_random_graph(9, 0.5, rng)]).shape == (1, 9)
+
+
+@pytest.mark.parametrize("kernel", ["linear", "gaussian", "relaxed"])
+@pytest.mark.parametrize("sync", ["orthogonal", "spectral"])
+def test_universe_beyond_the_fitted_graphs_total(kernel, sync, rng):
+    # a 3-node and a 4-node graph (7 nodes) fitted in a universe of 8 for an 8-node test graph:
+    # refused ("`n_universe` must be <= the total number of nodes 7") unless sync_dummies=True
+    graphs = [_random_graph(3, 0.9, rng), _random_graph(4, 0.7, rng)]
+    tak = TransitiveAssignmentKernel(matcher="node", n_universe=8, kernel=kernel, sync=sync,
+                                     random_state=0).fit(graphs)
+    assert tak.n_universe_ == 8 and tak.labels_.shape == (2, 8)
+    assert all(sorted(row) == list(range(8)) for row in tak.labels_.tolist())
+    assert min_eigenvalue_ratio(tak.gram_) >= -1e-9
+    np.testing.assert_allclose(np.diag(tak.gram_), 1.0, atol=1e-9)
+    K = tak.transform([_random_graph(8, 0.5, rng), _relabel(graphs[1], rng)])
+    assert K.shape == (2, 2) and np.all(np.isfinite(K))
+    np.testing.assert_allclose(K[1], tak.gram_[1], atol=1e-9)
+    # synchronize_alignments: two one-node graphs in a universe of 5
+    al = synchronize_alignments(np.array([[0, 1, 2, 3, 4]]), np.array([[0, 1]]), 2, n=5,
+                                sizes=[1, 1])
+    assert al.labels.tolist() == [[0, 1, 2, 3, 4]] * 2
 
 
 @pytest.mark.parametrize("kernel", ["linear", "relaxed"])
@@ -1063,3 +1085,14 @@ def test_fitted_attributes_are_in_the_callers_numbering():
         np.testing.assert_array_equal(slot_of_base[g], slot_of_base[0])
     for r, (i, j) in enumerate(tak.pairs_):
         np.testing.assert_array_equal(perms[j][tak.assignments_[r][:7]], perms[i])
+
+
+def test_graph_descriptors_refuse_label_values_without_labels():
+    # label_values without node_labels was ignored (the reverse was refused)
+    F = [np.array([[1.0], [0.0]])]
+    with pytest.raises(ValueError, match=r"`label_values` needs `node_labels`"):
+        graph_descriptors(F, None, np.array([3, 5]))
+    with pytest.raises(ValueError, match=r"`label_values` must be given with `node_labels`"):
+        graph_descriptors(F, [np.array([3, 5])], None)
+    np.testing.assert_allclose(graph_descriptors(F, [np.array([3, 5])], np.array([3, 5])),
+                               [[0.5, 0.5, 0.5]])

@@ -133,3 +133,29 @@ def test_pairwise_corner_error_overlap_is_the_shared_fraction_of_the_view():
     H = np.stack([np.eye(3), shift])
     assert pairwise_corner_error(H, H, image_size=(11, 11), min_overlap=0.5).size == 2
     assert pairwise_corner_error(H, H, image_size=(11, 11), min_overlap=0.51).size == 0
+
+
+def test_brenner_focus_is_the_same_at_any_bit_depth():
+    # only uint8 was scaled to [0, 1]: the 16-bit read of one picture scored 4e9 times higher
+    from transync.metrics import brenner_focus
+
+    img = (np.arange(36).reshape(6, 6) * 7).astype(np.uint8)
+    ref = brenner_focus(img)
+    assert ref > 0
+    for same in (img.astype(np.uint16) * 257, img / 255.0, np.dstack([img] * 3),
+                 np.dstack([img.astype(np.uint16) * 257] * 4)):
+        assert brenner_focus(same) == pytest.approx(ref, rel=1e-12)
+
+
+def test_affinity_score_names_a_short_assignment():
+    # an Affinity object's own shape check named its internal `X`
+    from transync.graphs import Graph
+    from transync.matching import gaussian_edge_affinity
+    from transync.metrics import affinity_score
+
+    g = Graph.from_points(np.random.default_rng(0).random((4, 2)), edges="full")
+    aff = gaussian_edge_affinity(g, g, sigma2=0.15)
+    with pytest.raises(ValueError, match=r"`assignment` must have one entry per node of the "
+                                         r"affinity's first graph \(4\), got 3"):
+        affinity_score(aff, [0, 1, 2])
+    assert affinity_score(aff, [0, 1, 2, 3]) > affinity_score(aff, [1, 0, 2, 3])

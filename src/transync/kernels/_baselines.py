@@ -296,6 +296,9 @@ def hks_mean_kernel(features, *, kernel: str = "linear", gamma: float | None = N
     normalize = check_bool(normalize, "normalize")
     feats = check_feature_list(features)
     kernel = check_choice(kernel, "kernel", ("linear", "rbf"))
+    if gamma is not None and kernel != "rbf":     # as assignment_kernel: not silently ignored
+        raise ValueError(f"`gamma` applies to kernel='rbf' only, got gamma={gamma!r} with "
+                         f"kernel={kernel!r}")
     block_nodes = check_int(block_nodes, "block_nodes", minimum=1)
     sizes = np.array([F.shape[0] for F in feats])
     labels = None if node_labels is None else check_node_labels(node_labels, sizes)
@@ -524,7 +527,9 @@ def grakel_kernel(graphs, name: str, *, node_labels=None, n_iter: int = 5, lamda
     normalize : bool, default=True
         Cosine-normalize the result.
     n_jobs : int, optional
-        GraKeL's parallelism (``"sp"`` and ``"rw"`` only).
+        GraKeL's parallelism for ``"rw"``: a positive number of jobs, or -1 for every core.
+        The other kernels run serially (GraKeL's shortest-path kernel has no parallel code and
+        only warns about it, so it is not passed on).
 
     Returns
     -------
@@ -561,7 +566,10 @@ def grakel_kernel(graphs, name: str, *, node_labels=None, n_iter: int = 5, lamda
     if lamda >= 1:
         raise ValueError(f"`lamda` must lie in (0, 1), got {lamda!r}")
     if n_jobs is not None:
-        n_jobs = check_int(n_jobs, "n_jobs")
+        n_jobs = check_int(n_jobs, "n_jobs", minimum=-1)
+        if n_jobs == 0:                  # joblib's own error named neither it nor the range
+            raise ValueError("`n_jobs` must be a positive number of jobs or -1 (every core), "
+                             "got 0")
     X = _grakel_input(graphs, node_labels)
     try:
         from grakel import kernels as gk
@@ -575,7 +583,7 @@ def grakel_kernel(graphs, name: str, *, node_labels=None, n_iter: int = 5, lamda
     elif name == "wl-oa":
         model = gk.WeisfeilerLehmanOptimalAssignment(n_iter=n_iter)
     elif name == "sp":
-        model = gk.ShortestPath(with_labels=True, n_jobs=n_jobs)
+        model = gk.ShortestPath(with_labels=True)
     else:
         model = gk.RandomWalkLabeled(lamda=lamda, kernel_type="geometric", n_jobs=n_jobs)
     K = np.asarray(model.fit_transform(X), dtype=np.float64)

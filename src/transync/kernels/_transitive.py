@@ -316,6 +316,9 @@ def graph_descriptors(features, node_labels=None, label_values=None) -> np.ndarr
     feats = check_feature_list(features)
     out = np.stack([F.mean(0) for F in feats])
     if node_labels is None:
+        if label_values is not None:
+            raise ValueError("`label_values` needs `node_labels` (the label fractions are "
+                             "counted from them), got label_values without node_labels")
         return out
     if label_values is None:
         raise ValueError("`label_values` must be given with `node_labels`")
@@ -487,7 +490,11 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
         A = np.where(keep, A, -1)
         observed = dict(zip(keys, [a[:k] for a, k in zip(A, real[pr[:, 0]].tolist())]))
     seconds_input = time.perf_counter() - t0
-    res = synchronize_permutations(observed, n_universe=n, method=method,
+    # real nodes fill at most sum n_i slots (the synchronization's own bound); the dummies fill
+    # the rest of the n: a universe beyond the fitted graphs' total (a small fit, placed for
+    # larger graphs) was refused
+    d = n if real is None else min(n, int(real.sum()))
+    res = synchronize_permutations(observed, n_universe=d, method=method,
                                    sizes=np.full(N, n, dtype=np.int64) if real is None else real,
                                    disconnected="raise",
                                    keep_embedding=bool(keep_embedding), max_iter=max_iter,

@@ -238,8 +238,11 @@ def _as_mask(x, name: str) -> np.ndarray:
 def brenner_focus(image, mask=None) -> float:
     """Brenner focus measure: mean of ``max(|I(x+2,y) - I(x,y)|, |I(x,y+2) - I(x,y)|)^2``.
 
-    Images are converted to grey levels in [0, 1] (uint8 divided by 255). Sharp (well aligned)
-    mean warped images score higher than blurred ones.
+    Color images are averaged over their channels. Unsigned integer images are brought to grey
+    levels in [0, 1] by their type's maximum (uint8 by 255, the 16-bit files
+    :func:`~transync.datasets.read_image` returns by 65535), so that one picture scores the
+    same at any bit depth; float, signed and boolean images are taken as they are. Sharp (well
+    aligned) mean warped images score higher than blurred ones.
 
     Parameters
     ----------
@@ -276,13 +279,12 @@ def brenner_focus(image, mask=None) -> float:
     if img.ndim not in (2, 3) or img.size == 0 or (img.ndim == 3 and img.shape[2] not in (1, 3, 4)):
         raise ValueError("`image` must be a non-empty 2-D grey or 3-D color image (1, 3 or 4 "
                          f"channels), got shape {img.shape}")
+    top = float(np.iinfo(img.dtype).max) if img.dtype.kind == "u" else 1.0
+    img = img.astype(float)
     if img.ndim == 3:
-        img = img.mean(axis=2) if img.dtype != np.uint8 else img.astype(float).mean(axis=2)
-        if np.asarray(image).dtype == np.uint8:
-            img = img / 255.0
-    elif img.dtype == np.uint8:
-        img = img / 255.0
-    img = np.asarray(img, dtype=float)
+        img = img.mean(axis=2)
+    if top != 1.0:
+        img = img / top
     if img.ndim != 2:
         raise ValueError(f"`image` must be a 2-D grey or 3-D color image, got shape {img.shape}")
     dh = np.zeros_like(img)

@@ -193,6 +193,10 @@ def affinity_score(affinity, assignment, *, n2: int | None = None,
             raise TypeError(f"`affinity` must be an Affinity (with .score and an int .n2) or a "
                             f"matrix, got {type(affinity).__name__} without .n2")
         n2 = int(affinity.n2)
+        n1 = getattr(affinity, "n1", None)
+        if isinstance(n1, (int, np.integer)) and a.shape[0] != n1:
+            raise ValueError(f"`assignment` must have one entry per node of the affinity's "
+                             f"first graph ({int(n1)}), got {a.shape[0]}")
         score = affinity.score
     else:
         if n2 is None:

@@ -351,3 +351,14 @@ def test_universe_estimated_on_a_sparse_view_graph(kw):
     np.testing.assert_array_equal(res.assignments, told.assignments)
     m = multimatching_precision_recall(res, c.ground_truth, pairs=np.asarray(pairs))
     assert m["f1"] > 0.9
+
+
+def test_n_universe_without_a_synchronization_is_refused_unless_it_pads():
+    # partial="universe" with sync=None validated n_universe, then ignored it (no universe)
+    c = make_subgraph_collection(n_graphs=4, n_universe=8, rng=1)
+    with pytest.raises(ValueError, match=r"`n_universe` sizes the synchronized universe; "
+                                         r".*sync=None.* synchronizes nothing, got n_universe=8"):
+        match_collection(c.graphs, sync=None, n_universe=8, progress=False)
+    r = match_collection(c.graphs, sync=None, n_universe=8, partial="dummies", progress=False)
+    assert all(np.asarray(r.pairwise(0, j)).shape == (c.sizes[0],) for j in (1, 2, 3))
+    assert match_collection(c.graphs, sync=None, progress=False).matching is None

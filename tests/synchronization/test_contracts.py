@@ -262,8 +262,30 @@ def test_universe_is_bounded_by_the_number_of_nodes():
     res = synchronize_permutations(pw, n_universe=6)       # the largest legal universe
     assert res.n_universe == 6
     # disconnected: a component never gets more slots than it has nodes
-    res = synchronize_permutations(pw, n_universe=6, sizes=np.array([3, 3, 2]))
+    res = synchronize_permutations(pw, n_universe=8, sizes=np.array([3, 3, 2]))
     assert res.n_universe == 8 and res.labels[2].tolist() == [6, 7]
+
+
+@pytest.mark.parametrize("method", ["spectral", "orthogonal", "matcheig"])
+def test_a_given_universe_is_the_results_or_an_error_on_a_disconnected_view_graph(method):
+    # the components' universes were returned side by side, larger than the given size (4 slots
+    # for n_universe=2, 6 for 3), and nothing said so
+    for pw, kw, total in [({(0, 1): np.array([0, 1]), (2, 3): np.array([1, 0])}, {}, 4),
+                          ({(0, 1): np.array([0, 1])}, {"sizes": [2, 2, 3]}, 5)]:
+        d = total - 2
+        with pytest.raises(ValueError, match=rf"`n_universe`={d} cannot hold the 2 groups of "
+                                             r"objects that no observed pair links \(\{0, 1\}, "
+                                             rf"\{{2.*own universe slots, {total} in all"):
+            synchronize_permutations(pw, n_universe=d, method=method, **kw)
+        res = synchronize_permutations(pw, n_universe=total, method=method, **kw)
+        assert res.n_universe == total
+        assert synchronize_permutations(pw, method=method, **kw).n_universe == total
+        # room to spare: the components at their own sizes, the last slot empty
+        res = synchronize_permutations(pw, n_universe=total + 1, method=method, **kw)
+        assert res.n_universe == total + 1
+        assert np.all(res.pairwise(0, 1) == pw[(0, 1)])
+        used = np.concatenate([lab[lab >= 0] for lab in res.labels])
+        assert np.unique(used).size == total and used.max() < total + 1
 
 
 def test_degenerate_but_legal_permutation_inputs():

@@ -284,6 +284,12 @@ default="auto"
         raise ValueError("`executor` spreads independent pairwise work (mode='offline', CAO); "
                          "the online solvers run all pairs in lock-step in this process: pass "
                          f"executor=None or mode='offline', got executor={executor!r}")
+    if sync is None and n_universe is not None and layout.kind == "universe":
+        # validated, then unused: the result had no universe (with partial="dummies" it sizes
+        # the padding, and is used)
+        raise ValueError(f"`n_universe` sizes the synchronized universe; {asked} synchronizes "
+                         f"nothing, got n_universe={n_universe!r} (partial='dummies' pads every "
+                         "graph to it)")
     refine = check_bool(refine, "refine")
     progress = check_bool(progress, "progress")
     options = _check_options(options, "rrwm" if solver in CAO_VARIANTS else solver)

@@ -767,7 +767,10 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
     every connected component is synchronized on its own, into its own universe (of size
     ``n_universe``, or its number of nodes when that is smaller), and the ids are
     offset so that different components never share a slot (``info["components"]``); maps
-    between components are empty (all ``-1``). With
+    between components are empty (all ``-1``). A given ``n_universe`` is the size of the
+    result: when the components at that size need more slots in all, each is synchronized at
+    its own estimated size and the slots left over stay empty; when those too are more than
+    ``n_universe`` in all, a ``ValueError`` says so. With
     ``"raise"`` a :class:`~transync.exceptions.DegenerateInputError` names the components.
 
     Parameters
@@ -861,6 +864,22 @@ def synchronize_permutations(pairwise, *, n_universe: int | None = None,
     info["components"] = comps
     labels, d_total, n_iter, converged, comp_info, embeddings = _synchronize_components(
         stk, comps, n_universe, opts, gen)
+    if n_universe is not None and d_total > n_universe:
+        # the components' universes are kept apart, each of up to n_universe slots: too many
+        # in all (they were returned, e.g. 4 slots for n_universe=2, and nothing said so).
+        # Each component at its own estimated size instead, the slots left over empty:
+        labels, d_own, n_iter, converged, comp_info, embeddings = _synchronize_components(
+            stk, comps, None, opts, gen)
+        d_total = max(d_own, n_universe)
+    if n_universe is not None and d_total > n_universe:
+        groups = ", ".join("{" + ", ".join(map(str, c[:4].tolist())) + (", ..." if c.size > 4
+                                                                          else "") + "}"
+                           for c in comps[:3]) + (", ..." if len(comps) > 3 else "")
+        raise ValueError(
+            f"`n_universe`={n_universe} cannot hold the {len(comps)} groups of objects that no "
+            f"observed pair links ({groups}): with disconnected='separate' each group gets its "
+            f"own universe slots, {d_total} in all. Observe a pair between the groups, leave "
+            "`n_universe` unset, or synchronize each group on its own")
     if not converged and method != "orthogonal":     # (orthogonal warns about its sweeps)
         # the matrix-free eigensolver stopped short: on a chain of 1001 3-node objects, exactly
         # consistent input came back with 12 of 1000 maps changed, and nothing said so

@@ -570,3 +570,27 @@ def test_default_falls_back_when_the_points_are_refused():
     assert res.n_universe == off.n_universe
     with pytest.raises(ValueError, match=r"`verify='affine'` cannot check the matches"):
         match_collection(graphs, verify="affine", rng=0, progress=False)
+
+
+@pytest.mark.parametrize("model", ["affine", "homography", ("affine", "homography")])
+def test_a_mirroring_transform_does_not_verify_unless_asked(model):
+    # two views are not mirror images: a matcher's mirrored answer (lengths are the same in a
+    # mirror) was fitted by a mirroring affine map and "verified" with no right match
+    rng = np.random.default_rng(3)
+    p1 = rng.random((14, 2))
+    mirror = np.array([[-1.0, 0.0], [0.0, 1.0]])
+    p2 = p1 @ mirror.T + [3.0, 1.0]
+    ident = np.arange(14)
+    res = verify_assignment(p1, p2, ident, model=model, rng=0)
+    assert not res.verified and np.all(res.assignment == -1)
+    ok = verify_assignment(p1, p2, ident, model=model, reflections=True, rng=0)
+    assert ok.verified and ok.assignment.tolist() == ident.tolist()
+    assert np.linalg.det(ok.transform) < 0
+    # the same points turned instead of mirrored verify either way
+    c, s = np.cos(0.7), np.sin(0.7)
+    turned = p1 @ np.array([[c, -s], [s, c]]).T + [3.0, 1.0]
+    for refl in (False, True):
+        r = verify_assignment(p1, turned, ident, model=model, reflections=refl, rng=0)
+        assert r.verified and r.assignment.tolist() == ident.tolist()
+    with pytest.raises(TypeError, match="reflections"):
+        verify_assignment(p1, p2, ident, reflections="no")

@@ -33,7 +33,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .._validation import as_generator, check_array, check_choices, check_int, check_positive
+from .._validation import (as_generator, check_array, check_bool, check_choices, check_int,
+                           check_positive)
 from ..permutations import UNMATCHED, check_assignment, solve_lap
 
 __all__ = ["VERIFY_MODELS", "VerificationResult", "verify_assignment"]
@@ -204,7 +205,8 @@ def _guided(H: np.ndarray, x1: np.ndarray, x2: np.ndarray, gate: float) -> np.nd
 
 def verify_assignment(points1, points2, assignment, *, model="affine",
                       threshold: float = DEFAULT_THRESHOLD, min_inliers: int | None = None,
-                      max_rounds: int = 5, rng=None) -> VerificationResult:
+                      max_rounds: int = 5, reflections: bool = False,
+                      rng=None) -> VerificationResult:
     """Keep the matches one plane transform supports; recover the ones it predicts.
 
     Stages: a RANSAC fit of ``model`` to the putative matches ``u -> assignment[u]``
@@ -248,6 +250,12 @@ def verify_assignment(points1, points2, assignment, *, model="affine",
         rarely wrong. Pairs that share fewer nodes need a lower value.
     max_rounds : int, default=5
         Guided-matching rounds after the robust fit.
+    reflections : bool, default=False
+        Accept a transform that mirrors the plane (``det < 0``: an affine map or homography
+        with a reflection; a similarity never has one). Two views of a scene are not mirror
+        images of each other, and a length-based matcher's mirrored answer can be fitted by a
+        mirroring affine map: on ten to thirteen random points, 7 supported matches, none of
+        them right. Such a fit fails the verification unless this is True.
     rng : None, int or numpy.random.Generator
         Orders the putative matches before the robust fit, and with them OpenCV's RANSAC
         samples: the same ``rng``, the same result.
@@ -289,6 +297,7 @@ def verify_assignment(points1, points2, assignment, *, model="affine",
         min_inliers = check_int(min_inliers, "min_inliers",
                                 minimum=max(VERIFY_MODELS[m] for m in models))
     max_rounds = check_int(max_rounds, "max_rounds", minimum=1)
+    reflections = check_bool(reflections, "reflections")
     gen = as_generator(rng)
 
     # Normalized coordinates: the fits and the gate do not depend on the units
@@ -307,7 +316,8 @@ def verify_assignment(points1, points2, assignment, *, model="affine",
         raise ValueError(f"`threshold` times the spacing of `points2` must be a finite "
                          f"distance, got {threshold:g} x {1 / T2[0, 0]:g}")
     if len(models) == 1:
-        res = _verify(models[0], a, x1, x2, T1, T2, g, gate, min_inliers, max_rounds, gen)
+        res = _verify(models[0], a, x1, x2, T1, T2, g, gate, min_inliers, max_rounds, gen,
+                      reflections)
         return replace(res, support={res.model: res.n_inliers})
     # every candidate from the same generator state, which is left where the first model's
     # verification leaves it: the first candidate is exactly the first model's own call
@@ -315,7 +325,8 @@ def verify_assignment(points1, points2, assignment, *, model="affine",
     best, support = None, {}
     for m in models:
         gen.bit_generator.state = start
-        res = _verify(m, a, x1, x2, T1, T2, g, gate, min_inliers, max_rounds, gen)
+        res = _verify(m, a, x1, x2, T1, T2, g, gate, min_inliers, max_rounds, gen,
+                      reflections)
         after_first = after_first or gen.bit_generator.state
         support[m] = res.n_inliers
         if best is None or (res.verified and (not best.verified
@@ -325,8 +336,15 @@ def verify_assignment(points1, points2, assignment, *, model="affine",
     return replace(best, support=support)
 
 
+def _keeps_orientation(H: np.ndarray) -> bool:
+    """Whether ``H`` maps the plane without mirroring it: ``det H > 0`` (for a homography the
+    sign of its Jacobian ``det H / w^3`` wherever points land in front, ``w > 0``)."""
+    return bool(np.linalg.det(H) > 0)
+
+
 def _verify(model: str, a, x1, x2, T1, T2, g: float, gate: float, min_inliers: int | None,
-            max_rounds: int, gen: np.random.Generator) -> VerificationResult:
+            max_rounds: int, gen: np.random.Generator,
+            reflections: bool = False) -> VerificationResult:
     """One model's verification of the putative map ``a`` (normalized points ``x1``, ``x2``,
     their normalizations ``T1``, ``T2``, the gate ``g`` normalized and ``gate`` in units)."""
     if min_inliers is None:
@@ -355,7 +373,7 @@ def _verify(model: str, a, x1, x2, T1, T2, g: float, gate: float, min_inliers: i
         H = refit
     rows = np.flatnonzero(current >= 0)
     H = _denormalize(H, T1, T2)
-    if len(rows) < min_inliers:
+    if len(rows) < min_inliers or (not reflections and not _keeps_orientation(H)):
         return VerificationResult(empty, H, 0, False, gate, model, rounds)
     return VerificationResult(current, H, int(len(rows)), True, gate, model, rounds)
 

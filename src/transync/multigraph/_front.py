@@ -117,7 +117,8 @@ def match_collection(graphs, *, solver: str = "rrwm", sync: str | None = "auto",
     :func:`~transync.matching.verify_assignment`: a RANSAC fit of one plane transform to its
     matches, guided matching within ``verify_threshold`` times the typical point spacing, a
     refit. Matches the geometry does not support are dropped (a pair that no transform
-    explains keeps no match), matches it predicts are added; the permutation synchronization
+    explains keeps no match, nor one explained only by a transform that mirrors the plane:
+    views are not mirror images), matches it predicts are added; the permutation synchronization
     (``"spectral"`` for ``sync="birkhoff"``: the verified maps are hard) then makes the
     verified maps consistent (with ``sync=None``, CAO's default, the verified maps are the
     output, not consistent). The quadratic objective prefers matching every node, so with

@@ -319,7 +319,8 @@ def test_missing_folder_and_files(tmp_path):
 
 @pytest.mark.parametrize("kind, text, line, message", [
     ("A", "1, 2\n2, x\n", 2, "expected one edge `i, j` (integers), got '2, x'"),
-    ("A", "1, 2\n2, 1\n1, 2, 3\n", 3, "expected one edge `i, j` (2 fields), found 3, got '1, 2, 3'"),
+    ("A", "1, 2\n2, 1\n1, 2, 3\n", 3,
+     "expected one edge `i, j` (2 fields), found 3, got '1, 2, 3'"),
     ("A", "1, 2\n7\n", 2, "expected one edge `i, j` (2 fields), found 1, got '7'"),
     ("A", "1,,2\n", 1, "expected one edge `i, j` (empty field), got '1,,2'"),
     ("A", "1, 2\n, 1, 2\n", 2, "expected one edge `i, j` (empty field), got ', 1, 2'"),

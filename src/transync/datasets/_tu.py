@@ -16,17 +16,17 @@ one scalar per edge, taken by the edge labels); :meth:`TUDataset.summary` lists 
 ``ignored_files`` when present.
 
 Reading is lenient about layout: fields may be separated by commas and/or blanks, blank lines
-after the last data line are ignored, Windows line ends are accepted, and an undirected edge given in one direction only is
-symmetrized. Self-loops (``i, i``) are dropped (a :class:`Graph` has a zero diagonal) and counted
-in :meth:`TUDataset.summary`; the sets shipped in the data home have none. Nodes that appear in no
-edge (isolated nodes, and one-node graphs) are kept.
+after the last data line are ignored, Windows line ends are accepted, and an undirected edge
+given in one direction only is symmetrized. Self-loops (``i, i``) are dropped (a :class:`Graph`
+has a zero diagonal) and counted in :meth:`TUDataset.summary`; the sets shipped in the data
+home have none. Nodes that appear in no edge (isolated nodes, and one-node graphs) are kept.
 
 Every error on malformed input names the file, and the line for a bad line (``FileNotFoundError``
 for a missing folder or file): a line without the expected fields, a number that does not parse,
 a blank line among the data lines (a lost value: skipping it shifted every later line, and
-the error, if any, named another file), a node id out of range, an edge joining two graphs, a decreasing or non-contiguous graph
-indicator, files whose line counts disagree, and an undirected edge whose two directions carry
-different labels.
+the error, if any, named another file), a node id out of range, an edge joining two graphs, a
+decreasing or non-contiguous graph indicator, files whose line counts disagree, and an
+undirected edge whose two directions carry different labels.
 """
 
 from __future__ import annotations

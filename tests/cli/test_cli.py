@@ -451,6 +451,19 @@ def test_cli_homography(tmp_path, scene, capsys):
         "mask_000.png", "mask_001.png", "notes.txt"]
     assert "- removed 2 mask file(s) of an earlier run" in capsys.readouterr().out
     assert "mask_002.png, mask_003.png" in (out / "report.md").read_text()
+    # a file where the masks folder goes: refused before anything moves (the new
+    # homographies.json had replaced the earlier one, then the masks failed)
+    blocked = tmp_path / "blocked"
+    blocked.mkdir()
+    (blocked / "homographies.json").write_text("earlier")
+    (blocked / "masks").write_text("a file")
+    assert main(["homography", *paths[:2], "--out", str(blocked), "--features", "800",
+                 "--max-iter", "1", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert re.search(r"cannot write .*mask_000\.png: .*blocked/masks exists and is not a "
+                     r"folder", err), err
+    assert (blocked / "homographies.json").read_text() == "earlier"
+    assert sorted(p.name for p in blocked.iterdir()) == ["homographies.json", "masks"]
 
 
 def test_stale_masks_are_only_names_the_command_writes(tmp_path):

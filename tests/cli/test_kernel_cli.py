@@ -86,6 +86,34 @@ def test_a_failed_write_leaves_an_earlier_runs_files_unmixed(toy, tmp_path, caps
     assert sorted(p.name for p in out.iterdir()) == ["gram.npz", "report.json", "report.md"]
 
 
+def test_an_interrupt_while_the_files_move_is_held_to_the_end(toy, tmp_path, capsys,
+                                                              monkeypatch):
+    # a SIGTERM between two renames left this run's gram.npz beside an earlier run's reports,
+    # and said "nothing was written"
+    import os
+    import signal
+
+    out = tmp_path / "out"
+    assert main(["kernel", str(toy), "--out", str(out), *FAST]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    replace, calls = os.replace, []
+
+    def interrupted_replace(src, dst):
+        replace(src, dst)
+        calls.append(dst)
+        if len(calls) == 1:
+            os.kill(os.getpid(), signal.SIGINT)      # Ctrl-C after the first of three moves
+
+    monkeypatch.setattr(os, "replace", interrupted_replace)
+    capsys.readouterr()
+    assert main(["kernel", str(toy), "--out", str(out), *FAST, "--kernel", "gaussian"]) == 130
+    err = capsys.readouterr().err
+    assert err.strip() == f"transync: interrupted; the results were written to {out}", err
+    assert len(calls) == 3 and sorted(p.name for p in out.iterdir()) == sorted(before)
+    assert json.loads((out / "report.json").read_text())["params"]["kernel"] == "gaussian"
+    assert all((out / name).read_bytes() != data for name, data in before.items())
+
+
 def test_dataset_by_name_in_the_data_home(toy, tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("TRANSYNC_DATA", str(tmp_path))
     out = tmp_path / "by-name"

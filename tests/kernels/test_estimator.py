@@ -381,6 +381,15 @@ def test_universe_beyond_the_fitted_graphs_total(kernel, sync, rng):
     K = tak.transform([_random_graph(8, 0.5, rng), _relabel(graphs[1], rng)])
     assert K.shape == (2, 2) and np.all(np.isfinite(K))
     np.testing.assert_allclose(K[1], tak.gram_[1], atol=1e-9)
+    # the relaxed embedding: the slots real nodes can take, 12 of 14 (documented)
+    A = np.tile(np.arange(14), (4, 1))
+    pairs = np.array([[0, 1], [0, 2], [1, 2], [2, 3]])
+    labels = [np.zeros(3, int)] * 2 + [np.array([0, 1, 0]), np.zeros(3, int)]
+    al = synchronize_alignments(A, pairs, 4, n=14, sizes=[3] * 4, node_labels=labels,
+                                method=sync, keep_embedding=True)
+    assert al.embedding.shape == (4, 14, 12) and np.all(np.isfinite(al.embedding))
+    norms = np.linalg.norm(al.embedding, axis=2)
+    assert np.all(norms[:, :3] > 0) and np.all(norms[:, 3:] == 0)
     # synchronize_alignments: two one-node graphs in a universe of 5
     al = synchronize_alignments(np.array([[0, 1, 2, 3, 4]]), np.array([[0, 1]]), 2, n=5,
                                 sizes=[1, 1])

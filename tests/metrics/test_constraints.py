@@ -334,3 +334,14 @@ def test_soft_values_and_sizes_beyond_float_are_refused():
                               sizes=[1e300, 2, 2])
     with pytest.raises(ValueError, match=r"`tol` must be finite, got an integer of about 10\^331"):
         constraint_violations({(0, 1): a([0, 1])}, tol=2**1100)
+
+
+def test_maps_into_an_empty_universe_and_no_triples():
+    # (n, 0) maps took the closed form's argmax of an empty row (a raw numpy error)
+    r = constraint_violations([np.zeros((2, 0)), np.zeros((1, 0)), np.zeros((2, 0))])
+    assert r.info["transitivity_mode"] == "exact" and r.info["n_object_triples"] == 3
+    assert r.transitivity.n_constraints == 3 * 2 * 1 * 2 and r.transitivity.cvr == 0.0
+    assert r.transitivity.magnitude == 0.0
+    # two objects: no triple; the sums are floats, as with triples
+    t = constraint_violations({(0, 1): np.array([[0.5, 0.5]])}).transitivity
+    assert t.n_constraints == 0 and type(t.violation) is float and type(t.magnitude) is float

@@ -20,7 +20,7 @@ import sys
 import traceback
 import warnings
 
-from ._common import CLIError
+from ._common import CLIError, signal_handlers
 
 __all__ = ["CLIError", "build_parser", "main"]
 
@@ -183,20 +183,8 @@ def _terminate_as_interrupt():
     def interrupt(signum, frame):
         raise KeyboardInterrupt(signal.Signals(signum).name)
 
-    previous = {}
-    for name in ("SIGTERM", "SIGHUP"):
-        sig = getattr(signal, name, None)
-        if sig is None:
-            continue
-        try:
-            previous[sig] = signal.signal(sig, interrupt)
-        except (ValueError, OSError):      # not the main thread: leave the signals alone
-            pass
-    try:
+    with signal_handlers(("SIGTERM", "SIGHUP"), interrupt):
         yield
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:

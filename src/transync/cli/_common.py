@@ -197,14 +197,54 @@ def check_output_folder(path) -> Path:
 
 
 @contextlib.contextmanager
-def new_output_folder(path):
+def signal_handlers(names, handler):
+    """``handler`` for the signals ``names`` (those the platform has) while the block runs,
+    the earlier handlers restored after it; outside the main thread nothing changes."""
+    import signal
+
+    previous = {}
+    for name in names:
+        sig = getattr(signal, name, None)
+        if sig is None:                                 # pragma: no cover - Windows: SIGHUP
+            continue
+        try:
+            previous[sig] = signal.signal(sig, handler)
+        except (ValueError, OSError):      # not the main thread: leave the signals alone
+            pass
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """Ctrl-C, SIGTERM and SIGHUP held back while the block runs and delivered after it, to
+    the handlers that were in place: a few renames are not cut in half. (Python runs signal
+    handlers in the main thread whichever thread the signal reached, so recording them there
+    works where blocking the main thread's signal mask would not: the BLAS and worker threads
+    would take the signal.)"""
+    import signal
+
+    pending: list = []
+    with signal_handlers(("SIGINT", "SIGTERM", "SIGHUP"),
+                         lambda signum, frame: pending.append(signum)):
+        yield
+    if pending:
+        signal.raise_signal(pending[0])
+
+
+@contextlib.contextmanager
+def new_output_folder(path, on_written=None):
     """Create ``path`` and write a command's files into it, all of them or none.
 
     Yields a hidden staging folder inside ``path`` to write into. When the block finishes,
     every file in it is moved to the same name under ``path`` (replacing an earlier run's
-    file); when the block fails, the staging folder is removed, so a folder that already
-    existed keeps an earlier run's files unmixed with this run's, and a folder this call
-    created is removed again.
+    file), with interrupts held back until the last move (``on_written()``, if given, runs
+    then, before an interrupt held back is delivered); when the block fails, the staging
+    folder is removed, so a folder that already existed keeps an earlier run's files unmixed
+    with this run's, and a folder this call created is removed again.
 
     Examples
     --------
@@ -232,6 +272,7 @@ def new_output_folder(path):
         stage = Path(tempfile.mkdtemp(prefix=".transync-staging-", dir=out))
     except OSError as exc:
         raise CLIError(f"cannot create the output folder {out}: {exc.strerror or exc}") from exc
+    moved = False
     try:
         yield stage
         files = [src for src in sorted(stage.rglob("*")) if src.is_file()]
@@ -239,15 +280,23 @@ def new_output_folder(path):
             dst = out / src.relative_to(stage)
             if dst.exists() and not dst.is_file():
                 raise CLIError(f"cannot write {dst}: it exists and is not a file")
-        try:
-            for src in files:
-                dst = out / src.relative_to(stage)
-                dst.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(src, dst)
-        except OSError as exc:
-            raise CLIError(f"cannot write into {out}: {exc.strerror or exc}") from exc
+            for parent in dst.relative_to(out).parents[:-1]:        # the folders on the way
+                if (out / parent).exists() and not (out / parent).is_dir():
+                    raise CLIError(f"cannot write {dst}: {out / parent} exists and is not a "
+                                   "folder")
+        with _signals_deferred():
+            try:
+                for src in files:
+                    dst = out / src.relative_to(stage)
+                    dst.parent.mkdir(parents=True, exist_ok=True)
+                    os.replace(src, dst)
+            except OSError as exc:
+                raise CLIError(f"cannot write into {out}: {exc.strerror or exc}") from exc
+            moved = True
+            if on_written is not None:
+                on_written()
     except BaseException:
-        if created:
+        if created and not moved:       # an interrupt held back to the end: the files stay
             shutil.rmtree(out, ignore_errors=True)
         raise
     finally:

@@ -101,7 +101,10 @@ def _cmd_kernel(args) -> int:
                 "tolerance": PSD_TOL},
         "seconds": {"gram": fit_seconds, "cv": cv_seconds},
     }
-    with new_output_folder(args.out) as stage:      # all three files or none
+    def written():
+        args.interrupt_hint = f"the results were written to {args.out}"
+
+    with new_output_folder(args.out, on_written=written) as stage:   # all three files or none
         np.savez(stage / "gram.npz", K=K, y=y, kept=np.asarray(keep),
                  params=np.str_(json.dumps(params)))
         (stage / "report.json").write_text(json.dumps(report, indent=2) + "\n")

@@ -74,10 +74,13 @@ class Alignment:
         ``labels[i, u]``: the slot of padded node ``u`` of graph ``i`` (real nodes first, dummies
         after); every row is a permutation of ``range(n)``. The transitive pairwise maps are
         ``u -> v`` with ``labels[j, v] == labels[i, u]``.
-    embedding : ndarray of shape (N, n, n) or None
+    embedding : ndarray of shape (N, n, d) or None
         The relaxed solution ``Q_i`` before rounding (orthogonal: the polar end point, rows
         orthonormal; spectral: the leading eigenvectors of the normalized block matrix), kept
-        when asked for (``keep_embedding=True``); ``Q_i Q_j^T`` approximates ``P_ij``.
+        when asked for (``keep_embedding=True``); ``Q_i Q_j^T`` approximates ``P_ij``. ``d =
+        n``, except for real-node synchronizations (``sizes``) of a universe larger than the
+        graphs' total node count: ``d = sum n_i`` columns, the slots real nodes can take (the
+        dummies' rows are zero).
     objective : float
         Number of observed pairwise correspondences that the transitive maps keep.
     info : dict
@@ -510,7 +513,7 @@ def synchronize_alignments(assignments, pairs, n_graphs: int, *, n: int,
     else:
         labels = _fill_dummies(res.labels, n)
         if emb is not None:
-            full = np.zeros((N, n, emb.shape[1]))
+            full = np.zeros((N, n, emb.shape[1]))         # d = min(n, sum n_i) columns
             is_real = np.arange(n)[None, :] < real[:, None]
             full[is_real] = emb                                 # real rows, graph order
             emb = _fill_unreached_rows(full, labels, is_real)
@@ -524,7 +527,8 @@ def _fill_unreached_rows(emb: np.ndarray, labels: np.ndarray, is_real: np.ndarra
     at the median norm of the reached rows."""
     norms = np.linalg.norm(emb, axis=2)
     empty = is_real & (norms == 0)
-    if not empty.any() or emb.shape[2] <= labels.max():
+    # the real nodes' slots (the dummies' lie beyond the d columns when n > sum n_i)
+    if not empty.any() or emb.shape[2] <= labels[is_real].max():
         return emb
     reached = norms[is_real & (norms > 0)]
     scale = float(np.median(reached)) if reached.size else 1.0

@@ -341,7 +341,8 @@ def _parse_absolute(X, tol: float) -> tuple[_Pairs, ConstraintStats]:
     cols = np.stack([M.sum(0) for M in mats])                        # (N, d)
     cap = _stats_from_values(cols, tol)
     if all(_is_partial_permutation(M) for M in mats):   # labels: no pairwise block needed
-        labels = [np.where(M.any(1), M.argmax(1), -1) for M in mats]
+        labels = [np.where(M.any(1), M.argmax(1), -1) if M.shape[1] else
+                  np.full(M.shape[0], -1, np.int64) for M in mats]      # d = 0: no slot
         return _Labels(sizes, labels, d), cap
     n_max = int(sizes.max())
     _check_work(N * (N - 1) // 2 * n_max * n_max, "pairwise blocks X_i X_j^T")
@@ -622,8 +623,8 @@ def _summed(parts) -> ConstraintStats:
     """One :class:`ConstraintStats` of chunks' exhaustive statistics."""
     parts = list(parts)
     return ConstraintStats(sum(t.n_constraints for t in parts), sum(t.n_evaluated for t in parts),
-                           sum(t.n_violated for t in parts), sum(t.violation for t in parts),
-                           sum(t.magnitude for t in parts))
+                           sum(t.n_violated for t in parts), sum((t.violation for t in parts), 0.0),
+                           sum((t.magnitude for t in parts), 0.0))
 
 
 def _transitivity(p: _Pairs, max_triples: int, tol: float, rng):

@@ -208,7 +208,7 @@ def test_cycle_inconsistency_arrays_scales_past_ten_thousand_objects():
     pairs = np.column_stack([np.arange(N - 1), np.arange(1, N)])
     maps = np.tile([1, 0], (N - 1, 1))
     rep = cycle_inconsistency_arrays(pairs, maps, np.full(N, 2))
-    assert rep["n_triangles"] == 0 and rep["sampled"]
+    assert rep["n_triangles"] == 0 and not rep["sampled"]       # a chain has no triangle
     tri = np.array([[0, 1], [1, 2], [0, 2]])
     rep = cycle_inconsistency_arrays(tri, np.array([[1, 0], [1, 0], [1, 0]]), [2, 2, 2])
     assert rep == {"n_triangles": 1, "inconsistent_triangles": 1.0, "cycle_error": 1.0,
@@ -291,3 +291,28 @@ def test_none_is_not_an_assignment():
                                         "NoneType"):
         check_assignment(None)
 
+
+
+def test_cycle_inconsistency_finds_the_triangles_of_a_sparse_view_graph():
+    # triples were drawn among all C(N, 3): one inconsistent triangle beside a chain of 200
+    # objects was never hit, and {"n_triangles": 0, "cycle_error": 0.0} read as consistent
+    from transync.permutations import cycle_inconsistency, cycle_inconsistency_arrays
+
+    d = {(0, 1): np.array([1, 0]), (1, 2): np.array([1, 0]), (0, 2): np.array([1, 0])}
+    d.update({(g, g + 1): np.array([0, 1]) for g in range(2, 199)})
+    want = {"n_triangles": 1, "inconsistent_triangles": 1.0, "cycle_error": 1.0,
+            "sampled": False}
+    assert cycle_inconsistency(d, rng=0) == want
+    assert cycle_inconsistency_arrays([[0, 1], [1, 2], [0, 2]], [[1, 0]] * 3, [2] * 200,
+                                      rng=0) == want
+    # above max_triangles: a uniform sample of the triangles themselves, every one checked
+    rng = np.random.default_rng(0)
+    N, n = 30, 4
+    iu = np.array(np.triu_indices(N, 1)).T
+    keep = iu[rng.random(len(iu)) < 0.5]
+    maps = np.array([rng.permutation(n) for _ in range(len(keep))])
+    full = cycle_inconsistency_arrays(keep, maps, [n] * N)
+    assert not full["sampled"] and full["n_triangles"] > 300
+    part = cycle_inconsistency_arrays(keep, maps, [n] * N, max_triangles=200, rng=1)
+    assert part["sampled"] and part["n_triangles"] == 200
+    assert abs(part["cycle_error"] - full["cycle_error"]) < 0.1

@@ -66,6 +66,9 @@ UNMATCHED = -1
 MAX_NODES = 10**8      # largest object (and dense matching matrix) the converters build
 _MAX_MATRIX_SIDE = 20000   # largest MultiMatching.to_matrix() whatever max_size (3.2 GB)
 _MAX_TRIANGLES = 10**8  # most triangles cycle_inconsistency checks (10**9 ran for hours)
+#: candidate triples listed in full (every triangle found, then subsampled to max_triangles);
+#: above, candidates are drawn, this many at most
+_CANDIDATE_LIMIT = 4_000_000
 
 
 def first_invalid_assignment(flat, lengths) -> int | None:
@@ -550,18 +553,22 @@ def cycle_inconsistency(pairwise: Mapping[tuple[int, int], np.ndarray], *,
     off universe labels are consistent (error 0); for full permutations the three orientations
     count the same nodes, so this is the plain comparison.
 
-    When there are more than ``max_triangles`` candidate triples, ``max_triangles`` triples
-    ``i < j < k`` are drawn uniformly at random (with ``rng``) and the observed ones among them
-    are checked; ``"sampled"`` says so. The work is vectorized over triangles (index gathers).
+    Triangles are found among the candidate triples ``i < j < k`` whose pairs ``(i, j)`` and
+    ``(i, k)`` are observed. Up to 4 million candidates are listed and every triangle among
+    them is found; when there are more than ``max_triangles`` triangles, a uniform sample of
+    ``max_triangles`` of them (with ``rng``) is checked. Above 4 million candidates, candidates
+    are drawn uniformly (4 million at most) until ``max_triangles`` triangles are found.
+    ``"sampled"`` says whether the triangles checked are a sample; ``n_triangles`` is 0 only
+    when no triangle was found. The work is vectorized over triangles (index gathers).
 
     Parameters
     ----------
     pairwise : dict {(i, j): assignment}
         Observed pairwise assignments.
     max_triangles : int, default=200000
-        Largest number of triples checked exhaustively.
+        Most triangles checked (a uniform sample of them beyond).
     rng : None, int or numpy.random.Generator, optional
-        Draws the triples when sampling.
+        Draws the triangles when sampling.
     sizes : sequence of int, optional
         Number of nodes of every object. Without it, an object's size is read off the maps: the
         length of its maps as a source, else its largest target + 1. A partial map given only
@@ -710,9 +717,10 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
     sizes : array_like of shape (N,), int
         Number of nodes of every object.
     max_triangles : int, default=200000
-        Largest number of triples checked exhaustively.
+        Most triangles checked (a uniform sample of them beyond; see
+        :func:`cycle_inconsistency`).
     rng : None, int or numpy.random.Generator, optional
-        Draws the triples when sampling.
+        Draws the triangles when sampling.
 
     Returns
     -------
@@ -769,34 +777,63 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
 
     # a column of -1 so that "unmatched" indexes to unmatched: ajk_pad[-1] = -1
     maps_pad = np.concatenate([maps, np.full((maps.shape[0], 1), UNMATCHED, maps.dtype)], 1)
-    total = n_obj * (n_obj - 1) * (n_obj - 2) // 6
-    sampled = total > max_triangles
+    # candidate triples: (i, j, k), i < j < k, with (i, j) and (i, k) observed -- every
+    # triangle is one of them (i its smallest object); drawn among all C(N, 3) triples
+    # instead, the triangles of a sparse view graph were almost never hit, and "0 triangles,
+    # error 0" read as consistent
+    uniq = np.unique(pairs, axis=0)                      # sorted by i, then j
+    heads, tails = uniq[:, 0], uniq[:, 1]
+    bounds = np.flatnonzero(np.diff(heads)) + 1
+    starts, stops = np.r_[0, bounds].astype(np.int64), np.r_[bounds, heads.size].astype(np.int64)
+    deg = stops - starts
+    per_head = deg * (deg - 1) // 2
+    n_cand = int(per_head.sum())
+    exhaustive = n_cand <= max(_CANDIDATE_LIMIT, max_triangles)
 
-    def _chunks():
-        if sampled:
-            left = max_triangles
-            while left > 0:
-                m = min(left, 100_000)
-                tri = np.sort(np.column_stack([gen.integers(0, n_obj, 3 * m) for _ in range(3)])
-                              .reshape(-1, 3)[:m * 3], axis=1)
-                tri = tri[(tri[:, 0] < tri[:, 1]) & (tri[:, 1] < tri[:, 2])][:m]
-                left -= m
-                yield tri
-        else:
-            uniq = np.unique(pairs, axis=0)                  # sorted by i, then j
-            heads, tails = uniq[:, 0], uniq[:, 1]
-            bounds = np.flatnonzero(np.diff(heads)) + 1
-            for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, heads.size]):
-                js = tails[lo:hi]
-                if js.size < 2:
-                    continue
-                jj, kk = np.triu_indices(js.size, 1)
-                yield np.column_stack([np.full(jj.size, heads[lo]), js[jj], js[kk]])
+    def _triangles(tri):
+        return tri[pid(tri[:, 1], tri[:, 2]) >= 0]
+
+    def _listed():
+        for lo, hi in zip(starts.tolist(), stops.tolist()):
+            js = tails[lo:hi]
+            if js.size < 2:
+                continue
+            jj, kk = np.triu_indices(js.size, 1)
+            yield np.column_stack([np.full(jj.size, heads[lo]), js[jj], js[kk]])
+
+    def _drawn():
+        """Candidates drawn uniformly (a head by its count, then two of its neighbours),
+        ``_CANDIDATE_LIMIT`` at most, until ``max_triangles`` triangles are found."""
+        weight = per_head / n_cand
+        found = drawn = 0
+        while found < max_triangles and drawn < _CANDIDATE_LIMIT:
+            m = min(100_000, _CANDIDATE_LIMIT - drawn)
+            h = gen.choice(per_head.size, m, p=weight)
+            a = gen.integers(0, deg[h])
+            b = gen.integers(0, deg[h] - 1)
+            b = b + (b >= a)
+            lo = starts[h]
+            j, k = tails[lo + np.minimum(a, b)], tails[lo + np.maximum(a, b)]
+            tri = _triangles(np.column_stack([heads[lo], j, k]))[:max_triangles - found]
+            drawn += m
+            found += tri.shape[0]
+            yield tri
+
+    if exhaustive:
+        listed = [_triangles(t) for t in _listed()]
+        tris = np.concatenate(listed) if listed else np.zeros((0, 3), np.int64)
+        sampled = tris.shape[0] > max_triangles
+        if sampled:                       # a uniform subset of the triangles
+            tris = tris[np.sort(gen.choice(tris.shape[0], max_triangles, replace=False))]
+        chunks = (tris[s:s + 100_000] for s in range(0, tris.shape[0], 100_000))
+    else:
+        sampled = True
+        chunks = _drawn()
 
     n_tri = 0
     bad = 0
     err = 0.0
-    for tri in _chunks():
+    for tri in chunks:
         qij = pid(tri[:, 0], tri[:, 1])
         qjk = pid(tri[:, 1], tri[:, 2])
         qik = pid(tri[:, 0], tri[:, 2])

@@ -142,3 +142,23 @@ def test_integers_beyond_float64_are_named():
                                          r"pixel each, got \(0.5, 3\)"):
         image_corners((0.5, 3))             # gave a corner at x = -0.5
     np.testing.assert_array_equal(translation(2, -1)[:2, 2], [2.0, -1.0])
+
+
+@pytest.mark.parametrize("n", [2, 3, 7])
+def test_hartley_normalization_of_coincident_points_is_a_translation(n):
+    # three copies of (0, 0.1): the mean's rounding residue (1e-17) was read as a spread and
+    # scaled by 1e17, the points sent to (0, -1.41)
+    from transync.geometry import hartley_normalization
+
+    T, x = hartley_normalization([[0.0, 0.1]] * n)
+    np.testing.assert_array_equal(T, [[1.0, 0.0, 0.0], [0.0, 1.0, -0.1], [0.0, 0.0, 1.0]])
+    np.testing.assert_array_equal(x, np.zeros((n, 2)))
+
+
+def test_normalization_matrix_of_a_vanishing_size_is_refused():
+    # (1e-310, 1e-310): 2 / 1e-310 overflowed to inf entries, returned silently
+    from transync.geometry import normalization_matrix
+
+    with pytest.raises(ValueError, match=r"`image_size` is too small to normalize"):
+        normalization_matrix((1e-310, 1e-310))
+    assert np.all(np.isfinite(normalization_matrix((1e-300, 1e-300))))

@@ -316,3 +316,13 @@ def test_cycle_inconsistency_finds_the_triangles_of_a_sparse_view_graph():
     part = cycle_inconsistency_arrays(keep, maps, [n] * N, max_triangles=200, rng=1)
     assert part["sampled"] and part["n_triangles"] == 200
     assert abs(part["cycle_error"] - full["cycle_error"]) < 0.1
+
+
+def test_named_refusals_of_other_and_dtype():
+    from transync.permutations import MultiMatching, assignment_to_matrix
+
+    m = MultiMatching([np.array([0]), np.array([0])])
+    with pytest.raises(TypeError, match=r"`other` must be a MultiMatching.*got NoneType"):
+        m.accuracy(None)                      # named `labels`, the constructor's argument
+    with pytest.raises(TypeError, match=r"`dtype` must be a numpy data type, got 'bogus'"):
+        assignment_to_matrix([0], 1, dtype="bogus")          # numpy's own message

@@ -138,7 +138,9 @@ _SCALE_LIMIT = 2.0 ** 100
 
 def rescale_homogeneous(A) -> np.ndarray:
     """Bring matrices defined up to scale (homographies) of huge or tiny entries to a safe
-    scale: largest entry in ``[0.5, 1)``, by a power of two (exact, no digit lost).
+    scale: largest entry in ``[0.5, 1)``, by a power of two (exact for every entry that stays a
+    normal number; an entry more than about 2**1022 times smaller than the largest becomes
+    subnormal and keeps fewer digits, or 0).
 
     Products and inverses of a homography like ``1e308 I`` overflow, and those of ``1e-320 I``
     (subnormal entries) overflow once inverted, though both are the identity map. Matrices whose
@@ -253,7 +255,11 @@ def normalization_matrix(image_size) -> np.ndarray:
     array([0., 0., 1.])
     """
     w, h = _image_size(image_size, "image_size")
-    s = 2.0 / max(w, h)
+    with np.errstate(over="ignore"):
+        s = 2.0 / max(w, h)
+    if not np.isfinite(s):          # (1e-310, 1e-310) gave inf entries
+        raise ValueError(f"`image_size` is too small to normalize: 2 / {max(w, h):.3g} "
+                         "overflows; give the size in pixels")
     return np.array([[s, 0.0, -s * w / 2], [0.0, s, -s * h / 2], [0.0, 0.0, 1.0]])
 
 
@@ -322,7 +328,9 @@ def hartley_normalization(points) -> tuple[np.ndarray, np.ndarray]:
     if not np.all(np.isfinite(pts)):
         raise ValueError("`points` must be finite, got NaN or infinite entries")
     with np.errstate(all="ignore"):
-        c = pts.mean(axis=0)
+        # coincident points: their own position (the mean of three 0.1s is not 0.1, and the
+        # residue of 1e-17 read as a spread scaled by 1e17)
+        c = pts[0] if np.all(pts == pts[0]) else pts.mean(axis=0)
         dev = pts - c
         d = float(np.hypot(dev[:, 0], dev[:, 1]).mean())   # no underflow of squares at 1e-165
         s = np.sqrt(2.0) / d if d > 0 else 1.0
@@ -331,7 +339,9 @@ def hartley_normalization(points) -> tuple[np.ndarray, np.ndarray]:
         spread_ok = s * s > 0
     if not (np.all(np.isfinite(T)) and np.all(np.isfinite(normalized)) and spread_ok):
         raise ValueError("`points` cannot be normalized in floating point: their centroid or "
-                         f"spread overflows (largest magnitude {np.abs(pts).max():.3g})")
+                         "spread is beyond the range a normalization can scale (largest "
+                         f"magnitude {np.abs(pts).max():.3g}, mean distance to the centroid "
+                         f"{d:.3g})")
     return T, normalized
 
 

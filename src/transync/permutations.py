@@ -340,6 +340,10 @@ def assignment_to_matrix(assignment, n2: int, *, dtype=float) -> np.ndarray:
            [0, 0]])
     """
     n2 = check_int(n2, "n2", minimum=0, maximum=MAX_NODES)
+    try:
+        dtype = np.dtype(dtype)
+    except TypeError:
+        raise TypeError(f"`dtype` must be a numpy data type, got {dtype!r}") from None
     a = check_assignment(assignment, n2=n2)
     if a.shape[0] * n2 > MAX_NODES:
         raise ValueError(f"`assignment` of length {a.shape[0]} and n2={n2} would build a matrix "
@@ -1119,6 +1123,10 @@ class MultiMatching:
             if not isinstance(other, MultiMatching) and isinstance(
                     getattr(other, "matching", None), MultiMatching):
                 other = other.matching
+            if other is None or isinstance(other, (str, bytes, int, float)):
+                raise TypeError("`other` must be a MultiMatching, its labels, a result with a "
+                                ".matching or a dict {(i, j): assignment}, got "
+                                f"{type(other).__name__}")
             other = MultiMatching.from_labels(other)
             if other.n_objects != self.n_objects or not np.array_equal(other.sizes, self.sizes):
                 raise ValueError(f"`other` must hold {self.n_objects} objects of sizes "

@@ -326,3 +326,13 @@ def test_named_refusals_of_other_and_dtype():
         m.accuracy(None)                      # named `labels`, the constructor's argument
     with pytest.raises(TypeError, match=r"`dtype` must be a numpy data type, got 'bogus'"):
         assignment_to_matrix([0], 1, dtype="bogus")          # numpy's own message
+
+
+def test_pair_rows_answers_only_for_its_own_pairs():
+    # (0, 3) with N = 2 has the key of (1, 1) and got its row; (0, 1.9) was read as (0, 1)
+    from transync.permutations import pair_rows
+
+    rows = pair_rows([[0, 1], [1, 1]], 2)
+    assert rows(np.array([0, 0, -1]), np.array([3, 1, 1])).tolist() == [-1, 0, -1]
+    with pytest.raises(TypeError, match=r"queries must be integer arrays"):
+        rows(np.array([0]), np.array([1.9]))

@@ -144,7 +144,8 @@ def pair_rows(pairs, n_objects: int):
     Returns
     -------
     callable
-        ``rows(a, b)`` for int arrays ``a``, ``b`` of one shape: the rows, ``-1`` where absent.
+        ``rows(a, b)`` for int arrays ``a``, ``b`` of one shape: the rows, ``-1`` where absent
+        (indices outside ``[0, N)`` included); non-integer queries raise ``TypeError``.
 
     Examples
     --------
@@ -167,13 +168,18 @@ def pair_rows(pairs, n_objects: int):
     keys, first = np.unique(pairs.min(1) * n + pairs.max(1), return_index=True)
 
     def rows(a, b) -> np.ndarray:
-        a = np.asarray(a, dtype=np.int64)
-        b = np.asarray(b, dtype=np.int64)
+        a, b = np.asarray(a), np.asarray(b)
+        if a.dtype.kind not in "iu" or b.dtype.kind not in "iu":   # 1.9 was read as 1
+            raise TypeError(f"pair_rows: the queries must be integer arrays, got dtypes "
+                            f"{a.dtype} and {b.dtype}")
+        a, b = a.astype(np.int64), b.astype(np.int64)
         k = np.minimum(a, b) * n + np.maximum(a, b)
         if not keys.size:
             return np.full(k.shape, -1, dtype=np.int64)
         pos = np.minimum(np.searchsorted(keys, k), keys.size - 1)
-        return np.where(keys[pos] == k, first[pos], -1)
+        # an index outside [0, N) has a key of another pair: absent, not that pair's row
+        inside = (np.minimum(a, b) >= 0) & (np.maximum(a, b) < n)
+        return np.where((keys[pos] == k) & inside, first[pos], -1)
 
     return rows
 

@@ -167,7 +167,9 @@ def evaluate_alignment(images, H_est, H_true, *, masks_true, reference=0, masks_
     ``brenner_ratio``: Brenner focus of the mean warped image with the estimated homographies
     over that with the true ones, both over the true plane masks and the pixels both cover
     (isolates the alignment). ``brenner_ratio_own_masks`` (with ``masks_est``): the estimated
-    homographies and masks against the true homographies and masks (the full output).
+    homographies and masks against the true homographies and masks (the full output). A ratio
+    is NaN when the true mean image has no texture over its region (focus 0: undefined; it
+    read 0.0, as a complete failure, for a perfect alignment).
     Views without an estimate count as 1000 px errors.
 
     Parameters
@@ -252,7 +254,7 @@ def evaluate_alignment(images, H_est, H_true, *, masks_true, reference=0, masks_
                                        reference=reference)
     region = (c_est > 0) & (c_true > 0)
     b_true = brenner_focus(np.nan_to_num(m_true) / 255.0, region)
-    out["brenner_ratio"] = brenner_focus(np.nan_to_num(m_est) / 255.0, region) / max(b_true, 1e-12)
+    out["brenner_ratio"] = _ratio(brenner_focus(np.nan_to_num(m_est) / 255.0, region), b_true)
     if masks_est is not None:
         s = segmentation_scores(np.concatenate([np.ravel(m) for m in masks_est]),
                                 np.concatenate([np.ravel(m) for m in masks_true]))
@@ -260,7 +262,12 @@ def evaluate_alignment(images, H_est, H_true, *, masks_true, reference=0, masks_
         m_own, c_own = mean_warped_image(gray, H_safe, size=size, masks=masks_est,
                                          reference=reference)
         reg = (c_own > 0) & (c_true > 0)
-        out["brenner_ratio_own_masks"] = (brenner_focus(np.nan_to_num(m_own) / 255.0, reg)
-                                          / max(brenner_focus(np.nan_to_num(m_true) / 255.0, reg),
-                                                1e-12))
+        out["brenner_ratio_own_masks"] = _ratio(
+            brenner_focus(np.nan_to_num(m_own) / 255.0, reg),
+            brenner_focus(np.nan_to_num(m_true) / 255.0, reg))
     return out
+
+
+def _ratio(focus_est: float, focus_true: float) -> float:
+    """Focus of the estimate over the truth's; NaN when the truth has none (no texture)."""
+    return focus_est / focus_true if focus_true > 0 else float("nan")

@@ -156,7 +156,8 @@ class PlaneAlignmentResult:
         Plane mask of every view (all True when ``segment=False``; all False for a view that
         could not be registered).
     mean_image : ndarray (h, w) float32
-        Mean of the plane pixels of all views warped into the reference view.
+        Mean of the plane pixels of all views warped into the reference view; NaN where no
+        view's plane pixels land (as :func:`mean_warped_image`).
     reference : int
     sparse_homographies : ndarray (N, 3, 3)
         The synchronized sparse estimate (before the dense step).

@@ -196,6 +196,10 @@ def load_images(images) -> list:
         images = list(images)
     if isinstance(images, (str, os.PathLike)):
         raise TypeError("`images` must be a list of images or paths, got a single path")
+    if isinstance(images, np.ndarray) and images.ndim == 2 and images.dtype != object:
+        # split into rows, it was refused as images[0] "of shape (W,)"
+        raise TypeError(f"`images` must be a list of images or paths, got a single "
+                        f"{images.shape} grey image; pass [image, ...]")
     try:
         images = list(images)
     except TypeError:
@@ -292,7 +296,7 @@ def sift_features(gray, *, n_features=4000) -> tuple[np.ndarray, np.ndarray]:
     gray = check_image(gray, "gray", min_size=1, grey=True)
     if gray.dtype != np.uint8:
         raise TypeError(f"`gray` must be a uint8 image (see to_gray), got dtype {gray.dtype}")
-    n_features = check_int(n_features, "n_features", minimum=0, maximum=10**6)
+    n_features = check_int(n_features, "n_features", minimum=1, maximum=10**6)
     sift = cv2.SIFT_create(nfeatures=n_features)
     kp, desc = sift.detectAndCompute(gray, None)
     if desc is None or not kp:
@@ -307,6 +311,14 @@ def margin_canvas(size, margin: float) -> tuple[tuple[int, int], tuple[int, int]
     w, h = size
     mx, my = int(round(margin * w)), int(round(margin * h))
     return (w + 2 * mx, h + 2 * my), (mx, my)
+
+
+def _check_ratio(ratio) -> float:
+    """Lowe's ratio, in (0, 1] (one check for both sparse passes)."""
+    ratio = check_positive(ratio, "ratio")
+    if ratio > 1:
+        raise ValueError(f"`ratio` must lie in (0, 1], got {ratio!r}")
+    return ratio
 
 
 def _ratio_matches(desc_i, desc_j, ratio, seed):
@@ -508,9 +520,7 @@ def estimate_pairwise_homographies(images, *, pairs=None, method="ransac", ratio
 
     t0 = time.perf_counter()
     method = check_choice(method, "method", tuple(_METHODS))
-    ratio = check_positive(ratio, "ratio")
-    if ratio > 1:
-        raise ValueError(f"`ratio` must lie in (0, 1], got {ratio!r}")
+    ratio = _check_ratio(ratio)
     threshold = check_positive(threshold, "threshold")
     max_iter = check_int(max_iter, "max_iter", minimum=1, maximum=MAX_RANSAC_ITER)
     confidence = check_positive(confidence, "confidence")
@@ -698,6 +708,7 @@ def estimate_rectified_pairwise(images, H_to_ref, pairs, *, reference=0, margin=
     threshold = check_positive(threshold, "threshold")
     min_inliers = check_int(min_inliers, "min_inliers", minimum=4)
     n_features = check_int(n_features, "n_features", minimum=1, maximum=10**6)
+    ratio = _check_ratio(ratio)          # the guided path used it unchecked (ratio="x", 5.0)
     pairs = _check_pairs(pairs, n)
     h0, w0 = gray[reference].shape
     size, (mx, my) = margin_canvas((w0, h0), margin)

@@ -579,20 +579,27 @@ def _draw_complete(sizes: np.ndarray, ids: np.ndarray, m: int, rng) -> np.ndarra
     return np.concatenate(out)[:m]
 
 
-def _draw_listed(p: _Pairs, m: int, rng) -> tuple[np.ndarray, int]:
-    """``m`` object triples drawn with probability ``n_i n_j n_k / total`` from the listed
-    triples, two passes over the chunks (memory of one chunk), and their count."""
+def _chunk_totals(p: _Pairs) -> tuple[list[int], int]:
+    """One pass over the listed triples: every chunk's number of constraints (``sum n_i n_j
+    n_k``) and the number of triples."""
     totals, count = [], 0
     for tri in _triple_chunks(p):
         totals.append(int(_triple_weights(p, tri).sum()))
         count += tri.shape[0]
+    return totals, count
+
+
+def _draw_listed(p: _Pairs, m: int, rng, totals: list[int]) -> np.ndarray:
+    """``m`` object triples drawn with probability ``n_i n_j n_k / total`` from the listed
+    triples (``totals`` per chunk, from :func:`_chunk_totals`), one pass over the chunks
+    (memory of one chunk)."""
     per_chunk = rng.multinomial(m, np.array(totals, np.float64) / sum(totals))
     out = []
     for tri, k in zip(_triple_chunks(p), per_chunk):
         if k:
             w = _triple_weights(p, tri).astype(np.float64)
             out.append(np.repeat(tri, rng.multinomial(k, w / w.sum()), axis=0))
-    return np.concatenate(out), count
+    return np.concatenate(out)
 
 
 def _transitivity_sampled(p: _Pairs, drawn: np.ndarray, total: int, tol: float,
@@ -628,31 +635,31 @@ def _summed(parts) -> ConstraintStats:
 
 
 def _transitivity(p: _Pairs, max_triples: int, tol: float, rng):
-    """Transitivity statistics, the mode used and the number of object triples."""
+    """Transitivity statistics, the mode used and the number of object triples (each pass
+    over the listed triples made once)."""
+    if p.dense is None:                        # exact: the evaluating pass counts them too
+        parts, count = [], 0
+        for tri in _triple_chunks(p):
+            parts.append(_transitivity_exact(p, tri))
+            count += tri.shape[0]
+        return _summed(parts), "exact", count
     complete = _complete_triples(p)
-    if complete is not None:
-        ids, n_tri = complete
-        total = 3 * _elementary3(p.sizes[ids])
+    totals = None
+    if complete is not None:                   # counted without listing
+        n_tri, total = complete[1], 3 * _elementary3(p.sizes[complete[0]])
     else:
-        n_tri = total = None
-    if p.dense is None:
-        parts = [_transitivity_exact(p, tri) for tri in _triple_chunks(p)]
-        stats = _summed(parts)
-        return stats, "exact", n_tri if n_tri is not None else _count_triples(p)
-    if total is None:
-        total = sum(int(_triple_weights(p, tri).sum()) for tri in _triple_chunks(p))
+        totals, n_tri = _chunk_totals(p)
+        total = sum(totals)
     if total <= max_triples:
         parts = [_transitivity_dense(p, tri, tol) for tri in _triple_chunks(p)]
-        return _summed(parts), "exhaustive", n_tri if n_tri is not None else _count_triples(p)
+        return _summed(parts), "exhaustive", n_tri
     rng = as_generator(rng)
     drawn = None if complete is None else _draw_complete(p.sizes, complete[0], max_triples, rng)
     if drawn is None:
-        drawn, n_tri = _draw_listed(p, max_triples, rng)
+        if totals is None:
+            totals, _ = _chunk_totals(p)
+        drawn = _draw_listed(p, max_triples, rng, totals)
     return _transitivity_sampled(p, drawn, total, tol, rng), "sampled", n_tri
-
-
-def _count_triples(p: _Pairs) -> int:
-    return sum(tri.shape[0] for tri in _triple_chunks(p))
 
 
 def constraint_violations(X, *, sizes=None, max_triples: int = 1_000_000, tol: float = 1e-9,

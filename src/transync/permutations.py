@@ -710,6 +710,65 @@ def _check_map_rows(pairs: np.ndarray, maps: np.ndarray, sizes: np.ndarray) -> N
                              f"{int(sizes[j])}")
 
 
+def _triangle_chunks(pairs: np.ndarray, pid, max_triangles: int, gen):
+    """The triangles ``(i, j, k)``, ``i < j < k``, of the observed ``pairs`` that
+    :func:`cycle_inconsistency_arrays` checks, in chunks, and whether they are a sample
+    (see :func:`cycle_inconsistency`); ``pid`` is :func:`pair_rows` of ``pairs``."""
+    # candidate triples: (i, j, k), i < j < k, with (i, j) and (i, k) observed -- every
+    # triangle is one of them (i its smallest object); drawn among all C(N, 3) triples
+    # instead, the triangles of a sparse view graph were almost never hit, and "0 triangles,
+    # error 0" read as consistent
+    uniq = np.unique(pairs, axis=0)                      # sorted by i, then j
+    heads, tails = uniq[:, 0], uniq[:, 1]
+    bounds = np.flatnonzero(np.diff(heads)) + 1
+    starts, stops = np.r_[0, bounds].astype(np.int64), np.r_[bounds, heads.size].astype(np.int64)
+    deg = stops - starts
+    per_head = deg * (deg - 1) // 2
+    n_cand = int(per_head.sum())
+    exhaustive = n_cand <= max(_CANDIDATE_LIMIT, max_triangles)
+
+    def _triangles(tri):
+        return tri[pid(tri[:, 1], tri[:, 2]) >= 0]
+
+    def _listed():
+        for lo, hi in zip(starts.tolist(), stops.tolist()):
+            js = tails[lo:hi]
+            if js.size < 2:
+                continue
+            jj, kk = np.triu_indices(js.size, 1)
+            yield np.column_stack([np.full(jj.size, heads[lo]), js[jj], js[kk]])
+
+    def _drawn():
+        """Candidates drawn uniformly (a head by its count, then two of its neighbours),
+        ``_CANDIDATE_LIMIT`` at most, until ``max_triangles`` triangles are found."""
+        weight = per_head / n_cand
+        found = drawn = 0
+        while found < max_triangles and drawn < _CANDIDATE_LIMIT:
+            m = min(100_000, _CANDIDATE_LIMIT - drawn)
+            h = gen.choice(per_head.size, m, p=weight)
+            a = gen.integers(0, deg[h])
+            b = gen.integers(0, deg[h] - 1)
+            b = b + (b >= a)
+            lo = starts[h]
+            j, k = tails[lo + np.minimum(a, b)], tails[lo + np.maximum(a, b)]
+            tri = _triangles(np.column_stack([heads[lo], j, k]))[:max_triangles - found]
+            drawn += m
+            found += tri.shape[0]
+            yield tri
+
+    if exhaustive:
+        listed = [_triangles(t) for t in _listed()]
+        tris = np.concatenate(listed) if listed else np.zeros((0, 3), np.int64)
+        sampled = tris.shape[0] > max_triangles
+        if sampled:                       # a uniform subset of the triangles
+            tris = tris[np.sort(gen.choice(tris.shape[0], max_triangles, replace=False))]
+        chunks = (tris[s:s + 100_000] for s in range(0, tris.shape[0], 100_000))
+    else:
+        sampled = True
+        chunks = _drawn()
+    return chunks, sampled
+
+
 def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_000,
                                rng=None) -> dict[str, float]:
     """:func:`cycle_inconsistency` on stacked arrays (no dict; for large collections).
@@ -787,58 +846,7 @@ def cycle_inconsistency_arrays(pairs, maps, sizes, *, max_triangles: int = 200_0
 
     # a column of -1 so that "unmatched" indexes to unmatched: ajk_pad[-1] = -1
     maps_pad = np.concatenate([maps, np.full((maps.shape[0], 1), UNMATCHED, maps.dtype)], 1)
-    # candidate triples: (i, j, k), i < j < k, with (i, j) and (i, k) observed -- every
-    # triangle is one of them (i its smallest object); drawn among all C(N, 3) triples
-    # instead, the triangles of a sparse view graph were almost never hit, and "0 triangles,
-    # error 0" read as consistent
-    uniq = np.unique(pairs, axis=0)                      # sorted by i, then j
-    heads, tails = uniq[:, 0], uniq[:, 1]
-    bounds = np.flatnonzero(np.diff(heads)) + 1
-    starts, stops = np.r_[0, bounds].astype(np.int64), np.r_[bounds, heads.size].astype(np.int64)
-    deg = stops - starts
-    per_head = deg * (deg - 1) // 2
-    n_cand = int(per_head.sum())
-    exhaustive = n_cand <= max(_CANDIDATE_LIMIT, max_triangles)
-
-    def _triangles(tri):
-        return tri[pid(tri[:, 1], tri[:, 2]) >= 0]
-
-    def _listed():
-        for lo, hi in zip(starts.tolist(), stops.tolist()):
-            js = tails[lo:hi]
-            if js.size < 2:
-                continue
-            jj, kk = np.triu_indices(js.size, 1)
-            yield np.column_stack([np.full(jj.size, heads[lo]), js[jj], js[kk]])
-
-    def _drawn():
-        """Candidates drawn uniformly (a head by its count, then two of its neighbours),
-        ``_CANDIDATE_LIMIT`` at most, until ``max_triangles`` triangles are found."""
-        weight = per_head / n_cand
-        found = drawn = 0
-        while found < max_triangles and drawn < _CANDIDATE_LIMIT:
-            m = min(100_000, _CANDIDATE_LIMIT - drawn)
-            h = gen.choice(per_head.size, m, p=weight)
-            a = gen.integers(0, deg[h])
-            b = gen.integers(0, deg[h] - 1)
-            b = b + (b >= a)
-            lo = starts[h]
-            j, k = tails[lo + np.minimum(a, b)], tails[lo + np.maximum(a, b)]
-            tri = _triangles(np.column_stack([heads[lo], j, k]))[:max_triangles - found]
-            drawn += m
-            found += tri.shape[0]
-            yield tri
-
-    if exhaustive:
-        listed = [_triangles(t) for t in _listed()]
-        tris = np.concatenate(listed) if listed else np.zeros((0, 3), np.int64)
-        sampled = tris.shape[0] > max_triangles
-        if sampled:                       # a uniform subset of the triangles
-            tris = tris[np.sort(gen.choice(tris.shape[0], max_triangles, replace=False))]
-        chunks = (tris[s:s + 100_000] for s in range(0, tris.shape[0], 100_000))
-    else:
-        sampled = True
-        chunks = _drawn()
+    chunks, sampled = _triangle_chunks(pairs, pid, max_triangles, gen)
 
     n_tri = 0
     bad = 0
